@@ -1,0 +1,30 @@
+"""Outcome codes of a scene: why its integration ended.
+
+The integer codes are stored in the netCDF cube (variable `outcome`, CF `flag_values` /
+`flag_meanings`) and returned by the numba kernel, so they are fixed: append, never renumber.
+"""
+from __future__ import annotations
+
+HALTED = 0               # reached the smallest configured inclination level (normal end)
+CONTACT_LOST = 1         # normal force Phi fell to zero: the rigid single-contact model ends
+STEP_LIMIT = 2           # the step budget was used up before the smallest level
+T_MAX = 3                # t_max (s) was reached before the smallest level
+LINE_CONTACT = 4         # alpha came to 0 and stayed: the disk stands on its flat edge (model void)
+STEP_SIZE_UNDERFLOW = 5  # the error control asked for a step below the round-off floor of tau
+NUMERICAL_ERROR = 6      # a NaN/inf appeared, or an exception was raised for this point
+NOT_RUN = 7              # reserved for the pipeline: the point was not computed (never written by a finished chunk)
+
+NAMES = {
+    HALTED: "halted",
+    CONTACT_LOST: "contact_lost",
+    STEP_LIMIT: "step_limit",
+    T_MAX: "t_max",
+    LINE_CONTACT: "line_contact",
+    STEP_SIZE_UNDERFLOW: "step_size_underflow",
+    NUMERICAL_ERROR: "numerical_error",
+    NOT_RUN: "not_run",
+}
+CODES = {name: code for code, name in NAMES.items()}
+
+FLAG_VALUES = sorted(NAMES)
+FLAG_MEANINGS = " ".join(NAMES[c] for c in FLAG_VALUES)
