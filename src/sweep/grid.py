@@ -1,0 +1,343 @@
+"""Sweep configuration: validation, normalisation and the split of the grid into chunks.
+
+A sweep is the Cartesian product of six axes (see `AXES`), every point one scene integrated by
+`sweep.simulate`. The grid is cut into *chunks*, one Snakemake job each, whose identity is the
+SHA-256 of the canonical JSON of their content (the point values and every setting that changes
+a scene's result). So a chunk file is reused exactly when its scenes would be recomputed
+identically, whatever the position of its points in the axes.
+
+Chunk layout (see docs/pipeline.md, "How reruns work"):
+
+* A chunk never mixes values of the *outer* axes (mu_d, k1, k2, k3): adding a value to one of
+  these axes, anywhere in it, adds whole new chunks and leaves every existing one untouched.
+* For one outer point, the *inner* points (alpha0, omega0), in row-major order of the sorted
+  axes, are cut by content-defined chunking: a chunk ends after the inner point p when
+  ``H(p) % chunk_size == 0`` (H: a hash of p's values only) or when it has reached
+  ``2 * chunk_size`` points. Inserting a value into alpha0 or omega0 therefore changes only the
+  chunks around the new points (until the next content-defined cut), instead of shifting every
+  later chunk as a positional split would.
+
+Units: SI throughout (m, kg, s, rad, rad/s); friction coefficients are dimensionless.
+"""
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import json
+import math
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+AXES = ("mu_d", "k1", "k2", "k3", "alpha0", "omega0")
+OUTER_AXES = AXES[:4]
+INNER_AXES = AXES[4:]
+AXIS_UNITS = {"mu_d": "1", "k1": "m", "k2": "m", "k3": "m", "alpha0": "rad", "omega0": "rad s-1"}
+AXIS_LONG_NAMES = {
+    "mu_d": "dynamic friction coefficient",
+    "k1": "rolling resistance length k1 (moment k1 |N|)",
+    "k2": "pivoting resistance length k2 (moment k2 |N|)",
+    "k3": "rolling resistance length k3 (moment k3 |N|)",
+    "alpha0": "initial angle alpha",
+    "omega0": "initial spin rate about -e3",
+}
+
+# Bump when the chunk file layout or the meaning of its variables changes: every chunk's
+# identity includes it, so old chunk files are then recomputed instead of being gathered.
+CHUNK_FORMAT = 1
+
+# Length of the hex chunk id: 16 hex digits = 64 bits, so a collision among even 10^6 chunks
+# has probability ~ n^2 / 2^65 < 3e-8.
+CHUNK_ID_HEX = 16
+
+SCHEMA_PATH = Path(__file__).resolve().parents[2] / "workflow" / "schemas" / "config.schema.yaml"
+
+NOTEBOOKS = ("halt_time", "frequency_ramps", "roll_slip", "cost")
+
+
+class SweepConfigError(ValueError):
+    """The sweep configuration is invalid; the message names every offending key."""
+
+
+# --------------------------------------------------------------------------------------------
+# canonical JSON and hashing
+# --------------------------------------------------------------------------------------------
+
+def canonical_json(obj: Any) -> str:
+    """Canonical JSON text: sorted keys, no whitespace, floats in Python's shortest repr.
+
+    NaN and infinities are refused (they have no JSON form and never belong in a valid config).
+    """
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def sha256_hex(text: str) -> str:
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+# --------------------------------------------------------------------------------------------
+# validation
+# --------------------------------------------------------------------------------------------
+
+def load_schema(path: str | Path | None = None) -> dict:
+    """The config JSON schema (YAML file), by default workflow/schemas/config.schema.yaml."""
+    import yaml
+
+    with open(path or SCHEMA_PATH, encoding="utf-8") as fh:
+        return yaml.safe_load(fh)
+
+
+def _key(path: Iterator[Any] | list[Any]) -> str:
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "<config>"
+
+
+def _subschema(schema: dict, path: list[Any]) -> dict:
+    """The schema node describing the config value at `path` (array indices -> items)."""
+    node = schema
+    for part in path:
+        if isinstance(part, int):
+            node = node.get("items", {})
+        else:
+            node = node.get("properties", {}).get(part, {})
+    return node
+
+
+def _walk(obj: Any, path: list[Any]) -> Iterator[tuple[list[Any], Any]]:
+    yield path, obj
+    if isinstance(obj, Mapping):
+        for k, v in obj.items():
+            yield from _walk(v, path + [k])
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            yield from _walk(v, path + [i])
+
+
+def fill_defaults(config: Mapping, schema: dict) -> dict:
+    """A deep copy of `config` with the schema's defaults filled in (same rule as
+    snakemake.utils.validate: an absent property with a `default` gets it, recursively)."""
+    def fill(value: Any, node: dict) -> Any:
+        if isinstance(value, Mapping):
+            out = dict(value)
+            for name, sub in node.get("properties", {}).items():
+                if name not in out and "default" in sub:
+                    out[name] = copy.deepcopy(sub["default"])
+                if name in out:
+                    out[name] = fill(out[name], sub)
+            return out
+        if isinstance(value, list):
+            return [fill(v, node.get("items", {})) for v in value]
+        return value
+
+    return fill(config, schema)
+
+
+def schema_errors(config: Mapping, schema: dict) -> list[str]:
+    """Readable messages for every JSON-schema violation and every non-finite number."""
+    import jsonschema
+
+    messages: list[str] = []
+    for path, value in _walk(config, []):
+        if isinstance(value, float) and not math.isfinite(value):
+            desc = _subschema(schema, path).get("description", "")
+            messages.append(f"config key `{_key(path)}`: {value!r} is not a finite number"
+                            + (f" ({desc})" if desc else ""))
+    validator = jsonschema.Draft202012Validator(schema)
+    for err in sorted(validator.iter_errors(config), key=lambda e: [str(p) for p in e.absolute_path]):
+        path = list(err.absolute_path)
+        value = err.instance
+        if isinstance(value, float) and not math.isfinite(value):
+            continue  # already reported above, with a clearer message
+        if err.validator == "additionalProperties":
+            node = _subschema(schema, path)
+            unknown = sorted(set(value) - set(node.get("properties", {})))
+            allowed = ", ".join(sorted(node.get("properties", {})))
+            messages.append(f"config key `{_key(path)}`: unknown key(s) {', '.join(map(repr, unknown))}; "
+                            f"allowed keys: {allowed}")
+            continue
+        if err.validator == "required":
+            messages.append(f"config key `{_key(path)}`: {err.message}")
+            continue
+        node = _subschema(schema, path)
+        desc = node.get("description") or _subschema(schema, path[:-1]).get("description", "")
+        msg = f"config key `{_key(path)}`: {err.message}"
+        if err.validator == "minItems" and not value:
+            msg = f"config key `{_key(path)}`: the axis is empty; give at least one value"
+        elif err.validator == "uniqueItems":
+            seen, dups = set(), []
+            for v in value:
+                if v in seen:
+                    dups.append(v)
+                seen.add(v)
+            msg = f"config key `{_key(path)}`: duplicate value(s) {dups}; each value may appear once"
+        if isinstance(value, str) and err.validator == "type":
+            try:
+                float(value)
+                msg += (" (YAML 1.1 reads a number like 1e-10 without a '.' as a string: "
+                        "write 1.0e-10)")
+            except ValueError:
+                pass
+        if desc:
+            msg += f" [{desc}]"
+        messages.append(msg)
+    return messages
+
+
+def cross_field_errors(config: Mapping) -> list[str]:
+    """Rules JSON schema cannot express; `config` must have its defaults filled."""
+    messages = []
+    mu_s = config.get("mu_s")
+    grid = config.get("grid", {})
+    if isinstance(mu_s, (int, float)):
+        for i, mu_d in enumerate(grid.get("mu_d", [])):
+            if isinstance(mu_d, (int, float)) and mu_d > mu_s:
+                messages.append(f"config key `grid.mu_d[{i}]`: {mu_d!r} exceeds mu_s = {mu_s!r}; "
+                                "allowed (0, mu_s] (dynamic friction cannot exceed static friction)")
+    for i, a in enumerate(grid.get("alpha0", [])):
+        if isinstance(a, (int, float)) and a == 0:
+            messages.append(f"config key `grid.alpha0[{i}]`: 0 is not allowed; allowed (-pi/2, 0) or "
+                            "(0, pi/2) (alpha = 0 is the degenerate line-contact state of the model)")
+    solver = config.get("solver", {})
+    if solver.get("method") == "fixed" and "dt" not in solver:
+        messages.append("config key `solver.dt`: required when solver.method is 'fixed'; "
+                        "allowed (0, 1] s")
+    return messages
+
+
+def check_config(config: Mapping, schema: dict | None = None) -> dict:
+    """Validate a sweep config and return it with defaults filled.
+
+    Raises SweepConfigError listing every problem (key, value, allowed range) before any work.
+    """
+    schema = schema if schema is not None else load_schema()
+    messages = schema_errors(config, schema)
+    if not messages:
+        messages = cross_field_errors(fill_defaults(config, schema))
+    if messages:
+        raise SweepConfigError("invalid sweep configuration:\n  " + "\n  ".join(messages))
+    return fill_defaults(config, schema)
+
+
+# --------------------------------------------------------------------------------------------
+# normalisation
+# --------------------------------------------------------------------------------------------
+
+def normalize(config: Mapping, schema: dict | None = None) -> dict:
+    """The validated config in canonical form: defaults filled, axis values as sorted floats,
+    every real number a float (so 1 and 1.0 hash alike), integers as int."""
+    cfg = check_config(config, schema)
+    disk = cfg["disk"]
+    solver = {"method": cfg["solver"]["method"],
+              "rtol": float(cfg["solver"]["rtol"]), "atol": float(cfg["solver"]["atol"])}
+    if solver["method"] == "fixed":
+        solver["dt"] = float(cfg["solver"]["dt"])
+    return {
+        "disk": {"radius": float(disk["radius"]), "thickness": float(disk["thickness"]),
+                 "mass": float(disk["mass"]), "shape": disk["shape"]},
+        "gravity": float(cfg["gravity"]),
+        "mu_s": float(cfg["mu_s"]),
+        "grid": {a: sorted(float(v) for v in cfg["grid"][a]) for a in AXES},
+        "levels": [float(v) for v in cfg["levels"]],
+        "solver": solver,
+        "stop": {"t_max": float(cfg["stop"]["t_max"]), "max_steps": int(cfg["stop"]["max_steps"])},
+        "chunk_size": int(cfg["chunk_size"]),
+        "outputs": {"notebooks": list(cfg["outputs"]["notebooks"])},
+    }
+
+
+def scene_settings(settings: Mapping) -> dict:
+    """The part of a normalised config that, with the point values, fixes a scene's result."""
+    return {k: copy.deepcopy(settings[k]) for k in ("disk", "gravity", "mu_s", "levels", "solver", "stop")}
+
+
+def grid_shape(settings: Mapping) -> tuple[int, ...]:
+    return tuple(len(settings["grid"][a]) for a in AXES)
+
+
+def scene(settings: Mapping, point: Mapping[str, float] | tuple[float, ...]) -> dict:
+    """The `sweep.simulate` scene dict (SI units) of one grid point.
+
+    The start is rolling: omega = [0, 0, -omega0] rad/s, slip = [0, 0] m/s, theta = psi = 0.
+    """
+    p = dict(zip(AXES, point)) if not isinstance(point, Mapping) else dict(point)
+    return {
+        "disk": dict(settings["disk"]),
+        "contact": {"mu_s": settings["mu_s"], "mu_d": p["mu_d"],
+                    "k1": p["k1"], "k2": p["k2"], "k3": p["k3"]},
+        "gravity": settings["gravity"],
+        "initial": {"alpha": p["alpha0"], "omega": [0.0, 0.0, -p["omega0"]],
+                    "slip": [0.0, 0.0], "theta": 0.0, "psi": 0.0},
+        "stop": {"levels": list(settings["levels"]), "t_max": settings["stop"]["t_max"],
+                 "max_steps": settings["stop"]["max_steps"]},
+        "solver": dict(settings["solver"]),
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# chunking
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Chunk:
+    """One job's worth of scenes. `points` are tuples in AXES order (SI units)."""
+    id: str
+    points: tuple[tuple[float, ...], ...]
+    spec_json: str    # canonical JSON of {format, settings, axes, points}: hashed into `id`
+
+    @property
+    def spec(self) -> dict:
+        return json.loads(self.spec_json)
+
+
+def _inner_hash(inner: tuple[float, ...]) -> int:
+    return int(sha256_hex(canonical_json(list(inner)))[:16], 16)
+
+
+def split_inner(inner_points: list[tuple[float, ...]], chunk_size: int) -> list[list[tuple[float, ...]]]:
+    """Content-defined cut of a sequence of inner points into blocks of 1..2*chunk_size.
+
+    A block ends after p if hash(p) % chunk_size == 0 (expected block length chunk_size) or
+    when it holds 2*chunk_size points (the cap bounds a job's size; the layout resynchronises
+    at the next content-defined cut, so an insertion changes only nearby blocks).
+    """
+    blocks: list[list[tuple[float, ...]]] = []
+    cur: list[tuple[float, ...]] = []
+    for p in inner_points:
+        cur.append(p)
+        if _inner_hash(p) % chunk_size == 0 or len(cur) >= 2 * chunk_size:
+            blocks.append(cur)
+            cur = []
+    if cur:
+        blocks.append(cur)
+    return blocks
+
+
+def chunk_id_of(settings_part: Mapping, points: list[tuple[float, ...]]) -> tuple[str, str]:
+    spec = {"format": CHUNK_FORMAT, "settings": settings_part, "axes": list(AXES),
+            "points": [list(p) for p in points]}
+    text = canonical_json(spec)
+    return sha256_hex(text)[:CHUNK_ID_HEX], text
+
+
+def plan_chunks(settings: Mapping) -> dict[str, Chunk]:
+    """All chunks of a normalised config, keyed by id, in grid order."""
+    part = scene_settings(settings)
+    g = settings["grid"]
+    inner = list(itertools.product(*(g[a] for a in INNER_AXES)))
+    blocks = split_inner(inner, settings["chunk_size"])
+    chunks: dict[str, Chunk] = {}
+    for outer in itertools.product(*(g[a] for a in OUTER_AXES)):
+        for block in blocks:
+            points = [tuple(outer) + tuple(p) for p in block]
+            cid, text = chunk_id_of(part, points)
+            chunks[cid] = Chunk(cid, tuple(points), text)
+    return chunks
+
+
+def grid_index(settings: Mapping) -> dict[str, dict[float, int]]:
+    """Per axis: value -> position in the (sorted) cube axis."""
+    return {a: {v: i for i, v in enumerate(settings["grid"][a])} for a in AXES}

@@ -1,0 +1,488 @@
+"""netCDF input/output of the sweep: chunk files, their verification, the gathered cube.
+
+Chunk files (`results/chunks/<id>.nc`) hold one row per scene along the dimension `point`
+(coordinates mu_d, k1, k2, k3, alpha0, omega0 per point) and the dimension `level`. Their global
+attribute `sweep_checksum` is a SHA-256 over every variable's values, so a truncated or damaged
+file is detected before it is gathered. The cube (`results/cube.nc`) has the dimensions
+(mu_d, k1, k2, k3, alpha0, omega0[, level]) and CF-1.10 metadata.
+
+Every file is written atomically: to a temporary name in the target directory, fsync'ed, then
+os.replace'd over the target, so a reader never sees a partial file under the final name.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import math
+import os
+import subprocess
+import uuid
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import grid as _grid
+from . import outcomes
+
+INT_FILL = -1          # _FillValue of the count variables: counts are >= 0, so -1 is never data
+COMPLEVEL = 4          # zlib level: the summary data compress ~3x by level 4; higher levels gain <5%
+# Target elements per netCDF chunk of the cube: 2^15 float64 = 256 KiB, so several chunks fit in
+# the default 1 MiB HDF5 chunk cache and a 1-D read along any axis touches few chunks.
+CUBE_CHUNK_ELEMENTS = 2 ** 15
+
+
+@dataclass(frozen=True)
+class Var:
+    """One output variable: how to take it from a `SimulationResult.summary`, and its CF metadata."""
+    name: str
+    kind: str                      # "float" | "int" | "bool" | "outcome"
+    units: str
+    long_name: str
+    get: Callable[[Mapping], Any]  # summary -> scalar, or (for per_level) level dict -> scalar
+    per_level: bool = False
+
+
+def _d(key: str) -> Callable[[Mapping], Any]:
+    return lambda s: s["dissipation"][key]
+
+
+VARIABLES: tuple[Var, ...] = (
+    Var("outcome", "outcome", "1", "why the integration ended (see flag_meanings)", lambda s: s["outcome_code"]),
+    Var("t_end", "float", "s", "simulated time at the end of the integration", lambda s: s["t_end"]),
+    Var("t_halt", "float", "s", "halt time (finite-time singularity) estimated from the final ramp",
+        lambda s: s["t_halt"]),
+    Var("t_halt_error", "float", "s", "estimated error of the halt time", lambda s: s["t_halt_error"]),
+    Var("halt_finite", "bool", "1", "whether the halt time was found finite", lambda s: s["halt_finite"]),
+    Var("ramp_exponent", "float", "1", "fitted exponent of the final frequency ramp",
+        lambda s: s["ramp_exponent"]),
+    Var("t_level", "float", "s", "time at which the inclination first reaches the level",
+        lambda lv: lv["t"], per_level=True),
+    Var("precession_hz", "float", "Hz", "precession frequency at the level", lambda lv: lv["precession_hz"],
+        per_level=True),
+    Var("normal_force_hz", "float", "Hz", "normal-force oscillation frequency at the level",
+        lambda lv: lv["normal_force_hz"], per_level=True),
+    Var("slip_fraction", "float", "1", "fraction of the simulated time spent slipping",
+        lambda s: s["slip_fraction"]),
+    Var("n_transitions", "int", "1", "number of roll/slip transitions", lambda s: s["n_transitions"]),
+    Var("n_stick", "int", "1", "number of stick episodes", lambda s: s["n_stick"]),
+    Var("n_impacts", "int", "1", "number of impacts (plastic contact re-establishments)",
+        lambda s: s["n_impacts"]),
+    Var("energy_initial", "float", "J", "initial mechanical energy", lambda s: s["energy_initial"]),
+    Var("energy_final", "float", "J", "final mechanical energy", lambda s: s["energy_final"]),
+    Var("dissipation_sliding", "float", "J", "energy dissipated by sliding friction", _d("sliding")),
+    Var("dissipation_k1", "float", "J", "energy dissipated by the k1 rolling-resistance moment", _d("k1")),
+    Var("dissipation_k2", "float", "J", "energy dissipated by the k2 pivoting-resistance moment", _d("k2")),
+    Var("dissipation_k3", "float", "J", "energy dissipated by the k3 rolling-resistance moment", _d("k3")),
+    Var("dissipation_impact", "float", "J", "energy dissipated in impacts", _d("impact")),
+    Var("n_steps", "int", "1", "number of accepted integration steps", lambda s: s["n_steps"]),
+    Var("n_rejected", "int", "1", "number of rejected integration steps", lambda s: s["n_rejected"]),
+    Var("n_rhs", "int", "1", "number of right-hand-side evaluations", lambda s: s["n_rhs"]),
+    Var("n_events", "int", "1", "number of located events", lambda s: s["n_events"]),
+    Var("wall_time", "float", "s", "wall-clock time of the integration", lambda s: s["wall_time"]),
+)
+VARIABLE_NAMES = tuple(v.name for v in VARIABLES)
+LEVEL_ATTRS = {"units": "rad", "long_name": "inclination level"}
+
+
+def error_summary(n_levels: int, outcome_code: int = outcomes.NUMERICAL_ERROR, wall_time: float = math.nan) -> dict:
+    """A summary dict for a scene that produced no result (NaN everywhere, counts missing)."""
+    nan = math.nan
+    return {
+        "outcome": outcomes.NAMES[outcome_code], "outcome_code": outcome_code,
+        "t_end": nan, "t_halt": nan, "t_halt_error": nan, "halt_finite": False, "ramp_exponent": nan,
+        "levels": [{"inclination": nan, "t": nan, "precession_hz": nan, "normal_force_hz": nan}
+                   for _ in range(n_levels)],
+        "slip_fraction": nan, "n_transitions": None, "n_stick": None, "n_impacts": None,
+        "energy_initial": nan, "energy_final": nan,
+        "dissipation": {k: nan for k in ("sliding", "k1", "k2", "k3", "impact")},
+        "n_steps": None, "n_rejected": None, "n_rhs": None, "n_events": None, "wall_time": wall_time,
+    }
+
+
+def _column(var: Var, summaries: Sequence[Mapping], n_levels: int) -> np.ndarray:
+    if var.per_level:
+        raw = [[var.get(s["levels"][j]) for j in range(n_levels)] for s in summaries]
+    else:
+        raw = [var.get(s) for s in summaries]
+    if var.kind == "float":
+        return np.array(raw, dtype=np.float64).reshape(len(summaries), *([n_levels] if var.per_level else []))
+    if var.kind == "int":
+        return np.array([INT_FILL if v is None else int(v) for v in raw], dtype=np.int32)
+    if var.kind == "bool":
+        return np.array([bool(v) for v in raw], dtype=bool)
+    return np.array([int(v) for v in raw], dtype=np.int8)
+
+
+def _var_attrs(var: Var) -> dict:
+    attrs = {"units": var.units, "long_name": var.long_name}
+    if var.kind == "outcome":
+        attrs["flag_values"] = np.array(outcomes.FLAG_VALUES, dtype=np.int8)
+        attrs["flag_meanings"] = outcomes.FLAG_MEANINGS
+    return attrs
+
+
+def _coord_attrs(axis: str) -> dict:
+    return {"units": _grid.AXIS_UNITS[axis], "long_name": _grid.AXIS_LONG_NAMES[axis]}
+
+
+# --------------------------------------------------------------------------------------------
+# checksums and atomic writes
+# --------------------------------------------------------------------------------------------
+
+def dataset_checksum(ds) -> str:
+    """SHA-256 over every variable's name, shape and values (as float64, NaN canonicalised).
+
+    Values are compared as stored (open with mask_and_scale=False so count fills stay -1).
+    """
+    h = hashlib.sha256()
+    for name in sorted(map(str, ds.variables)):
+        arr = np.asarray(ds[name].values)
+        if arr.dtype.kind not in "biuf":
+            h.update(name.encode() + repr(arr.tolist()).encode())
+            continue
+        a = arr.astype(np.float64)
+        a = np.where(np.isnan(a), np.nan, a)  # one bit pattern for every NaN
+        h.update(name.encode() + repr(a.shape).encode() + np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def _fsync_path(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_atomic(ds, path: str | Path, encoding: Mapping | None = None,
+                 finish: Callable[[Path], None] | None = None) -> Path:
+    """Write `ds` to netCDF-4 at `path` atomically (temp file in the same dir, fsync, os.replace).
+
+    `finish(tmp_path)` may amend the temporary file (e.g. add a checksum) before the rename.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    try:
+        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=dict(encoding or {}))
+        if finish is not None:
+            finish(tmp)
+        _fsync_path(tmp)
+        os.replace(tmp, path)
+        _fsync_path(path.parent)  # make the rename itself durable
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# chunk files
+# --------------------------------------------------------------------------------------------
+
+def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
+    """The xarray Dataset of one chunk from its scenes' summaries (in chunk point order)."""
+    import xarray as xr
+
+    spec = chunk.spec
+    levels = spec["settings"]["levels"]
+    if len(summaries) != len(chunk.points):
+        raise ValueError(f"chunk {chunk.id}: {len(summaries)} summaries for {len(chunk.points)} points")
+    pts = np.array(chunk.points, dtype=np.float64).reshape(len(chunk.points), len(_grid.AXES))
+    coords = {a: ("point", pts[:, i], _coord_attrs(a)) for i, a in enumerate(_grid.AXES)}
+    coords["level"] = ("level", np.array(levels, dtype=np.float64), dict(LEVEL_ATTRS))
+    data = {}
+    for var in VARIABLES:
+        dims = ("point", "level") if var.per_level else ("point",)
+        data[var.name] = (dims, _column(var, summaries, len(levels)), _var_attrs(var))
+    from . import __version__
+    attrs = {"Conventions": "CF-1.10", "title": "Euler's disk sweep chunk",
+             "sweep_chunk_id": chunk.id, "sweep_chunk_spec": chunk.spec_json,
+             "sweep_chunk_format": _grid.CHUNK_FORMAT, "sweep_version": __version__}
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _chunk_encoding(ds) -> dict:
+    enc = {}
+    for name in ds.variables:
+        dt = ds[name].dtype
+        if dt.kind == "f":
+            enc[name] = {"_FillValue": np.nan}
+        elif dt.kind == "i" and name in VARIABLE_NAMES and next(v for v in VARIABLES if v.name == name).kind == "int":
+            enc[name] = {"_FillValue": np.int32(INT_FILL)}
+        else:
+            enc[name] = {"_FillValue": None}
+    return enc
+
+
+def write_chunk(chunk: _grid.Chunk, summaries: Sequence[Mapping], path: str | Path) -> Path:
+    """Write a chunk file atomically, with the checksum of its content as `sweep_checksum`."""
+    import netCDF4
+    import xarray as xr
+
+    ds = chunk_dataset(chunk, summaries)
+
+    def add_checksum(tmp: Path) -> None:
+        with xr.open_dataset(tmp, engine="netcdf4", mask_and_scale=False) as back:
+            digest = dataset_checksum(back.load())
+        with netCDF4.Dataset(tmp, "a") as nc:
+            nc.setncattr("sweep_checksum", digest)
+
+    return write_atomic(ds, path, _chunk_encoding(ds), finish=add_checksum)
+
+
+def verify_chunk(path: str | Path, chunk: _grid.Chunk | None = None) -> str | None:
+    """None if the chunk file is intact (and matches `chunk`), else the reason it is not."""
+    import xarray as xr
+
+    path = Path(path)
+    try:
+        if path.stat().st_size == 0:
+            return "empty file"
+        with xr.open_dataset(path, engine="netcdf4", mask_and_scale=False) as ds:
+            ds.load()
+            want = ds.attrs.get("sweep_checksum")
+            if want is None:
+                return "no sweep_checksum attribute (incomplete write)"
+            if dataset_checksum(ds) != want:
+                return "checksum mismatch (damaged data)"
+            missing = [v for v in VARIABLE_NAMES if v not in ds.variables]
+            if missing:
+                return f"missing variables {missing}"
+            if chunk is not None:
+                if ds.attrs.get("sweep_chunk_id") != chunk.id:
+                    return f"chunk id {ds.attrs.get('sweep_chunk_id')!r} != expected {chunk.id!r}"
+                if ds.attrs.get("sweep_chunk_spec") != chunk.spec_json:
+                    return "chunk spec differs from the expected one"
+                if ds.sizes.get("point") != len(chunk.points):
+                    return f"{ds.sizes.get('point')} points, expected {len(chunk.points)}"
+                if ds.sizes.get("level") != len(chunk.spec["settings"]["levels"]):
+                    return "wrong number of levels"
+    except (OSError, RuntimeError, ValueError, KeyError) as exc:  # netCDF/HDF5 raise these on damage
+        return f"unreadable ({type(exc).__name__}: {exc})"
+    return None
+
+
+def quarantine(path: str | Path, reason: str) -> Path:
+    """Move a damaged chunk file to <dir>/quarantine/ (kept for inspection) so it is recomputed."""
+    path = Path(path)
+    qdir = path.parent / "quarantine"
+    qdir.mkdir(parents=True, exist_ok=True)
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%S")
+    target = qdir / f"{path.name}.{stamp}"
+    os.replace(path, target)
+    (qdir / f"{target.name}.reason").write_text(reason + "\n", encoding="utf-8")
+    return target
+
+
+def check_existing_chunks(chunk_dir: str | Path, chunks: Mapping[str, _grid.Chunk],
+                          act: bool = True) -> dict[str, str]:
+    """Verify every existing chunk file of the plan; quarantine damaged ones if `act`.
+
+    Returns {chunk_id: reason} for the damaged files (which Snakemake then sees as missing).
+    """
+    bad = {}
+    chunk_dir = Path(chunk_dir)
+    for cid, chunk in chunks.items():
+        p = chunk_dir / f"{cid}.nc"
+        if p.exists():
+            reason = verify_chunk(p, chunk)
+            if reason is not None:
+                bad[cid] = reason
+                if act:
+                    quarantine(p, reason)
+    return bad
+
+
+# --------------------------------------------------------------------------------------------
+# the cube
+# --------------------------------------------------------------------------------------------
+
+def cube_chunksizes(shape: Sequence[int], target: int = CUBE_CHUNK_ELEMENTS) -> tuple[int, ...]:
+    """netCDF chunk shape: halve the longest dimension until the chunk holds <= target elements.
+
+    Balanced chunks make a 1-D read along any axis touch about the same number of chunks.
+    """
+    c = [max(1, int(n)) for n in shape]
+    while math.prod(c) > target:
+        i = max(range(len(c)), key=lambda k: c[k])
+        c[i] = math.ceil(c[i] / 2)
+    return tuple(c)
+
+
+def git_commit(path: str | Path) -> str:
+    """HEAD commit of the git repository containing `path` (+ '-dirty' if tracked files
+    differ from it), or 'unknown'."""
+    try:
+        head = subprocess.run(["git", "-C", str(path), "rev-parse", "HEAD"], capture_output=True,
+                              text=True, timeout=30, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(path), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=30, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return head + ("-dirty" if dirty else "") if head else "unknown"
+
+
+def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str | Path,
+           repo_path: str | Path | None = None, history: str = "") -> Path:
+    """Gather verified chunk files into the cube at `out_path` (atomic write), lazily with dask.
+
+    `settings`: the normalised config (sweep.grid.normalize). Every grid point must be present
+    exactly once; a damaged chunk file raises (after quarantining it) instead of being gathered.
+    """
+    import dask.array as da
+    import xarray as xr
+
+    from . import __version__
+
+    paths = [Path(p) for p in chunk_paths]
+    plan = _grid.plan_chunks(settings)
+    for p in paths:
+        reason = verify_chunk(p, plan.get(p.stem))
+        if reason is not None:
+            moved = quarantine(p, reason)
+            raise RuntimeError(f"chunk file {p} is damaged ({reason}); moved to {moved}. "
+                               "Run snakemake again to recompute it.")
+    axes = _grid.AXES
+    shape = _grid.grid_shape(settings)
+    n_levels = len(settings["levels"])
+    src = xr.open_mfdataset([str(p) for p in paths], combine="nested", concat_dim="point",
+                            engine="netcdf4", data_vars="minimal", coords="minimal",
+                            compat="override", join="exact", parallel=False)
+    try:
+        index = _grid.grid_index(settings)
+        pos = np.zeros(src.sizes["point"], dtype=np.int64)
+        for a in axes:  # flat row-major index of every point in the cube
+            vals = src[a].values
+            try:
+                idx = np.array([index[a][float(v)] for v in vals], dtype=np.int64)
+            except KeyError as exc:
+                raise RuntimeError(f"a chunk holds {a} = {exc.args[0]!r}, not on the grid axis") from None
+            pos = pos * len(index[a]) + idx
+        n = math.prod(shape)
+        if len(pos) != n or not np.array_equal(np.sort(pos), np.arange(n)):
+            raise RuntimeError(f"chunks hold {len(pos)} points with {len(np.unique(pos))} distinct "
+                               f"grid positions; the grid has {n}")
+        order = np.argsort(pos, kind="stable")
+        identity = bool(np.array_equal(order, np.arange(n)))
+        csizes = cube_chunksizes(shape + (n_levels,))
+        data_vars, encoding = {}, {}
+        for var in VARIABLES:
+            arr = src[var.name].data
+            if not identity:
+                arr = arr[order]
+            full_shape = shape + ((n_levels,) if var.per_level else ())
+            arr = arr.reshape(full_shape, merge_chunks=True)
+            cs = csizes if var.per_level else csizes[:-1]
+            arr = arr.rechunk(cs)
+            dims = axes + (("level",) if var.per_level else ())
+            if var.kind == "int":  # decoded with NaN for missing; stored as int32 with a fill value
+                enc = {"dtype": "int32", "_FillValue": np.int32(INT_FILL)}
+            elif var.kind == "outcome":
+                enc = {"dtype": "int8", "_FillValue": None}
+            elif var.kind == "bool":
+                enc = {"_FillValue": None}
+            else:
+                enc = {"dtype": "float64", "_FillValue": np.nan}
+            enc.update(zlib=True, complevel=COMPLEVEL, shuffle=True, chunksizes=cs)
+            data_vars[var.name] = (dims, arr, _var_attrs(var))
+            encoding[var.name] = enc
+        coords = {a: (a, np.array(settings["grid"][a], dtype=np.float64), _coord_attrs(a)) for a in axes}
+        coords["level"] = ("level", np.array(settings["levels"], dtype=np.float64), dict(LEVEL_ATTRS))
+        for c in coords:
+            encoding[c] = {"_FillValue": None}
+        config_json = _grid.canonical_json(settings)
+        created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        attrs = {
+            "Conventions": "CF-1.10",
+            "title": "Euler's disk (Kessler & O'Reilly 2002) parameter sweep",
+            "history": f"{created}: gathered {len(paths)} chunk files ({n} scenes) into this cube"
+                       + (f"; {history}" if history else ""),
+            "source": f"sweep {__version__}: rigid-disk model of Kessler & O'Reilly (2002), "
+                      "numba hybrid integrator",
+            "sweep_version": __version__,
+            "git_commit": git_commit(repo_path) if repo_path is not None else "unknown",
+            "config_json": config_json,
+            "config_sha256": _grid.sha256_hex(config_json),
+            "solver": _grid.canonical_json(settings["solver"]),
+            "stop": _grid.canonical_json(settings["stop"]),
+            "created": created,
+        }
+        cube = xr.Dataset(data_vars, coords=coords, attrs=attrs)
+        return write_atomic(cube, out_path, encoding)
+    finally:
+        src.close()
+
+
+def open_cube(path: str | Path):
+    """Open the cube lazily (dask arrays with the on-disk chunking)."""
+    import xarray as xr
+
+    return xr.open_dataset(path, engine="netcdf4", chunks={})
+
+
+def reduce_to(da, keep: Sequence[str], how: str = "median"):
+    """Reduce a cube variable over every dimension not in `keep` (NaN-skipping), computed.
+
+    `how`: "median" | "mean" | "max" | "min". Returns an in-memory DataArray with dims `keep`.
+    """
+    others = [d for d in da.dims if d not in keep]
+    if others:
+        da = da.chunk({d: -1 for d in others}) if hasattr(da.data, "dask") else da
+        da = getattr(da, how)(dim=others, skipna=True)
+    return da.transpose(*keep).compute()
+
+
+# --------------------------------------------------------------------------------------------
+# notebooks
+# --------------------------------------------------------------------------------------------
+
+# A notebook cell that runs longer than this is stuck: the figure notebooks reduce the cube
+# with dask and plot a handful of panels, which takes seconds even for 10^6 scenes.
+NOTEBOOK_CELL_TIMEOUT_S = 600
+
+
+def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
+                 executed: str | Path | None = None, log_path: str | Path | None = None) -> Path:
+    """Execute a figure notebook with nbclient; it reads the cube and saves `figure` (PNG).
+
+    The paths reach the kernel as the environment variables SWEEP_CUBE and SWEEP_FIGURE
+    (absolute). The executed notebook, with its outputs, is written to `executed`.
+    """
+    import nbclient
+    import nbformat
+
+    figure = Path(figure).resolve()
+    figure.parent.mkdir(parents=True, exist_ok=True)
+    figure.unlink(missing_ok=True)
+    env_keys = {"SWEEP_CUBE": str(Path(cube).resolve()), "SWEEP_FIGURE": str(figure),
+                "MPLBACKEND": "Agg"}
+    saved = {k: os.environ.get(k) for k in env_keys}
+    os.environ.update(env_keys)  # the kernel inherits this process's environment
+    try:
+        nb = nbformat.read(str(notebook), as_version=4)
+        client = nbclient.NotebookClient(nb, timeout=NOTEBOOK_CELL_TIMEOUT_S, kernel_name="python3",
+                                         resources={"metadata": {"path": str(Path.cwd())}})
+        client.execute()
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    if executed is not None:
+        executed = Path(executed)
+        executed.parent.mkdir(parents=True, exist_ok=True)
+        tmp = executed.parent / f".{executed.name}.tmp-{os.getpid()}"
+        nbformat.write(nb, str(tmp))
+        os.replace(tmp, executed)
+    if not figure.exists():
+        raise RuntimeError(f"notebook {notebook} ran but did not write {figure}")
+    if log_path is not None:
+        Path(log_path).parent.mkdir(parents=True, exist_ok=True)
+        Path(log_path).write_text(f"executed {notebook} -> {figure}\n", encoding="utf-8")
+    return figure

@@ -1,0 +1,34 @@
+# Config validation and the chunk plan, shared by every rule.
+import sys
+
+from snakemake.utils import validate
+
+from sweep import grid as sweep_grid
+from sweep import io as sweep_io
+
+
+# Readable messages (key, value, allowed range) and the cross-field rules JSON schema cannot
+# express (mu_d <= mu_s, alpha0 != 0, finite numbers, dt for the fixed step) come first; then
+# Snakemake's own validation against the same schema fills the defaults into `config`.
+try:
+    sweep_grid.check_config(config, sweep_grid.load_schema(workflow.source_path("../schemas/config.schema.yaml")))
+except sweep_grid.SweepConfigError as err:
+    raise WorkflowError(str(err)) from None
+validate(config, "../schemas/config.schema.yaml")
+
+SETTINGS = sweep_grid.normalize(config, sweep_grid.load_schema(workflow.source_path("../schemas/config.schema.yaml")))
+SETTINGS_JSON = sweep_grid.canonical_json(SETTINGS)
+PLAN = sweep_grid.plan_chunks(SETTINGS)
+CHUNK_DIR = "results/chunks"
+
+# A damaged chunk file (truncated copy, full disk, bit rot) must be recomputed, not gathered:
+# the main process verifies every existing chunk of the plan and moves damaged ones to
+# results/chunks/quarantine/, so Snakemake sees them as missing. Jobs (remote/subprocess
+# executions of this file) skip the check; a dry run only reports.
+if workflow.is_main_process:
+    _damaged = sweep_io.check_existing_chunks(CHUNK_DIR, PLAN, act=not workflow.dryrun)
+    for _cid, _reason in _damaged.items():
+        print(f"sweep: chunk {_cid} is damaged ({_reason}); "
+              + ("a real run will quarantine and recompute it" if workflow.dryrun
+                 else "moved to results/chunks/quarantine/, it will be recomputed"),
+              file=sys.stderr)

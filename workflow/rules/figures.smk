@@ -1,0 +1,20 @@
+# Execute a notebook of workflow/notebooks/ against the cube; it saves results/figures/<name>.png.
+
+
+rule notebook:
+    input:
+        cube="results/cube.nc",
+        notebook=workflow.source_path("../notebooks/{notebook}.ipynb"),
+    output:
+        figure="results/figures/{notebook}.png",
+        executed="results/notebooks/{notebook}.ipynb",
+    log:
+        "results/logs/notebooks/{notebook}.log",
+    wildcard_constraints:
+        notebook="|".join(sweep_grid.NOTEBOOKS),
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    script:
+        "../scripts/run_notebook.py"

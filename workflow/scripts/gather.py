@@ -1,0 +1,13 @@
+"""Snakemake job `gather`: verified chunk files -> results/cube.nc."""
+import json
+
+from sweep import batch, io
+
+batch.setup_logging(snakemake.log[0])  # noqa: F821 (injected by Snakemake)
+io.gather(
+    chunk_paths=snakemake.input.chunks,  # noqa: F821
+    settings=json.loads(snakemake.params.settings),  # noqa: F821
+    out_path=snakemake.output[0],  # noqa: F821
+    repo_path=snakemake.scriptdir,  # noqa: F821
+    history="snakemake rule gather",
+)
