@@ -5,3 +5,8 @@ try:
     __version__ = _version("sweep")
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
+
+from .errors import ConfigError  # noqa: E402
+from .simulate import SimulationResult, simulate  # noqa: E402
+
+__all__ = ["simulate", "SimulationResult", "ConfigError", "__version__"]

@@ -486,3 +486,36 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
         Path(log_path).parent.mkdir(parents=True, exist_ok=True)
         Path(log_path).write_text(f"executed {notebook} -> {figure}\n", encoding="utf-8")
     return figure
+
+
+def plot_map(ax, da, label: str, log: bool = False, annotate_max_cells: int = 64):
+    """Draw a 2-D DataArray (dims (y, x)) as a cell map on a matplotlib Axes.
+
+    Cells sit at index positions with the coordinate values as tick labels, so axes of length
+    1, unevenly spaced or logarithmic values all display; NaN cells are grey. Grids with at
+    most `annotate_max_cells` cells (64: the numbers stay legible) get their values written in.
+    """
+    import matplotlib as mpl
+    import matplotlib.colors as mcolors
+
+    ydim, xdim = da.dims
+    z = np.asarray(da.values, dtype=float)
+    finite = z[np.isfinite(z)]
+    norm = None
+    if log and finite.size and (finite > 0).all():
+        norm = mcolors.LogNorm(vmin=finite.min(), vmax=max(finite.max(), finite.min() * (1 + 1e-12)))
+    cmap = mpl.colormaps["viridis"].with_extremes(bad="0.85")
+    ny, nx = z.shape
+    mesh = ax.pcolormesh(np.arange(nx + 1) - 0.5, np.arange(ny + 1) - 0.5, np.ma.masked_invalid(z),
+                         cmap=cmap, norm=norm, shading="flat")
+    ax.set_xticks(range(nx), [f"{v:.3g}" for v in da[xdim].values], rotation=45 if nx > 6 else 0)
+    ax.set_yticks(range(ny), [f"{v:.3g}" for v in da[ydim].values])
+    units = {d: da[d].attrs.get("units", "") for d in (xdim, ydim)}
+    ax.set_xlabel(f"{xdim} ({units[xdim]})")
+    ax.set_ylabel(f"{ydim} ({units[ydim]})")
+    if nx * ny <= annotate_max_cells:
+        for (j, i), v in np.ndenumerate(z):
+            ax.text(i, j, "NaN" if not np.isfinite(v) else f"{v:.3g}", ha="center", va="center",
+                    fontsize=7, color="k" if not np.isfinite(v) else "w")
+    ax.figure.colorbar(mesh, ax=ax, label=label)
+    return mesh

@@ -1,0 +1,687 @@
+"""Hybrid integrator: DOP853 (adaptive, or fixed step) with located events and mode switches.
+
+One numba kernel, `integrate`, runs a whole scene: it steps the current smooth mode (rolling or
+sliding with a fixed set of moment signs and stuck components), detects every event on the
+accepted step, locates the earliest one on the 7th-order dense output, restarts from there with
+the new discrete state (keeping the step size), and records the diagnostics the scene asked for.
+
+Step-size control follows Hairer, Norsett & Wanner (1993), II.4 and II.10: the error norm of
+dop853 (5th/3rd-order embedded estimates), safety 0.9, factor in [0.2, 10], exponent -1/8.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from . import outcomes as oc
+from .events import (EV_CONE, EV_CONTACT, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SLIPEND, EV_UNSTICK1,
+                     N_DYN_EVENTS, N_EVENTS, brent_max_phi, dense_eval, event_values,
+                     hermite_interior_root, locate)
+from .model import (N_AUX, N_CORE, N_FULL, P_K1, P_K2, P_K3, P_MUS, ROLL, SLIDE, X_F1, X_F2, X_G1, X_OK,
+                    X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W3, energy,
+                    project_velocity, rhs)
+from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
+
+SAFETY = 0.9
+MIN_FACTOR = 0.2
+MAX_FACTOR = 10.0
+ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8)
+EPS = 2.220446049250313e-16
+
+# settings vector layout
+S_RTOL, S_ATOL, S_HFIXED, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS, S_EXTRA = 0, 1, 2, 3, 4, 5, 6, 7, 8
+N_SETTINGS = 9
+
+# integer statistics layout
+I_OUTCOME, I_STEPS, I_REJECTED, I_RHS, I_EVENTS, I_TRANS, I_STICK, I_IMPACTS, I_LEVELS, I_TRAJ, I_PEAKS = range(11)
+N_ISTATS = 11
+# float statistics layout
+F_TEND, F_SLIDETIME, F_DIMPACT, F_E0, F_EEND, F_HLAST = range(6)
+N_FSTATS = 6
+# trajectory columns: tau, y[0:N_FULL], Phi, mode
+TRAJ_COLS = 2 + N_FULL + 1
+
+
+@njit(cache=True)
+def _rk_step(t, y, f, h, n, p, mode, side, sig, stuck, n0x, n0y, K, y_new, f_new, aux_new, ytmp, dytmp, auxtmp):
+    """One DOP853 step; returns the (Hairer) scaled error norm factor inputs via K. 12 RHS calls."""
+    for i in range(n):
+        K[0, i] = f[i]
+    for s in range(1, 12):
+        for i in range(n):
+            acc = 0.0
+            for j in range(s):
+                acc += RK_A[s, j] * K[j, i]
+            ytmp[i] = y[i] + h * acc
+        rhs(t + RK_C[s] * h, ytmp, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
+        for i in range(n):
+            K[s, i] = dytmp[i]
+    for i in range(n):
+        acc = 0.0
+        for j in range(12):
+            acc += RK_B[j] * K[j, i]
+        y_new[i] = y[i] + h * acc
+    rhs(t + h, y_new, p, mode, side, sig, stuck, n0x, n0y, n, f_new, aux_new)
+    for i in range(n):
+        K[12, i] = f_new[i]
+
+
+@njit(cache=True)
+def _error_norm(K, h, y, y_new, n, rtol, atol):
+    e5 = 0.0
+    e3 = 0.0
+    for i in range(n):
+        sc = atol + rtol * max(abs(y[i]), abs(y_new[i]))
+        a5 = 0.0
+        a3 = 0.0
+        for j in range(13):
+            a5 += RK_E5[j] * K[j, i]
+            a3 += RK_E3[j] * K[j, i]
+        e5 += (a5 / sc) ** 2
+        e3 += (a3 / sc) ** 2
+    if e5 == 0.0 and e3 == 0.0:
+        return 0.0
+    den = e5 + 0.01 * e3
+    return abs(h) * e5 / math.sqrt(den * n)
+
+
+@njit(cache=True)
+def _dense_coeffs(t, y, h, y_new, f_new, n, p, mode, side, sig, stuck, n0x, n0y, K, F, ytmp, dytmp, auxtmp):
+    """Coefficients of the continuous extension (3 extra RHS calls: stages 13..15)."""
+    for s in range(13, 16):
+        for i in range(n):
+            acc = 0.0
+            for j in range(s):
+                acc += RK_A[s, j] * K[j, i]
+            ytmp[i] = y[i] + h * acc
+        rhs(t + RK_C[s] * h, ytmp, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
+        for i in range(n):
+            K[s, i] = dytmp[i]
+    for i in range(n):
+        dyv = y_new[i] - y[i]
+        F[0, i] = dyv
+        F[1, i] = h * K[0, i] - dyv
+        F[2, i] = 2.0 * dyv - h * (f_new[i] + K[0, i])
+        for r in range(4):
+            acc = 0.0
+            for j in range(16):
+                acc += RK_D[r, j] * K[j, i]
+            F[3 + r, i] = h * acc
+
+
+@njit(cache=True)
+def _slip_accel(nu, t, y, p, side, sig, stuck, n, dy, aux):
+    rhs(t, y, p, SLIDE, side, sig, stuck, math.cos(nu), math.sin(nu), n, dy, aux)
+    c = math.cos(nu)
+    s = math.sin(nu)
+    return dy[Y_U2] * c - dy[Y_U1] * s, dy[Y_U1] * c + dy[Y_U2] * s
+
+
+@njit(cache=True)
+def slip_onset_direction(t, y, p, side, sig, stuck, n, F1, F2, counter):
+    """Slip direction nu at the onset of sliding (u = 0), consistent with the sliding dynamics.
+
+    Sliding starts with zero slip speed; its direction s = (cos nu, sin nu) must be the one along
+    which the slip then grows: the slip acceleration a_P(nu) (with friction -mu_d Phi s) must be
+    parallel to s with a_P.s > 0. The paper's rule s = -F_f/|F_f| (section 6.2) is exact only when
+    the contact's inverse inertia is isotropic; it is the initial guess. The cross product
+    a_P(nu) x s is scanned on 64 angles for sign changes with a_P.s > 0, the root nearest the guess
+    is refined by bisection to 1e-13 rad, and the guess is kept if no consistent root exists.
+    """
+    y0 = y.copy()
+    y0[Y_U1] = 0.0
+    y0[Y_U2] = 0.0
+    dy = np.empty(n)
+    aux = np.empty(N_AUX)
+    guess = math.atan2(-F2, -F1)
+    best = guess
+    bestd = 1e300
+    m = 64
+    xa = guess - math.pi
+    ca, da = _slip_accel(xa, t, y0, p, side, sig, stuck, n, dy, aux)
+    counter[0] += 1
+    for j in range(1, m + 1):
+        xb = guess - math.pi + 2.0 * math.pi * j / m
+        cb, db = _slip_accel(xb, t, y0, p, side, sig, stuck, n, dy, aux)
+        counter[0] += 1
+        if (ca > 0.0) != (cb > 0.0):
+            lo, hi, clo = xa, xb, ca
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                cm, dm = _slip_accel(mid, t, y0, p, side, sig, stuck, n, dy, aux)
+                counter[0] += 1
+                if (cm > 0.0) == (clo > 0.0):
+                    lo, clo = mid, cm
+                else:
+                    hi = mid
+                if hi - lo < 1e-13:
+                    break
+            root = 0.5 * (lo + hi)
+            cr, dr = _slip_accel(root, t, y0, p, side, sig, stuck, n, dy, aux)
+            counter[0] += 1
+            dist = abs(math.atan2(math.sin(root - guess), math.cos(root - guess)))
+            if dr > 0.0 and dist < bestd:
+                best = root
+                bestd = dist
+        xa, ca, da = xb, cb, db
+    return best
+
+
+@njit(cache=True)
+def _stick_or_flip(i, t, y, p, mode, side, sig, stuck, n0x, n0y, n, dy, aux, counter):
+    """At omega.a_i = 0: stick if the moment can hold it (|sigma needed| <= 1), else flip sign.
+
+    Returns 1 when the component sticks. The sign is set to the one the motion will take.
+    """
+    stuck[i] = 1
+    rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, dy, aux)
+    counter[0] += 1
+    need = aux[X_SIG1 + i]
+    if abs(need) < 1.0:
+        return 1
+    stuck[i] = 0
+    sig[i] = 1.0 if need > 0.0 else -1.0
+    return 0
+
+
+@njit(cache=True)
+def _consistent_signs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, active, dy, aux, counter):
+    """Make every non-stuck moment sign agree with omega.a_i; an exact zero gets the stick test."""
+    rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, dy, aux)
+    counter[0] += 1
+    nst = 0
+    for i in range(3):
+        if active[i] == 1 and stuck[i] == 0:
+            g = aux[X_G1 + i]
+            if g > 0.0:
+                sig[i] = 1.0
+            elif g < 0.0:
+                sig[i] = -1.0
+            else:
+                nst += _stick_or_flip(i, t, y, p, mode, side, sig, stuck, n0x, n0y, n, dy, aux, counter)
+    return nst
+
+
+@njit(cache=True)
+def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
+    """Integrate one scene. Pure arrays in, arrays out.
+
+    y0: initial state (N_FULL); mode0: ROLL or SLIDE; settings: see S_* indices;
+    level_e: energies of the halt levels, decreasing; sample_tau: increasing output times;
+    traj_cap: initial capacity of the trajectory buffer (0: no trajectory stored).
+    Returns istats, fstats, level_out (n_levels x 4: tau, alpha, dtheta/dtau, f_hat),
+    samples (n_samples x N_FULL, plus energy in an extra column), trajectory (rows x TRAJ_COLS),
+    peaks (tau, Phi of the located maxima of the normal force; empty unless tracked).
+    """
+    rtol = settings[S_RTOL]
+    atol = settings[S_ATOL]
+    h_fixed = settings[S_HFIXED]
+    t_max = settings[S_TMAX]
+    u_tol = settings[S_UTOL]
+    max_steps = int(settings[S_MAXSTEPS])
+    n = N_FULL if settings[S_KIN] > 0.0 else N_CORE
+    track_peaks = settings[S_PEAKS] > 0.0
+    extra_steps = int(settings[S_EXTRA])
+    adaptive = h_fixed <= 0.0
+
+    istats = np.zeros(N_ISTATS, np.int64)
+    fstats = np.zeros(N_FSTATS)
+    nl = level_e.shape[0]
+    level_out = np.full((nl, 4), np.nan)
+    ns = sample_tau.shape[0]
+    samples = np.full((ns, N_FULL + 1), np.nan)
+    traj = np.empty((max(traj_cap, 1), TRAJ_COLS))
+    ntraj = 0
+    peaks = np.empty((64 if track_peaks else 1, 2))
+    npk = 0
+    counter = np.zeros(1, np.int64)
+
+    y = y0.copy()
+    t = 0.0
+    mode = mode0
+    side = 1 if y[Y_ALPHA] > 0.0 else -1
+    sig = np.ones(3)
+    stuck = np.zeros(3, np.int64)
+    active = np.zeros(N_EVENTS, np.int64)
+    active[0] = 1 if p[P_K1] > 0.0 else 0
+    active[1] = 1 if p[P_K2] > 0.0 else 0
+    active[2] = 1 if p[P_K3] > 0.0 else 0
+    active[EV_CONE] = 1
+    n0x = 1.0
+    n0y = 0.0
+
+    f = np.empty(n)
+    aux = np.empty(N_AUX)
+    K = np.zeros((16, n))
+    Fd = np.zeros((7, n))
+    Fprev = np.zeros((7, n))
+    y_new = np.empty(n)
+    f_new = np.empty(n)
+    aux_new = np.empty(N_AUX)
+    ytmp = np.empty(n)
+    dytmp = np.empty(n)
+    auxtmp = np.empty(N_AUX)
+    ybuf = np.empty(n)
+    dybuf = np.empty(n)
+    auxbuf = np.empty(N_AUX)
+    gbuf = np.empty(N_EVENTS)
+    g_old = np.empty(N_EVENTS)
+    g_new = np.empty(N_EVENTS)
+    yprev = np.empty(n)
+    y_end = np.zeros(N_FULL)
+    end_mode = ROLL
+    end_side = 1
+
+    # --- initial discrete state -------------------------------------------------------------
+    istats[I_STICK] += _consistent_signs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, active, dytmp, auxtmp, counter)
+    if mode == SLIDE:
+        un = math.hypot(y[Y_U1], y[Y_U2])
+        n0x = y[Y_U1] / un
+        n0y = y[Y_U2] / un
+    rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux)
+    counter[0] += 1
+    if mode == ROLL and aux[X_PHI] > 0.0 and p[P_MUS] * aux[X_PHI] < math.hypot(aux[X_F1], aux[X_F2]):
+        nu = slip_onset_direction(t, y, p, side, sig, stuck, n, aux[X_F1], aux[X_F2], counter)
+        mode = SLIDE
+        n0x = math.cos(nu)
+        n0y = math.sin(nu)
+        y[Y_U1] = 0.0
+        y[Y_U2] = 0.0
+        istats[I_TRANS] += 1
+        rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux)
+        counter[0] += 1
+    fstats[F_E0] = energy(y, p, side, mode)
+    next_level = 0
+    lev = level_e[0] if nl > 0 else np.nan
+    event_values(y, aux, p, mode, side, sig, stuck, u_tol, lev, active, g_old)
+    outcome = -1
+    if aux[X_PHI] <= 0.0:
+        outcome = oc.CONTACT_LOST
+    if aux[X_OK] == 0.0:
+        outcome = oc.NUMERICAL_ERROR
+    isamp = 0
+    while isamp < ns and sample_tau[isamp] <= 0.0:
+        for i in range(n):
+            samples[isamp, i] = y[i]
+        samples[isamp, N_FULL] = energy(y, p, side, mode)
+        isamp += 1
+    if traj_cap > 0:
+        traj[0, 0] = t
+        for i in range(n):
+            traj[0, 1 + i] = y[i]
+        traj[0, 1 + N_FULL] = aux[X_PHI]
+        traj[0, 2 + N_FULL] = mode
+        ntraj = 1
+
+    # Phi peak tracking: Phi at the last two step ends and the previous step's dense output
+    phi_a = np.nan
+    phi_b = aux[X_PHI]
+    t_a = np.nan
+    t_b = 0.0
+    prev_ok = False
+    tprev = 0.0
+    hprev = 0.0
+    prev_mode = mode
+    prev_side = side
+    prev_sig = sig.copy()
+    prev_stuck = stuck.copy()
+    prev_n0x = n0x
+    prev_n0y = n0y
+    pending = np.zeros(nl, np.int64)    # levels waiting for the first Phi peak after them
+    n_pending = 0
+    after_halt = 0
+
+    # --- initial step size (Hairer & Wanner II.4, 'starting step size') ------------------------
+    if adaptive:
+        d0 = 0.0
+        d1 = 0.0
+        for i in range(n):
+            sc = atol + rtol * abs(y[i])
+            d0 += (y[i] / sc) ** 2
+            d1 += (f[i] / sc) ** 2
+        d0 = math.sqrt(d0 / n)
+        d1 = math.sqrt(d1 / n)
+        h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+        for i in range(n):
+            ytmp[i] = y[i] + h0 * f[i]
+        rhs(t + h0, ytmp, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
+        counter[0] += 1
+        d2 = 0.0
+        for i in range(n):
+            sc = atol + rtol * abs(y[i])
+            d2 += ((dytmp[i] - f[i]) / sc) ** 2
+        d2 = math.sqrt(d2 / n) / h0
+        if max(d1, d2) <= 1e-15:
+            h1 = max(1e-6, h0 * 1e-3)
+        else:
+            h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
+        h = min(100.0 * h0, h1)
+    else:
+        h = h_fixed
+
+    # --- main loop ------------------------------------------------------------------------------
+    while outcome < 0 or (n_pending > 0 and after_halt < extra_steps):
+        running = outcome < 0
+        if not running:
+            after_halt += 1
+        if istats[I_STEPS] + istats[I_REJECTED] >= max_steps:
+            if outcome < 0:
+                outcome = oc.STEP_LIMIT
+            break
+        hit_tmax = False
+        if outcome < 0 and t + h >= t_max:
+            h = t_max - t
+            hit_tmax = True
+        if h <= 16.0 * EPS * max(abs(t), 1.0):
+            if outcome < 0:
+                outcome = oc.STEP_SIZE_UNDERFLOW if not hit_tmax else oc.T_MAX
+            break
+        _rk_step(t, y, f, h, n, p, mode, side, sig, stuck, n0x, n0y, K, y_new, f_new, aux_new, ytmp, dytmp, auxtmp)
+        counter[0] += 12
+        finite = True
+        for i in range(n):
+            if not math.isfinite(y_new[i]):
+                finite = False
+        if adaptive:
+            err = _error_norm(K, h, y, y_new, n, rtol, atol) if finite else np.inf
+            if not err <= 1.0:
+                istats[I_REJECTED] += 1
+                fac = MIN_FACTOR if not math.isfinite(err) else max(MIN_FACTOR, SAFETY * err ** ERR_EXPONENT)
+                h *= fac
+                if not finite and h <= 16.0 * EPS * max(abs(t), 1.0):
+                    if outcome < 0:
+                        outcome = oc.NUMERICAL_ERROR
+                    break
+                continue
+            fac = MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** ERR_EXPONENT)
+            h_next = h * fac
+        else:
+            if not finite:
+                if outcome < 0:
+                    outcome = oc.NUMERICAL_ERROR
+                break
+            h_next = h_fixed
+        istats[I_STEPS] += 1
+        if aux_new[X_OK] == 0.0 and outcome < 0:
+            outcome = oc.NUMERICAL_ERROR
+            break
+
+        # --- events on [t, t + h] ---------------------------------------------------------------
+        event_values(y_new, aux_new, p, mode, side, sig, stuck, u_tol, lev, active, g_new)
+        t_end = t + h
+        have_dense = False
+        first_k = -1
+        first_t = t_end
+        first_ta = t
+        for k in range(N_DYN_EVENTS):
+            ta = -1.0
+            ga = 0.0
+            gb = 0.0
+            if g_old[k] > 0.0 and g_new[k] <= 0.0:
+                ta, ga, tb, gb = t, g_old[k], t_end, g_new[k]
+            elif k <= 2 and g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != np.inf:
+                x = hermite_interior_root(k, sig[k], y, f, y_new, f_new, g_old[k], g_new[k], h)
+                if x > 0.0:
+                    if not have_dense:
+                        _dense_coeffs(t, y, h, y_new, f_new, n, p, mode, side, sig, stuck, n0x, n0y, K, Fd, ytmp, dytmp, auxtmp)
+                        counter[0] += 3
+                        have_dense = True
+                    # confirm on the dense output: scan for a sign change of g_k
+                    prevt = t
+                    prevg = g_old[k]
+                    for j in range(1, 17):
+                        tj = t + h * j / 17.0
+                        dense_eval(Fd, y, t, h, tj, n, ybuf)
+                        rhs(tj, ybuf, p, mode, side, sig, stuck, n0x, n0y, n, dybuf, auxbuf)
+                        counter[0] += 1
+                        event_values(ybuf, auxbuf, p, mode, side, sig, stuck, u_tol, lev, active, gbuf)
+                        if prevg > 0.0 and gbuf[k] <= 0.0:
+                            ta, ga, tb, gb = prevt, prevg, tj, gbuf[k]
+                            break
+                        prevt = tj
+                        prevg = gbuf[k]
+            if ta >= 0.0 and ta < first_t:
+                if not have_dense:
+                    _dense_coeffs(t, y, h, y_new, f_new, n, p, mode, side, sig, stuck, n0x, n0y, K, Fd, ytmp, dytmp, auxtmp)
+                    counter[0] += 3
+                    have_dense = True
+                ra, rb = locate(k, ta, ga, tb, gb, Fd, y, t, h, n, p, mode, side, sig, stuck, n0x, n0y,
+                                u_tol, lev, active, ybuf, dybuf, auxbuf, gbuf, counter)
+                if rb < first_t or first_k < 0:
+                    first_k = k
+                    first_t = rb
+                    first_ta = ra
+        seg_end = first_t if first_k >= 0 else t_end
+        need_dense = (not have_dense) and (
+            track_peaks or (isamp < ns and sample_tau[isamp] <= seg_end)
+            or (nl > next_level and g_old[EV_LEVEL] > 0.0 and g_new[EV_LEVEL] <= 0.0)
+            or first_k >= 0)
+        if need_dense:
+            _dense_coeffs(t, y, h, y_new, f_new, n, p, mode, side, sig, stuck, n0x, n0y, K, Fd, ytmp, dytmp, auxtmp)
+            counter[0] += 3
+            have_dense = True
+
+        # --- halt levels crossed before the segment end (energy is monotone: one root each) -----
+        while outcome < 0 and next_level < nl:
+            if first_k >= 0:
+                dense_eval(Fd, y, t, h, seg_end, n, ybuf)
+                gl = energy(ybuf, p, side, mode) - level_e[next_level]
+            else:
+                gl = energy(y_new, p, side, mode) - level_e[next_level]
+            if not (gl <= 0.0):
+                break
+            gl0 = energy(y, p, side, mode) - level_e[next_level]
+            ta, tb = t, seg_end
+            if gl0 <= 0.0:
+                tb = t
+                ta = t
+            else:
+                ta, tb = locate(EV_LEVEL, t, gl0, seg_end, gl, Fd, y, t, h, n, p, mode, side, sig, stuck,
+                                n0x, n0y, u_tol, level_e[next_level], active, ybuf, dybuf, auxbuf, gbuf, counter)
+            tl = 0.5 * (ta + tb)
+            dense_eval(Fd, y, t, h, tl, n, ybuf)
+            level_out[next_level, 0] = tl
+            level_out[next_level, 1] = ybuf[Y_ALPHA]
+            level_out[next_level, 2] = ybuf[Y_W3] / math.cos(ybuf[Y_ALPHA])
+            if track_peaks:
+                pending[next_level] = 1
+                n_pending += 1
+            next_level += 1
+            istats[I_LEVELS] = next_level
+            if next_level == nl:
+                outcome = oc.HALTED
+                fstats[F_TEND] = tl
+                for i in range(n):
+                    y_end[i] = ybuf[i]
+                end_mode = mode
+                end_side = side
+            else:
+                lev = level_e[next_level]
+
+        # --- samples in the segment ----------------------------------------------------------
+        while isamp < ns and sample_tau[isamp] <= seg_end and (outcome < 0 or sample_tau[isamp] <= fstats[F_TEND]):
+            dense_eval(Fd, y, t, h, sample_tau[isamp], n, ybuf)
+            for i in range(n):
+                samples[isamp, i] = ybuf[i]
+            samples[isamp, N_FULL] = energy(ybuf, p, side, mode)
+            isamp += 1
+
+        # --- normal-force peaks: Phi at step ends a < b > c brackets a maximum ------------------
+        if track_peaks:
+            if first_k >= 0:
+                dense_eval(Fd, y, t, h, seg_end, n, ybuf)
+                rhs(seg_end, ybuf, p, mode, side, sig, stuck, n0x, n0y, n, dybuf, auxbuf)
+                counter[0] += 1
+                phi_c = auxbuf[X_PHI]
+            else:
+                phi_c = aux_new[X_PHI]
+            if phi_b > phi_a and phi_b >= phi_c and prev_ok:
+                tp1, pv1 = brent_max_phi(t_a, t_b, Fprev, yprev, tprev, hprev, n, p, prev_mode, prev_side,
+                                         prev_sig, prev_stuck, prev_n0x, prev_n0y, ybuf, dybuf, auxbuf, counter)
+                tp2, pv2 = brent_max_phi(t, seg_end, Fd, y, t, h, n, p, mode, side, sig, stuck, n0x, n0y,
+                                         ybuf, dybuf, auxbuf, counter)
+                tpk = tp1 if pv1 >= pv2 else tp2
+                pvk = pv1 if pv1 >= pv2 else pv2
+                if npk == peaks.shape[0]:
+                    bigger = np.empty((2 * npk, 2))
+                    bigger[:npk] = peaks[:npk]
+                    peaks = bigger
+                peaks[npk, 0] = tpk
+                peaks[npk, 1] = pvk
+                npk += 1
+                # resolve levels that now have a peak after them: f_hat = 2 / (t_k - t_{k-2})
+                for L in range(nl):
+                    if pending[L] == 1 and tpk > level_out[L, 0]:
+                        j = npk - 2
+                        while j >= 0 and peaks[j, 0] > level_out[L, 0]:
+                            j -= 1
+                        if j >= 2:
+                            level_out[L, 3] = 2.0 / (peaks[j, 0] - peaks[j - 2, 0])
+                        pending[L] = 0
+                        n_pending -= 1
+            # shift the window; keep this step's dense output for the next bracket
+            phi_a, t_a = phi_b, t_b
+            phi_b, t_b = phi_c, seg_end
+            for r in range(7):
+                for i in range(n):
+                    Fprev[r, i] = Fd[r, i]
+            for i in range(n):
+                yprev[i] = y[i]
+            tprev = t
+            hprev = h
+            prev_mode = mode
+            prev_side = side
+            for i in range(3):
+                prev_sig[i] = sig[i]
+                prev_stuck[i] = stuck[i]
+            prev_n0x = n0x
+            prev_n0y = n0y
+            prev_ok = True
+
+        # --- advance ------------------------------------------------------------------------
+        if mode == SLIDE and running:
+            fstats[F_SLIDETIME] += (seg_end if outcome < 0 else fstats[F_TEND]) - t
+        if first_k >= 0:
+            dense_eval(Fd, y, t, h, seg_end, n, ybuf)
+            for i in range(n):
+                y[i] = ybuf[i]
+            t = seg_end
+        else:
+            for i in range(n):
+                y[i] = y_new[i]
+                f[i] = f_new[i]
+            t = t_end
+        if traj_cap > 0 and outcome < 0:
+            if ntraj == traj.shape[0]:
+                bigger = np.empty((2 * ntraj, TRAJ_COLS))
+                bigger[:ntraj] = traj[:ntraj]
+                traj = bigger
+            traj[ntraj, 0] = t
+            for i in range(n):
+                traj[ntraj, 1 + i] = y[i]
+            traj[ntraj, 1 + N_FULL] = aux_new[X_PHI] if first_k < 0 else np.nan
+            traj[ntraj, 2 + N_FULL] = mode
+            ntraj += 1
+
+        if first_k >= 0:
+            istats[I_EVENTS] += 1
+            k = first_k
+            restart_check_cone = False
+            if k <= 2:
+                istats[I_STICK] += _stick_or_flip(k, t, y, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp, counter)
+            elif k <= 5:
+                i = k - EV_UNSTICK1
+                rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
+                counter[0] += 1
+                sig[i] = 1.0 if auxtmp[X_SIG1 + i] > 0.0 else -1.0
+                stuck[i] = 0
+            elif k == EV_CONE:
+                rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
+                counter[0] += 1
+                nu = slip_onset_direction(t, y, p, side, sig, stuck, n, auxtmp[X_F1], auxtmp[X_F2], counter)
+                mode = SLIDE
+                n0x = math.cos(nu)
+                n0y = math.sin(nu)
+                y[Y_U1] = 0.0
+                y[Y_U2] = 0.0
+                istats[I_TRANS] += 1
+            elif k == EV_SLIPEND:
+                loss = project_velocity(y, p, side, SLIDE, side, ROLL)
+                y[Y_DSLIDE] += loss
+                mode = ROLL
+                istats[I_TRANS] += 1
+                restart_check_cone = True
+            elif k == EV_CONTACT:
+                if outcome < 0:
+                    outcome = oc.CONTACT_LOST
+                    fstats[F_TEND] = t
+                break
+            elif k == EV_SIDE:
+                loss = project_velocity(y, p, side, mode, -side, mode)
+                fstats[F_DIMPACT] += loss
+                side = -side
+                istats[I_IMPACTS] += 1
+                y[Y_ALPHA] = 0.0
+                for i in range(3):
+                    stuck[i] = 0
+                if y[Y_W1] * side <= 0.0:
+                    # the impact left no rotation towards the new side: the disk stands on its
+                    # flat edge (line contact, alpha = 0), where this single-contact model ends
+                    if outcome < 0:
+                        outcome = oc.LINE_CONTACT
+                        fstats[F_TEND] = t
+                    break
+                else:
+                    istats[I_STICK] += _consistent_signs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, active, dytmp, auxtmp, counter)
+                    restart_check_cone = mode == ROLL
+            if True:
+                rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux_new)
+                counter[0] += 1
+                if restart_check_cone and p[P_MUS] * aux_new[X_PHI] < math.hypot(aux_new[X_F1], aux_new[X_F2]):
+                    nu = slip_onset_direction(t, y, p, side, sig, stuck, n, aux_new[X_F1], aux_new[X_F2], counter)
+                    mode = SLIDE
+                    n0x = math.cos(nu)
+                    n0y = math.sin(nu)
+                    y[Y_U1] = 0.0
+                    y[Y_U2] = 0.0
+                    istats[I_TRANS] += 1
+                    rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux_new)
+                    counter[0] += 1
+                if aux_new[X_OK] == 0.0:
+                    if outcome < 0:
+                        outcome = oc.NUMERICAL_ERROR
+                        fstats[F_TEND] = t
+                    break
+                event_values(y, aux_new, p, mode, side, sig, stuck, u_tol, lev, active, g_old)
+        else:
+            for kk in range(N_EVENTS):
+                g_old[kk] = g_new[kk]
+            if nl > next_level:
+                g_old[EV_LEVEL] = energy(y, p, side, mode) - lev
+        if mode == SLIDE:
+            un = math.hypot(y[Y_U1], y[Y_U2])
+            if un > 0.0:
+                n0x = y[Y_U1] / un
+                n0y = y[Y_U2] / un
+        if hit_tmax and outcome < 0 and first_k < 0:
+            outcome = oc.T_MAX
+            fstats[F_TEND] = t
+        h = h_next
+
+    if outcome < 0:
+        outcome = oc.STEP_LIMIT
+    if outcome != oc.HALTED:
+        fstats[F_TEND] = t
+        for i in range(n):
+            y_end[i] = y[i]
+        end_mode = mode
+        end_side = side
+    istats[I_OUTCOME] = outcome
+    istats[I_RHS] = counter[0]
+    istats[I_TRAJ] = ntraj
+    istats[I_PEAKS] = npk
+    fstats[F_EEND] = energy(y_end, p, end_side, end_mode)
+    fstats[F_HLAST] = h
+    return istats, fstats, level_out, samples, traj[:ntraj], peaks[:npk], y_end

@@ -1,0 +1,172 @@
+"""Single-scene API: `simulate(scene) -> SimulationResult` (SI units at this boundary)."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import diagnostics, model, outcomes
+from .errors import ConfigError
+from .integrator import (F_DIMPACT, F_E0, F_EEND, F_SLIDETIME, F_TEND, I_EVENTS, I_IMPACTS,
+                         I_OUTCOME, I_REJECTED, I_RHS, I_STEPS, I_STICK, I_TRANS, N_SETTINGS,
+                         S_ATOL, S_EXTRA, S_HFIXED, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX,
+                         S_UTOL, TRAJ_COLS, integrate)
+from .scene import Scene, load_scene
+
+# After the smallest level, the normal-force frequency of that level needs the next peak of Phi;
+# a peak comes every nutation period (~10-40 steps), so 5000 extra steps only bound a pathology.
+EXTRA_STEPS_FOR_PEAKS = 5000
+
+
+@dataclass
+class SimulationResult:
+    """What one scene produced. `summary` is JSON-able (SI units); arrays are numpy.
+
+    samples: dict with t (s), alpha (rad), omega (n x 3, rad/s on e1, e2, e3), energy (J) at the
+    requested sample times (NaN after the scene ended). trajectory: dict of arrays at every
+    accepted step (t, alpha, omega, slip, theta, psi, x, y, Phi, mode) if requested, else None.
+    """
+
+    scene: Scene
+    summary: dict
+    samples: dict | None = None
+    trajectory: dict | None = None
+    peaks: np.ndarray | None = field(default=None, repr=False)
+
+
+def initial_state(scene: Scene) -> tuple[np.ndarray, int]:
+    """Dimensionless initial state and mode (SLIDE if the initial slip is non-zero)."""
+    cfg = scene.config
+    chi, R = scene.chi, cfg["disk"]["radius"]
+    y0 = np.zeros(model.N_FULL)
+    ini = cfg["initial"]
+    y0[model.Y_ALPHA] = ini["alpha"]
+    y0[model.Y_W1:model.Y_W3 + 1] = np.asarray(ini["omega"]) * chi
+    slip = np.asarray(ini["slip"]) * chi / R
+    mode = model.SLIDE if np.any(slip != 0.0) else model.ROLL
+    y0[model.Y_U1:model.Y_U2 + 1] = slip
+    y0[model.Y_THETA] = ini["theta"]
+    y0[model.Y_PSI] = ini["psi"]
+    return y0, mode
+
+
+def _settings(scene: Scene) -> np.ndarray:
+    cfg = scene.config
+    so, st, out = cfg["solver"], cfg["stop"], cfg["outputs"]
+    s = np.zeros(N_SETTINGS)
+    s[S_RTOL] = so["rtol"]
+    s[S_ATOL] = so["atol"]
+    s[S_HFIXED] = so["dt"] / scene.chi if so["method"] == "fixed" else 0.0
+    s[S_TMAX] = st["t_max"] / scene.chi
+    s[S_UTOL] = so["slip_tol"] * scene.chi / cfg["disk"]["radius"]
+    s[S_MAXSTEPS] = st["max_steps"]
+    s[S_KIN] = 1.0 if out["kinematics"] else 0.0
+    s[S_PEAKS] = 1.0 if out["normal_force_frequency"] else 0.0
+    s[S_EXTRA] = EXTRA_STEPS_FOR_PEAKS
+    return s
+
+
+def level_energies(scene: Scene) -> np.ndarray:
+    """Dimensionless energies E_ss(beta) of the configured levels (decreasing)."""
+    return np.array([model.steady_rolling_energy(b, scene.params) for b in scene.levels])
+
+
+def run_kernel(scene: Scene, sample_tau: np.ndarray | None = None, traj_cap: int = 0):
+    """Call the numba kernel for a validated scene; returns its raw output tuple."""
+    y0, mode = initial_state(scene)
+    st = np.zeros(0) if sample_tau is None else np.ascontiguousarray(sample_tau, dtype=float)
+    return integrate(y0, scene.params, mode, _settings(scene), level_energies(scene), st, traj_cap)
+
+
+def _finite_or_nan(x: float) -> float:
+    return float(x) if math.isfinite(x) else math.nan
+
+
+def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationResult:
+    """Run one scene. `scene`: path to a YAML scene file or a dict of the same structure.
+
+    sample_times: times (s, >= 0, increasing) at which alpha, omega and energy are returned.
+    trajectory: also return the state at every accepted step (forces kinematics on).
+    Raises ConfigError for invalid input, before any integration.
+    """
+    sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    if trajectory and not sc.config["outputs"]["kinematics"]:
+        cfg = {**sc.config, "outputs": {**sc.config["outputs"], "kinematics": True}}
+        sc = load_scene(cfg)
+    sample_tau = None
+    if sample_times is not None:
+        st = np.atleast_1d(np.asarray(sample_times, dtype=float))
+        if st.ndim != 1 or not np.all(np.isfinite(st)) or np.any(st < 0) or np.any(np.diff(st) < 0):
+            raise ConfigError("sample_times", list(np.atleast_1d(sample_times)),
+                              "finite times >= 0 s in increasing order")
+        sample_tau = st / sc.chi
+    chi = sc.chi
+    escale = sc.energy_scale
+    t0 = time.perf_counter()
+    istats, fstats, lev, samp, traj, peaks, y_end = run_kernel(sc, sample_tau, 4096 if trajectory else 0)
+    wall = time.perf_counter() - t0
+
+    levels = sc.levels
+    level_t = lev[:, 0] * chi
+    prec_hz = lev[:, 2] / chi / (2.0 * math.pi)
+    nf_hz = lev[:, 3] / chi
+    fit = diagnostics.halt_time(level_t, levels)
+    code = int(istats[I_OUTCOME])
+    t_end = float(fstats[F_TEND]) * chi
+    dis = y_end[model.Y_DSLIDE:model.Y_DK3 + 1] * escale
+    summary = {
+        "outcome": outcomes.NAMES[code],
+        "outcome_code": code,
+        "t_end": t_end,
+        "t_halt": _finite_or_nan(fit["t_halt"]),
+        "t_halt_error": _finite_or_nan(fit["t_halt_error"]),
+        "halt_finite": bool(fit["halt_finite"]),
+        "approach_exponent": _finite_or_nan(fit["approach_exponent"]),
+        "ramp_exponent": diagnostics.ramp_exponent(level_t, prec_hz, fit["t_halt"]),
+        "levels": [
+            {"inclination": float(b), "t": _finite_or_nan(level_t[i]),
+             "precession_hz": _finite_or_nan(prec_hz[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
+            for i, b in enumerate(levels)
+        ],
+        "slip_fraction": float(fstats[F_SLIDETIME] / fstats[F_TEND]) if fstats[F_TEND] > 0 else 0.0,
+        "n_transitions": int(istats[I_TRANS]),
+        "n_stick": int(istats[I_STICK]),
+        "n_impacts": int(istats[I_IMPACTS]),
+        "energy_initial": float(fstats[F_E0]) * escale,
+        "energy_final": float(fstats[F_EEND]) * escale,
+        "dissipation": {"sliding": float(dis[0]), "k1": float(dis[1]), "k2": float(dis[2]),
+                        "k3": float(dis[3]), "impact": float(fstats[F_DIMPACT]) * escale},
+        "n_steps": int(istats[I_STEPS]),
+        "n_rejected": int(istats[I_REJECTED]),
+        "n_rhs": int(istats[I_RHS]),
+        "n_events": int(istats[I_EVENTS]),
+        "wall_time": wall,
+    }
+    samples = None
+    if sample_tau is not None:
+        samples = {
+            "t": sample_tau * chi,
+            "alpha": samp[:, model.Y_ALPHA].copy(),
+            "omega": samp[:, model.Y_W1:model.Y_W3 + 1] / chi,
+            "energy": samp[:, model.N_FULL] * escale,
+        }
+    tr = None
+    if trajectory:
+        R = sc.config["disk"]["radius"]
+        tr = {
+            "t": traj[:, 0] * chi,
+            "alpha": traj[:, 1 + model.Y_ALPHA].copy(),
+            "omega": traj[:, 1 + model.Y_W1:2 + model.Y_W3] / chi,
+            "slip": traj[:, 1 + model.Y_U1:2 + model.Y_U2] * R / chi,
+            "theta": traj[:, 1 + model.Y_THETA].copy(),
+            "psi": traj[:, 1 + model.Y_PSI].copy(),
+            "x": traj[:, 1 + model.Y_X] * R,
+            "y": traj[:, 1 + model.Y_Y] * R,
+            "normal_force": traj[:, 1 + model.N_FULL] * sc.config["disk"]["mass"] * R / chi**2,
+            "phi": traj[:, 1 + model.N_FULL].copy(),
+            "mode": traj[:, 2 + model.N_FULL].astype(np.int8),
+            "tau": traj[:, 0].copy(),
+        }
+    return SimulationResult(scene=sc, summary=summary, samples=samples, trajectory=tr, peaks=peaks * [chi, 1.0])
