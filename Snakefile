@@ -16,6 +16,10 @@ configfile: "config/config.yaml"
 include: "workflow/rules/common.smk"
 
 
+localrules:
+    all,
+
+
 rule all:
     default_target: True
     input:

@@ -190,13 +190,24 @@ def schema_errors(config: Mapping, schema: dict) -> list[str]:
 def cross_field_errors(config: Mapping) -> list[str]:
     """Rules JSON schema cannot express; `config` must have its defaults filled."""
     messages = []
+    disk = config.get("disk", {})
+    radius = disk.get("radius")
+    if isinstance(radius, (int, float)):
+        if disk.get("thickness", 0) > 4 * radius:
+            messages.append(f"config key `disk.thickness`: {disk['thickness']!r} exceeds 4*radius = "
+                            f"{4 * radius!r} m; allowed (0, 4*radius]")
+        for k in ("k1", "k2", "k3"):
+            for i, v in enumerate(config.get("grid", {}).get(k, [])):
+                if isinstance(v, (int, float)) and v > radius:
+                    messages.append(f"config key `grid.{k}[{i}]`: {v!r} m exceeds the disk radius "
+                                    f"{radius!r} m; allowed [0, radius]")
     mu_s = config.get("mu_s")
     grid = config.get("grid", {})
     if isinstance(mu_s, (int, float)):
         for i, mu_d in enumerate(grid.get("mu_d", [])):
             if isinstance(mu_d, (int, float)) and mu_d > mu_s:
                 messages.append(f"config key `grid.mu_d[{i}]`: {mu_d!r} exceeds mu_s = {mu_s!r}; "
-                                "allowed (0, mu_s] (dynamic friction cannot exceed static friction)")
+                                "allowed [0, mu_s] (with mu_d > mu_s the slip onset is inconsistent)")
     for i, a in enumerate(grid.get("alpha0", [])):
         if isinstance(a, (int, float)) and a == 0:
             messages.append(f"config key `grid.alpha0[{i}]`: 0 is not allowed; allowed (-pi/2, 0) or "
@@ -226,27 +237,76 @@ def check_config(config: Mapping, schema: dict | None = None) -> dict:
 # normalisation
 # --------------------------------------------------------------------------------------------
 
-def normalize(config: Mapping, schema: dict | None = None) -> dict:
-    """The validated config in canonical form: defaults filled, axis values as sorted floats,
-    every real number a float (so 1 and 1.0 hash alike), integers as int."""
+def normalize(config: Mapping, schema: dict | None = None, check_scenes: bool = True) -> dict:
+    """The validated config in canonical form.
+
+    Defaults filled; axis values sorted ascending (the cube's coordinate order); levels sorted
+    decreasing (the order in which the disk reaches them, as `sweep.simulate` reports them);
+    every real number a float (so 1 and 1.0 hash alike); the solver settings completed with
+    the physics core's defaults (`sweep.scene.DEFAULTS["solver"]`, e.g. slip_tol), so a change
+    of those defaults changes every chunk's identity. With `check_scenes`, representative
+    scenes are validated by the core too (see `check_scenes`).
+    """
+    from . import scene as _scene
+
     cfg = check_config(config, schema)
     disk = cfg["disk"]
-    solver = {"method": cfg["solver"]["method"],
-              "rtol": float(cfg["solver"]["rtol"]), "atol": float(cfg["solver"]["atol"])}
-    if solver["method"] == "fixed":
-        solver["dt"] = float(cfg["solver"]["dt"])
-    return {
+    solver = dict(_scene.DEFAULTS["solver"])
+    solver.update(cfg["solver"])
+    solver = {k: (v if isinstance(v, str) else float(v)) for k, v in solver.items()}
+    settings = {
         "disk": {"radius": float(disk["radius"]), "thickness": float(disk["thickness"]),
                  "mass": float(disk["mass"]), "shape": disk["shape"]},
         "gravity": float(cfg["gravity"]),
         "mu_s": float(cfg["mu_s"]),
         "grid": {a: sorted(float(v) for v in cfg["grid"][a]) for a in AXES},
-        "levels": [float(v) for v in cfg["levels"]],
+        "levels": sorted((float(v) for v in cfg["levels"]), reverse=True),
         "solver": solver,
         "stop": {"t_max": float(cfg["stop"]["t_max"]), "max_steps": int(cfg["stop"]["max_steps"])},
         "chunk_size": int(cfg["chunk_size"]),
         "outputs": {"notebooks": list(cfg["outputs"]["notebooks"])},
     }
+    if check_scenes:
+        check_scenes_valid(settings)
+    return settings
+
+
+# scene-file field (sweep.scene) -> sweep config key, to name the key the user wrote
+_SCENE_FIELD_TO_KEY = {
+    "contact.mu_d": "grid.mu_d", "contact.k1": "grid.k1", "contact.k2": "grid.k2",
+    "contact.k3": "grid.k3", "initial.alpha": "grid.alpha0", "initial.omega": "grid.omega0",
+    "initial.omega[2]": "grid.omega0", "contact.mu_s": "mu_s", "stop.levels": "levels",
+}
+
+
+def check_scenes_valid(settings: Mapping) -> None:
+    """Validate representative scenes with the physics core's own checks (sweep.scene).
+
+    Every value of every axis is tried once (with the first value of the other axes), so each
+    single-value rule of the core (e.g. k_i <= radius, levels below the largest inclination for
+    which the disk's steady motion exists) is checked for every configured value, in
+    sum(len(axis)) scene validations (~ms each) instead of one per grid point.
+    """
+    from . import scene as _scene
+    from .errors import ConfigError
+
+    first = {a: settings["grid"][a][0] for a in AXES}
+    messages = []
+    for a in AXES:
+        for v in settings["grid"][a]:
+            point = dict(first, **{a: v})
+            try:
+                _scene.load_scene(scene(settings, point))
+            except ConfigError as err:
+                key = _SCENE_FIELD_TO_KEY.get(err.field, err.field)
+                if key.startswith("stop.levels["):
+                    key = "levels"
+                msg = f"config key `{key}`: {err.value!r} is invalid; allowed {err.allowed}"
+                if msg not in messages:
+                    messages.append(msg)
+    if messages:
+        raise SweepConfigError("invalid sweep configuration (physics-core checks):\n  "
+                               + "\n  ".join(messages))
 
 
 def scene_settings(settings: Mapping) -> dict:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
+import logging
 import math
 import os
 import subprocess
@@ -27,6 +28,8 @@ import numpy as np
 
 from . import grid as _grid
 from . import outcomes
+
+log = logging.getLogger("sweep.io")
 
 INT_FILL = -1          # _FillValue of the count variables: counts are >= 0, so -1 is never data
 COMPLEVEL = 4          # zlib level: the summary data compress ~3x by level 4; higher levels gain <5%
@@ -57,7 +60,9 @@ VARIABLES: tuple[Var, ...] = (
         lambda s: s["t_halt"]),
     Var("t_halt_error", "float", "s", "estimated error of the halt time", lambda s: s["t_halt_error"]),
     Var("halt_finite", "bool", "1", "whether the halt time was found finite", lambda s: s["halt_finite"]),
-    Var("ramp_exponent", "float", "1", "fitted exponent of the final frequency ramp",
+    Var("approach_exponent", "float", "1", "fitted exponent p of the final approach, inclination ~ (t_halt - t)^p",
+        lambda s: s.get("approach_exponent", math.nan)),
+    Var("ramp_exponent", "float", "1", "fitted exponent n of the precession ramp, Omega ~ (t_halt - t)^(-n)",
         lambda s: s["ramp_exponent"]),
     Var("t_level", "float", "s", "time at which the inclination first reaches the level",
         lambda lv: lv["t"], per_level=True),
@@ -93,7 +98,8 @@ def error_summary(n_levels: int, outcome_code: int = outcomes.NUMERICAL_ERROR, w
     nan = math.nan
     return {
         "outcome": outcomes.NAMES[outcome_code], "outcome_code": outcome_code,
-        "t_end": nan, "t_halt": nan, "t_halt_error": nan, "halt_finite": False, "ramp_exponent": nan,
+        "t_end": nan, "t_halt": nan, "t_halt_error": nan, "halt_finite": False, "approach_exponent": nan,
+        "ramp_exponent": nan,
         "levels": [{"inclination": nan, "t": nan, "precession_hz": nan, "normal_force_hz": nan}
                    for _ in range(n_levels)],
         "slip_fraction": nan, "n_transitions": None, "n_stick": None, "n_impacts": None,
@@ -192,6 +198,10 @@ def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
     levels = spec["settings"]["levels"]
     if len(summaries) != len(chunk.points):
         raise ValueError(f"chunk {chunk.id}: {len(summaries)} summaries for {len(chunk.points)} points")
+    for s in summaries:  # the level columns must line up with the `level` coordinate
+        got = [lv["inclination"] for lv in s["levels"]]
+        if len(got) != len(levels) or any(g == g and g != w for g, w in zip(got, levels)):
+            raise ValueError(f"chunk {chunk.id}: summary levels {got} do not match the configured {levels}")
     pts = np.array(chunk.points, dtype=np.float64).reshape(len(chunk.points), len(_grid.AXES))
     coords = {a: ("point", pts[:, i], _coord_attrs(a)) for i, a in enumerate(_grid.AXES)}
     coords["level"] = ("level", np.array(levels, dtype=np.float64), dict(LEVEL_ATTRS))
@@ -413,7 +423,12 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             "created": created,
         }
         cube = xr.Dataset(data_vars, coords=coords, attrs=attrs)
-        return write_atomic(cube, out_path, encoding)
+        log.info("gathering %d chunk files, %d scenes, grid %s x %d levels into %s (netCDF chunks %s)",
+                 len(paths), n, dict(zip(axes, shape)), n_levels, out_path, csizes)
+        out = write_atomic(cube, out_path, encoding)
+        log.info("wrote %s (%d bytes); outcomes %s", out, out.stat().st_size,
+                 {outcomes.NAMES[int(c)]: int(k) for c, k in zip(*np.unique(cube.outcome.values, return_counts=True))})
+        return out
     finally:
         src.close()
 

@@ -1,4 +1,5 @@
 # Config validation and the chunk plan, shared by every rule.
+import os
 import sys
 
 from snakemake.utils import validate

@@ -4,7 +4,7 @@
 rule notebook:
     input:
         cube="results/cube.nc",
-        notebook=workflow.source_path("../notebooks/{notebook}.ipynb"),
+        notebook=os.path.join(workflow.basedir, "workflow", "notebooks", "{notebook}.ipynb"),
     output:
         figure="results/figures/{notebook}.png",
         executed="results/notebooks/{notebook}.ipynb",
