@@ -23,9 +23,15 @@ EV_CONE = 6        # rolling: friction needed leaves the static cone, mu_s Phi -
 EV_SLIPEND = 7     # sliding: slip speed falls to u_tol
 EV_CONTACT = 8     # Phi = 0: contact lost
 EV_SIDE = 9        # alpha = 0: the other rim edge takes the contact
-N_DYN_EVENTS = 10
-EV_LEVEL = 10      # energy-equivalent inclination reaches the next level (does not restart)
-N_EVENTS = 11
+EV_FACE = 10       # pi/2 - |alpha| = BETA_FACE: the disk's face reaches the table
+N_DYN_EVENTS = 11
+EV_LEVEL = 11      # energy-equivalent inclination reaches the next level (does not restart)
+N_EVENTS = 12
+
+# Inclination (rad) at which the face is taken to touch the table. The model (single rim contact)
+# ends there; 3-1-2 angles are singular at 0, and at 1e-8 rad alpha still carries 8 significant
+# digits of the inclination (ulp(pi/2) = 2.2e-16). Levels must lie above it.
+BETA_FACE = 1e-8
 
 # Location tolerance on tau. The issue asks for ~1e-12; below 4 ulp of tau the bracket cannot
 # shrink further, so the effective tolerance is max(EVENT_TOL_TAU, 4 ulp(tau)).
@@ -71,6 +77,7 @@ def event_values(y, aux, p, mode, side, sig, stuck, u_tol, level_e, active, g):
         g[EV_SLIPEND] = math.hypot(y[Y_U1], y[Y_U2]) - u_tol
     g[EV_CONTACT] = aux[X_PHI]
     g[EV_SIDE] = side * y[Y_ALPHA]
+    g[EV_FACE] = (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
     if not math.isnan(level_e):
         g[EV_LEVEL] = energy(y, p, side, mode) - level_e
 

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from . import outcomes as oc
-from .events import (EV_CONE, EV_CONTACT, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SLIPEND, EV_UNSTICK1,
+from .events import (EV_CONE, EV_CONTACT, EV_FACE, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SLIPEND, EV_UNSTICK1,
                      N_DYN_EVENTS, N_EVENTS, brent_max_phi, dense_eval, event_values,
                      hermite_interior_root, locate)
 from .model import (N_AUX, N_CORE, N_FULL, P_K1, P_K2, P_K3, P_MUS, ROLL, SLIDE, X_F1, X_F2, X_G1, X_OK,
@@ -613,9 +613,9 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                 mode = ROLL
                 istats[I_TRANS] += 1
                 restart_check_cone = True
-            elif k == EV_CONTACT:
+            elif k == EV_CONTACT or k == EV_FACE:
                 if outcome < 0:
-                    outcome = oc.CONTACT_LOST
+                    outcome = oc.CONTACT_LOST if k == EV_CONTACT else oc.FACE_CONTACT
                     fstats[F_TEND] = t
                 break
             elif k == EV_SIDE:

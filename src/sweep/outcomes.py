@@ -13,6 +13,7 @@ LINE_CONTACT = 4         # alpha came to 0 and stayed: the disk stands on its fl
 STEP_SIZE_UNDERFLOW = 5  # the error control asked for a step below the round-off floor of tau
 NUMERICAL_ERROR = 6      # a NaN/inf appeared, or an exception was raised for this point
 NOT_RUN = 7              # reserved for the pipeline: the point was not computed (never written by a finished chunk)
+FACE_CONTACT = 8         # the actual inclination pi/2 - |alpha| reached 1e-8 rad: the face hits the table
 
 NAMES = {
     HALTED: "halted",
@@ -23,6 +24,7 @@ NAMES = {
     STEP_SIZE_UNDERFLOW: "step_size_underflow",
     NUMERICAL_ERROR: "numerical_error",
     NOT_RUN: "not_run",
+    FACE_CONTACT: "face_contact",
 }
 CODES = {name: code for code, name in NAMES.items()}
 

@@ -38,7 +38,7 @@ DEFAULTS: dict[str, Any] = {
     "stop": {"levels": [1.0e-1, 1.0e-2, 1.0e-3, 1.0e-4], "t_max": 120.0, "max_steps": 2_000_000},
     # rtol 1e-10: halt times converge to ~1e-9 relative there (docs/performance.md), at a cost of a
     # few ms per scene; slip_tol: slip speed (m/s) at which sliding ends, see docs/model.md.
-    "solver": {"method": "adaptive", "rtol": 1.0e-10, "atol": 1.0e-12, "dt": 1.0e-3, "slip_tol": 1.0e-7},
+    "solver": {"method": "adaptive", "rtol": 1.0e-10, "atol": 1.0e-12, "dt": 1.0e-3, "slip_tol": 1.0e-9},
     "outputs": {"normal_force_frequency": True, "kinematics": False},
 }
 
@@ -167,7 +167,9 @@ def load_scene(src) -> Scene:
     lv = st["levels"]
     if not isinstance(lv, (list, tuple)) or not lv:
         raise ConfigError("stop.levels", lv, "a non-empty list of inclinations in (0, pi/2) rad")
-    lv = [_num(f"stop.levels[{i}]", x, 0.0, HALF_PI, lo_open=True, hi_open=True) for i, x in enumerate(lv)]
+    # levels must lie above the face-contact inclination (events.BETA_FACE = 1e-8 rad)
+    lv = [_num(f"stop.levels[{i}]", x, 1e-7, HALF_PI, hi_open=True,
+               allowed="an inclination in [1e-7, pi/2) rad") for i, x in enumerate(lv)]
     if len(set(lv)) != len(lv):
         raise ConfigError("stop.levels", lv, "distinct values (a level is listed twice)")
     st["levels"] = sorted(lv, reverse=True)
