@@ -1,0 +1,283 @@
+"""Chunk files, their verification, the cube and the batch runner, on synthetic summaries.
+
+No integration is run: summaries are generated from the point values by `fake_summary`, so
+every value in a file can be traced back to its grid point.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import random
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+import yaml
+
+from sweep import batch, grid, io, outcomes
+
+ROOT = Path(__file__).resolve().parents[1]
+SCHEMA = grid.load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml")
+
+
+def settings_for(**grid_axes) -> dict:
+    cfg = yaml.safe_load((ROOT / "config" / "tiny.yaml").read_text())
+    cfg["grid"].update({k: list(v) for k, v in grid_axes.items()})
+    return grid.normalize(cfg, SCHEMA, check_scenes=False)
+
+
+def fake_summary(point, levels) -> dict:
+    """A summary whose every value is a distinct function of the point (SI units as in the contract)."""
+    mu_d, k1, k2, k3, a0, w0 = point
+    code = outcomes.HALTED if a0 < 1.0 else outcomes.T_MAX
+    base = 1000 * mu_d + 1e4 * k3 + a0 + 0.01 * w0
+    return {
+        "outcome": outcomes.NAMES[code], "outcome_code": code, "t_end": base + 1, "t_halt": base + 2,
+        "t_halt_error": 1e-3 * base, "halt_finite": code == outcomes.HALTED, "approach_exponent": 0.5 + mu_d,
+        "ramp_exponent": math.nan if code else 1.0 + k3,
+        "levels": [{"inclination": lv, "t": base + j, "precession_hz": w0 / (j + 1),
+                    "normal_force_hz": math.nan if j == 0 else 2 * w0 * j} for j, lv in enumerate(levels)],
+        "slip_fraction": mu_d / 2, "n_transitions": int(w0), "n_stick": int(10 * a0), "n_impacts": 0,
+        "energy_initial": w0 ** 2, "energy_final": 0.1 * w0,
+        "dissipation": {"sliding": mu_d, "k1": k1, "k2": k2, "k3": k3, "impact": 0.0},
+        "n_steps": int(base), "n_rejected": int(base) // 7, "n_rhs": 12 * int(base), "n_events": 3,
+        "wall_time": 0.001 * base,
+    }
+
+
+def write_all(settings, d: Path, summarise=fake_summary) -> list[Path]:
+    paths = []
+    for cid, c in grid.plan_chunks(settings).items():
+        sums = [summarise(p, settings["levels"]) for p in c.points]
+        paths.append(io.write_chunk(c, sums, d / f"{cid}.nc"))
+    return paths
+
+
+@pytest.fixture
+def tiny():
+    return settings_for(mu_d=[0.1, 0.3], k3=[1e-4, 3e-4, 5e-4], alpha0=[0.6, 1.2], omega0=[10.0, 20.0, 30.0])
+
+
+# ------------------------------------------------------------------------------- chunk files
+
+def test_chunk_round_trip(tmp_path, tiny):
+    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    sums = [fake_summary(p, tiny["levels"]) for p in chunk.points]
+    sums[0] = io.error_summary(len(tiny["levels"]))  # a scene that raised
+    path = io.write_chunk(chunk, sums, tmp_path / f"{chunk.id}.nc")
+    assert io.verify_chunk(path, chunk) is None
+    with xr.open_dataset(path) as ds:
+        assert ds.sizes == {"point": len(chunk.points), "level": len(tiny["levels"])}
+        for i, a in enumerate(grid.AXES):
+            np.testing.assert_array_equal(ds[a].values, [p[i] for p in chunk.points])
+        for var in io.VARIABLES:
+            got = ds[var.name].values
+            for j, s in enumerate(sums):
+                want = ([var.get(lv) for lv in s["levels"]] if var.per_level else var.get(s))
+                want = np.array(np.nan if want is None else want, dtype=float)
+                np.testing.assert_array_equal(np.asarray(got[j], dtype=float), want, err_msg=var.name)
+        assert ds.outcome.values[0] == outcomes.NUMERICAL_ERROR
+        assert ds.attrs["sweep_chunk_id"] == chunk.id
+
+
+def test_summary_levels_must_match_the_level_coordinate(tiny):
+    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    sums = [fake_summary(p, list(reversed(tiny["levels"]))) for p in chunk.points]
+    with pytest.raises(ValueError, match="do not match"):
+        io.chunk_dataset(chunk, sums)
+
+
+def test_every_variable_and_coordinate_has_cf_attributes(tmp_path, tiny):
+    paths = write_all(tiny, tmp_path)
+    io.gather(paths, tiny, tmp_path / "cube.nc")
+    for path in [paths[0], tmp_path / "cube.nc"]:
+        with xr.open_dataset(path) as ds:
+            assert ds.attrs["Conventions"] == "CF-1.10"
+            for name in ds.variables:
+                assert ds[name].attrs.get("units"), (path.name, name)
+                assert ds[name].attrs.get("long_name"), (path.name, name)
+            assert list(ds.outcome.attrs["flag_values"]) == outcomes.FLAG_VALUES
+            assert ds.outcome.attrs["flag_meanings"] == outcomes.FLAG_MEANINGS
+
+
+def _fail_midway(monkeypatch):
+    def broken(self, path, *args, **kwargs):
+        Path(path).write_bytes(b"\x89HDF\r\n partial")
+        raise OSError("disk full")
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", broken)
+
+
+def test_atomic_write_leaves_no_partial_file(tmp_path, tiny, monkeypatch):
+    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    sums = [fake_summary(p, tiny["levels"]) for p in chunk.points]
+    target = tmp_path / f"{chunk.id}.nc"
+    io.write_chunk(chunk, sums, target)
+    before = target.read_bytes()
+    _fail_midway(monkeypatch)
+    with pytest.raises(OSError, match="disk full"):
+        io.write_chunk(chunk, sums, target)
+    assert target.read_bytes() == before  # the old complete file is untouched
+    assert sorted(os.listdir(tmp_path)) == [target.name]  # and no temporary file is left
+    fresh = tmp_path / "fresh.nc"
+    with pytest.raises(OSError):
+        io.write_chunk(chunk, sums, fresh)
+    assert not fresh.exists()
+
+
+# ------------------------------------------------------------------------------- damage
+
+def _damage(path: Path, how: str) -> None:
+    data = bytearray(path.read_bytes())
+    if how == "truncate":
+        path.write_bytes(data[: len(data) // 2])
+    elif how == "empty":
+        path.write_bytes(b"")
+    elif how == "values":  # rewrite one stored value in place, as bit rot would
+        import netCDF4
+        with netCDF4.Dataset(path, "a") as nc:
+            nc["t_halt"][0] = nc["t_halt"][0] + 1.0
+    elif how == "no_checksum":
+        import netCDF4
+        with netCDF4.Dataset(path, "a") as nc:
+            nc.delncattr("sweep_checksum")
+
+
+@pytest.mark.parametrize("how, reason", [("truncate", "unreadable"), ("empty", "empty"),
+                                         ("values", "checksum mismatch"), ("no_checksum", "sweep_checksum")])
+def test_damaged_chunk_is_detected_and_quarantined(tmp_path, tiny, how, reason):
+    plan = grid.plan_chunks(tiny)
+    paths = write_all(tiny, tmp_path)
+    victim = paths[1]
+    _damage(victim, how)
+    assert reason in io.verify_chunk(victim, plan[victim.stem])
+    bad = io.check_existing_chunks(tmp_path, plan, act=False)
+    assert list(bad) == [victim.stem] and victim.exists()  # a dry run only reports
+    bad = io.check_existing_chunks(tmp_path, plan, act=True)
+    assert list(bad) == [victim.stem] and not victim.exists()
+    quarantined = list((tmp_path / "quarantine").glob(victim.name + ".*"))
+    assert any(p.suffix != ".reason" for p in quarantined)
+
+
+def test_chunk_of_another_plan_is_rejected(tmp_path, tiny):
+    plan = grid.plan_chunks(tiny)
+    a, b = list(plan.values())[:2]
+    path = io.write_chunk(a, [fake_summary(p, tiny["levels"]) for p in a.points], tmp_path / f"{b.id}.nc")
+    assert "chunk id" in io.verify_chunk(path, b)
+
+
+def test_gather_refuses_a_damaged_chunk(tmp_path, tiny):
+    paths = write_all(tiny, tmp_path)
+    _damage(paths[0], "values")
+    with pytest.raises(RuntimeError, match="damaged"):
+        io.gather(paths, tiny, tmp_path / "cube.nc")
+    assert not (tmp_path / "cube.nc").exists() and not paths[0].exists()
+
+
+# ------------------------------------------------------------------------------- cube
+
+@pytest.mark.parametrize("shuffle", [False, True])
+def test_cube_places_every_value_at_its_grid_point(tmp_path, tiny, shuffle):
+    paths = write_all(tiny, tmp_path)
+    if shuffle:  # the gather must not rely on the order of its inputs
+        random.Random(1).shuffle(paths)
+    out = io.gather(paths, tiny, tmp_path / "cube.nc", repo_path=ROOT, history="test")
+    with xr.open_dataset(out) as cube:
+        assert tuple(cube.outcome.dims) == grid.AXES
+        assert tuple(cube.t_level.dims) == grid.AXES + ("level",)
+        for a in grid.AXES:
+            np.testing.assert_array_equal(cube[a].values, tiny["grid"][a])
+        np.testing.assert_array_equal(cube.level.values, tiny["levels"])
+        for point in grid.plan_chunks(tiny)[paths[0].stem].points + grid.plan_chunks(tiny)[paths[-1].stem].points:
+            s = fake_summary(point, tiny["levels"])
+            at = cube.sel(dict(zip(grid.AXES, point)))
+            for var in io.VARIABLES:
+                want = [var.get(lv) for lv in s["levels"]] if var.per_level else var.get(s)
+                np.testing.assert_array_equal(np.asarray(at[var.name].values, dtype=float),
+                                              np.asarray(want, dtype=float), err_msg=var.name)
+        cfg = cube.attrs["config_json"]
+        assert json.loads(cfg) == tiny
+        assert cube.attrs["config_sha256"] == hashlib.sha256(cfg.encode()).hexdigest()
+        assert json.loads(cube.attrs["solver"]) == tiny["solver"]
+        for key in ("title", "history", "source", "sweep_version", "git_commit", "created"):
+            assert cube.attrs[key]
+        enc = cube.t_level.encoding
+        assert enc["zlib"] and enc["chunksizes"] == io.cube_chunksizes(
+            tuple(len(tiny["grid"][a]) for a in grid.AXES) + (len(tiny["levels"]),))
+
+
+def test_gather_requires_every_grid_point(tmp_path, tiny):
+    paths = write_all(tiny, tmp_path)
+    with pytest.raises(RuntimeError, match="grid has"):
+        io.gather(paths[:-1], tiny, tmp_path / "cube.nc")
+
+
+@pytest.mark.parametrize("shape", [(1,), (3, 1, 1, 5, 7, 2, 4), (200, 1, 1, 300, 20, 20, 4), (2 ** 16,)])
+def test_cube_chunksizes(shape):
+    c = io.cube_chunksizes(shape)
+    assert len(c) == len(shape)
+    assert all(1 <= ci <= max(1, n) for ci, n in zip(c, shape))
+    assert math.prod(c) <= max(io.CUBE_CHUNK_ELEMENTS, 1)
+    if math.prod(shape) <= io.CUBE_CHUNK_ELEMENTS:
+        assert c == shape  # small cubes are one chunk
+    else:  # balanced: no dimension was halved while a longer one stayed whole
+        assert max(c) <= 2 * min(ci for ci, n in zip(c, shape) if ci < n)
+
+
+def test_git_commit_outside_a_repository(tmp_path):
+    assert io.git_commit(tmp_path) == "unknown"
+    assert len(io.git_commit(ROOT).split("-")[0]) == 40
+
+
+# ------------------------------------------------------------------------------- batch
+
+class FakeCore:
+    """Stands in for sweep.simulate: raises for one point, records warm-up calls."""
+
+    def __init__(self, bad_alpha0: float):
+        self.bad_alpha0 = bad_alpha0
+        self.calls = []
+
+    def __call__(self, scene):
+        self.calls.append(scene)
+        if scene["initial"]["alpha"] == self.bad_alpha0:
+            raise FloatingPointError("synthetic failure")
+        point = (scene["contact"]["mu_d"], scene["contact"]["k1"], scene["contact"]["k2"],
+                 scene["contact"]["k3"], scene["initial"]["alpha"], -scene["initial"]["omega"][2])
+
+        class R:
+            summary = fake_summary(point, scene["stop"]["levels"])
+        return R()
+
+
+def test_run_chunk_records_exceptions_and_completes(tmp_path, tiny, monkeypatch, caplog):
+    monkeypatch.setattr(batch, "_warmed_up", False)
+    chunk = max(grid.plan_chunks(tiny).values(), key=lambda c: len({p[4] for p in c.points}))
+    bad = chunk.points[0][4]
+    core = FakeCore(bad)
+    caplog.set_level("INFO", logger="sweep.batch")
+    stats = batch.run_chunk(chunk, tmp_path / f"{chunk.id}.nc", simulate=core)
+    assert stats["n"] == len(chunk.points)
+    with xr.open_dataset(tmp_path / f"{chunk.id}.nc") as ds:
+        is_bad = ds.alpha0.values == bad
+        assert (ds.outcome.values[is_bad] == outcomes.NUMERICAL_ERROR).all()
+        assert np.isnan(ds.t_halt.values[is_bad]).all() and np.isnan(ds.n_steps.values[is_bad]).all()
+        assert (ds.outcome.values[~is_bad] != outcomes.NUMERICAL_ERROR).all()
+    # one warm-up call (short step budget) and then one call per scene
+    warm = [c for c in core.calls if c["stop"]["max_steps"] == batch.WARM_UP_STEPS]
+    assert len(warm) == 1 and len(core.calls) == len(chunk.points) + 1
+    assert "scenes/s" in caplog.text and "numerical_error" in caplog.text
+    # a second chunk in the same process does not warm up again
+    other = next(c for c in grid.plan_chunks(tiny).values() if c.id != chunk.id)
+    core.calls.clear()
+    batch.run_chunk(other, tmp_path / f"{other.id}.nc", simulate=core)
+    assert len(core.calls) == len(other.points)
+
+
+def test_chunk_job_checks_its_id(tmp_path, tiny):
+    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    assert batch.chunk_from_spec(chunk.spec_json) == chunk
+    with pytest.raises(ValueError, match="hashes to"):
+        batch.run_chunk_job(chunk.spec_json, "0" * 16, tmp_path / "x.nc")
