@@ -20,7 +20,7 @@ from .events import (EV_CONE, EV_CONTACT, EV_FACE, EV_LEVEL, EV_SIDE, EV_SIGN1, 
                      N_DYN_EVENTS, N_EVENTS, brent_max_phi, dense_eval, event_values,
                      hermite_interior_root, locate)
 from .model import (N_AUX, N_CORE, N_FULL, P_K1, P_K2, P_K3, P_MUS, ROLL, SLIDE, X_F1, X_F2, X_G1, X_OK,
-                    X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W3, energy,
+                    X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, energy,
                     project_velocity, rhs)
 from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
 
@@ -29,6 +29,14 @@ MIN_FACTOR = 0.2
 MAX_FACTOR = 10.0
 ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8)
 EPS = 2.220446049250313e-16
+# Stiction: a slip slower than max(slip_tol, rtol |omega|) ends as soon as the static friction cone
+# holds for the rolling state. Near u = 0 the sliding equations are stiff (slip-direction rate
+# ~ mu_d Phi / u), explicit steps shrink like u, and a slip that creeps (required friction close to
+# mu_d Phi) would otherwise take millions of steps. rtol |omega| is the velocity error the step-size
+# control itself accepts, so a slip below it is not resolved anyway; at tight tolerances the band
+# is slip_tol itself and every slip end stays on the located slip_tol event (first-order
+# convergence in slip_tol, tests/test_physics.py).
+STICTION_FACTOR = 1.0
 
 # settings vector layout
 S_RTOL, S_ATOL, S_HFIXED, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS, S_EXTRA = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -453,6 +461,20 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                     first_k = k
                     first_t = rb
                     first_ta = ra
+        u_stick = max(STICTION_FACTOR * u_tol, rtol * math.sqrt(y_new[Y_W1] ** 2 + y_new[Y_W2] ** 2 + y_new[Y_W3] ** 2))
+        if first_k < 0 and mode == SLIDE and math.hypot(y_new[Y_U1], y_new[Y_U2]) < u_stick:
+            # creeping slip: the slip speed is negligible and static friction can hold the rolling
+            # state -> stick now (detected at the step end; steps are stability-limited, h ~ u,
+            # so the time error is ~h, far below the slip-tolerance error itself)
+            for i in range(n):
+                ytmp[i] = y_new[i]
+            ytmp[Y_U1] = 0.0
+            ytmp[Y_U2] = 0.0
+            rhs(t_end, ytmp, p, ROLL, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
+            counter[0] += 1
+            if p[P_MUS] * auxtmp[X_PHI] >= math.hypot(auxtmp[X_F1], auxtmp[X_F2]):
+                first_k = EV_SLIPEND
+                first_t = t_end
         seg_end = first_t if first_k >= 0 else t_end
         need_dense = (not have_dense) and (
             track_peaks or (isamp < ns and sample_tau[isamp] <= seg_end)

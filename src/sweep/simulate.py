@@ -110,7 +110,7 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
 
     levels = sc.levels
     level_t = lev[:, 0] * chi
-    prec_hz = lev[:, 2] / chi / (2.0 * math.pi)
+    prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)   # a frequency: magnitude of dtheta/dt / 2 pi
     nf_hz = lev[:, 3] / chi
     fit = diagnostics.halt_time(level_t, levels)
     code = int(istats[I_OUTCOME])

@@ -1,0 +1,128 @@
+"""Command line: `python -m sweep scene FILE.yaml [--json] [--plot DIR] [--trajectory FILE.nc]
+[--sample-times t1,t2,...]`. Invalid input exits with status 2 and a message naming the field."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ConfigError
+
+
+def _times(text: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise ConfigError("--sample-times", text, "comma-separated times in s, e.g. 0,1.5,3") from None
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (float, np.floating)):
+        x = float(obj)
+        return x if math.isfinite(x) else None   # JSON has no NaN: unknown values are null
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def write_trajectory(result, path) -> None:
+    """Trajectory (every accepted step) as CF-style netCDF, written atomically."""
+    import os
+
+    import xarray as xr
+
+    from . import __version__
+
+    tr = result.trajectory
+    ds = xr.Dataset(
+        {
+            "alpha": ("time", tr["alpha"], {"units": "rad", "long_name": "tilt of the disk plane from the vertical"}),
+            "omega": (("time", "axis"), tr["omega"], {"units": "rad s-1", "long_name": "angular velocity on e1, e2, e3"}),
+            "slip": (("time", "tangent"), tr["slip"], {"units": "m s-1", "long_name": "contact point velocity on a1, a2"}),
+            "theta": ("time", tr["theta"], {"units": "rad", "long_name": "precession angle (3-1-2 Euler angle 1)"}),
+            "psi": ("time", tr["psi"], {"units": "rad", "long_name": "spin angle (3-1-2 Euler angle 3)"}),
+            "x": ("time", tr["x"], {"units": "m", "long_name": "centre of mass position on E1"}),
+            "y": ("time", tr["y"], {"units": "m", "long_name": "centre of mass position on E2"}),
+            "normal_force": ("time", tr["normal_force"], {"units": "N", "long_name": "normal contact force"}),
+            "mode": ("time", tr["mode"], {"units": "1", "long_name": "contact mode", "flag_values": np.array([0, 1], np.int8),
+                                          "flag_meanings": "rolling sliding"}),
+        },
+        coords={"time": ("time", tr["t"], {"units": "s", "long_name": "time"}),
+                "axis": ("axis", [1, 2, 3], {"units": "1", "long_name": "e-frame axis index"}),
+                "tangent": ("tangent", [1, 2], {"units": "1", "long_name": "a-frame tangent axis index"})},
+        attrs={"Conventions": "CF-1.10", "title": "Euler's disk trajectory (Kessler & O'Reilly 2002 model)",
+               "source": f"sweep {__version__}", "scene": json.dumps(result.scene.config, sort_keys=True),
+               "outcome": result.summary["outcome"]},
+    )
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    enc = {v: {"zlib": True, "complevel": 4} for v in ds.data_vars}
+    ds.to_netcdf(tmp, engine="netcdf4", encoding=enc)
+    os.replace(tmp, path)
+
+
+def _print_human(s: dict) -> None:
+    print(f"outcome          {s['outcome']}  (t_end = {s['t_end']:.6f} s)")
+    print(f"t_halt           {s['t_halt']:.6f} s  +- {s['t_halt_error']:.3g} s  (finite: {s['halt_finite']})")
+    print(f"ramp exponent    {s['ramp_exponent']:.4f}   approach exponent {s['approach_exponent']:.4f}")
+    print("levels           inclination (rad)   t (s)          precession (Hz)   normal force (Hz)")
+    for lv in s["levels"]:
+        print(f"                 {lv['inclination']:<18.3g} {lv['t']:<14.6f} {lv['precession_hz']:<17.6g} {lv['normal_force_hz']:.6g}")
+    print(f"slip fraction    {s['slip_fraction']:.4f}   transitions {s['n_transitions']}   stick episodes {s['n_stick']}   impacts {s['n_impacts']}")
+    print(f"energy           {s['energy_initial']:.6g} J -> {s['energy_final']:.6g} J")
+    d = s["dissipation"]
+    print("dissipated (J)   " + "  ".join(f"{k} {v:.6g}" for k, v in d.items()))
+    print(f"cost             {s['n_steps']} steps ({s['n_rejected']} rejected), {s['n_rhs']} RHS, {s['n_events']} events, {s['wall_time'] * 1e3:.2f} ms")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sweep", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    sp = sub.add_parser("scene", help="simulate one scene from a YAML file (SI units)")
+    sp.add_argument("file", help="scene YAML file, e.g. config/scenes/kessler2002.yaml")
+    sp.add_argument("--json", action="store_true", help="print one JSON object (NaN -> null)")
+    sp.add_argument("--plot", metavar="DIR", help="write the analogues of the paper's Figs 3-6 to DIR")
+    sp.add_argument("--trajectory", metavar="FILE.nc", help="write the state at every step to netCDF")
+    sp.add_argument("--sample-times", metavar="T1,T2,...", help="report alpha, omega, energy at these times (s)")
+    args = ap.parse_args(argv)
+
+    from .simulate import simulate
+
+    try:
+        times = _times(args.sample_times) if args.sample_times else None
+        want_traj = bool(args.plot or args.trajectory)
+        res = simulate(args.file, sample_times=times, trajectory=want_traj)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    out = dict(res.summary)
+    if res.samples is not None:
+        out["samples"] = {k: res.samples[k] for k in ("t", "alpha", "omega", "energy")}
+    if args.trajectory:
+        write_trajectory(res, args.trajectory)
+    if args.plot:
+        from .plots import paper_figures
+        for p in paper_figures(res, args.plot):
+            print(f"wrote {p}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(_jsonable(out), allow_nan=False))
+    else:
+        _print_human(res.summary)
+        if res.samples is not None:
+            print("samples          t (s), alpha (rad), omega (rad/s), energy (J)")
+            for i, t in enumerate(res.samples["t"]):
+                w = res.samples["omega"][i]
+                print(f"                 {t:<10.4g} {res.samples['alpha'][i]:<12.8g} "
+                      f"[{w[0]:.6g}, {w[1]:.6g}, {w[2]:.6g}]  {res.samples['energy'][i]:.8g}")
+    return 0
