@@ -78,8 +78,9 @@ def _merge(path: str, user, default):
         if unknown:
             where = f"{path}.{unknown[0]}" if path else unknown[0]
             raise ConfigError(where, user[unknown[0]], f"no such key; known keys: {', '.join(sorted(default))}")
-        return {k: _merge(f"{path}.{k}" if path else k, user.get(k), d) for k, d in default.items()}
-    return copy.deepcopy(default) if user is None else user
+        return {k: (_merge(f"{path}.{k}" if path else k, user[k], d) if k in user else copy.deepcopy(d))
+                for k, d in default.items()}
+    return user   # an explicit null stays null and is rejected by the field's validator
 
 
 def _vector(path: str, v, n: int, bound: float) -> list[float]:
@@ -142,7 +143,7 @@ def load_scene(src) -> Scene:
     d["thickness"] = _num("disk.thickness", d["thickness"], 0.0, 4.0 * d["radius"], lo_open=True,
                           allowed=f"a finite number in (0, 4*radius] = (0, {4 * d['radius']:g}] m")
     d["mass"] = _num("disk.mass", d["mass"], 0.0, 1e4, lo_open=True)
-    if d["shape"] not in SHAPES:
+    if not isinstance(d["shape"], str) or d["shape"] not in SHAPES:
         raise ConfigError("disk.shape", d["shape"], "one of: solid, shell")
     c = cfg["contact"]
     c["mu_s"] = _num("contact.mu_s", c["mu_s"], 0.0, 100.0)
@@ -176,7 +177,7 @@ def load_scene(src) -> Scene:
     st["t_max"] = _num("stop.t_max", st["t_max"], 0.0, 1e5, lo_open=True)
     st["max_steps"] = _int("stop.max_steps", st["max_steps"], 1, 10**9)
     so = cfg["solver"]
-    if so["method"] not in ("adaptive", "fixed"):
+    if not isinstance(so["method"], str) or so["method"] not in ("adaptive", "fixed"):
         raise ConfigError("solver.method", so["method"], "one of: adaptive, fixed")
     # rtol below 1e-14 asks for less than ~50 ulp per step: the error control cannot deliver it
     so["rtol"] = _num("solver.rtol", so["rtol"], 1e-14, 1e-2)
