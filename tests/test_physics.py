@@ -190,3 +190,18 @@ def test_bad_input_is_rejected_before_work(bad):
 def test_outcome_codes_are_stable():
     assert outcomes.HALTED == 0 and outcomes.CONTACT_LOST == 1 and outcomes.FACE_CONTACT == 8
     assert len(set(outcomes.NAMES.values())) == len(outcomes.NAMES)
+
+
+def test_results_do_not_depend_on_requested_outputs():
+    """Kinematics and Phi-peak tracking are skipped unless asked for; asking changes no other result."""
+    base = make_scene(stop__levels=[0.1, 0.03])
+    # (step counts may differ: after the last level the kernel steps on until the next Phi peak
+    # gives that level's normal-force frequency)
+    keys = ("t_end", "n_transitions", "n_stick", "energy_final", "dissipation", "slip_fraction")
+    lean = sweep.simulate(make_scene(stop__levels=[0.1, 0.03], outputs__normal_force_frequency=False)).summary
+    full = sweep.simulate(make_scene(stop__levels=[0.1, 0.03], outputs__kinematics=True), trajectory=True).summary
+    for k in keys:
+        assert lean[k] == full[k], k
+    assert [lv["t"] for lv in lean["levels"]] == [lv["t"] for lv in full["levels"]]
+    assert math.isnan(lean["levels"][0]["normal_force_hz"]) and full["levels"][0]["normal_force_hz"] > 0
+    assert lean["n_rhs"] < full["n_rhs"]          # the skipped diagnostics cost nothing

@@ -79,6 +79,7 @@ def _print_human(s: dict) -> None:
     print("levels           inclination (rad)   t (s)          precession (Hz)   normal force (Hz)")
     for lv in s["levels"]:
         print(f"                 {lv['inclination']:<18.3g} {lv['t']:<14.6f} {lv['precession_hz']:<17.6g} {lv['normal_force_hz']:.6g}")
+    print(f"max normal-force frequency {s['normal_force_hz_max']:.6g} Hz")
     print(f"slip fraction    {s['slip_fraction']:.4f}   transitions {s['n_transitions']}   stick episodes {s['n_stick']}   impacts {s['n_impacts']}")
     print(f"energy           {s['energy_initial']:.6g} J -> {s['energy_final']:.6g} J")
     d = s["dissipation"]

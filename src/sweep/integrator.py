@@ -78,6 +78,13 @@ def _rk_step(t, y, f, h, n, p, mode, side, sig, stuck, n0x, n0y, K, y_new, f_new
 
 @njit(cache=True)
 def _error_norm(K, h, y, y_new, n, rtol, atol):
+    """Hairer's dop853 error norm over the dynamic state and the dissipation quadratures only.
+
+    theta, psi, x, y (when integrated) are passive quadratures that never feed back into the
+    dynamics; leaving them out keeps the step sequence, and so every result, identical whether or
+    not a scene asks for them (tests/test_physics.py).
+    """
+    n = min(n, N_CORE)
     e5 = 0.0
     e3 = 0.0
     for i in range(n):
@@ -343,24 +350,25 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
 
     # --- initial step size (Hairer & Wanner II.4, 'starting step size') ------------------------
     if adaptive:
+        nc = min(n, N_CORE)   # as in the error norm: the passive kinematics do not steer the steps
         d0 = 0.0
         d1 = 0.0
-        for i in range(n):
+        for i in range(nc):
             sc = atol + rtol * abs(y[i])
             d0 += (y[i] / sc) ** 2
             d1 += (f[i] / sc) ** 2
-        d0 = math.sqrt(d0 / n)
-        d1 = math.sqrt(d1 / n)
+        d0 = math.sqrt(d0 / nc)
+        d1 = math.sqrt(d1 / nc)
         h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
         for i in range(n):
             ytmp[i] = y[i] + h0 * f[i]
         rhs(t + h0, ytmp, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
         counter[0] += 1
         d2 = 0.0
-        for i in range(n):
+        for i in range(nc):
             sc = atol + rtol * abs(y[i])
             d2 += ((dytmp[i] - f[i]) / sc) ** 2
-        d2 = math.sqrt(d2 / n) / h0
+        d2 = math.sqrt(d2 / nc) / h0
         if max(d1, d2) <= 1e-15:
             h1 = max(1e-6, h0 * 1e-3)
         else:

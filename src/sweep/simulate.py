@@ -80,6 +80,14 @@ def run_kernel(scene: Scene, sample_tau: np.ndarray | None = None, traj_cap: int
     return integrate(y0, scene.params, mode, _settings(scene), level_energies(scene), st, traj_cap)
 
 
+def _max_normal_force_hz(peak_tau: np.ndarray, tau_end: float, chi: float) -> float:
+    """Largest normal-force frequency f_hat/chi (Hz), f_hat = 2/T over three consecutive Phi peaks up to t_end."""
+    tp = peak_tau[peak_tau <= tau_end]
+    if tp.size < 3:
+        return math.nan
+    return float(np.max(2.0 / (tp[2:] - tp[:-2])) / chi)
+
+
 def _finite_or_nan(x: float) -> float:
     return float(x) if math.isfinite(x) else math.nan
 
@@ -130,6 +138,7 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
              "precession_hz": _finite_or_nan(prec_hz[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
             for i, b in enumerate(levels)
         ],
+        "normal_force_hz_max": _max_normal_force_hz(peaks[:, 0], float(fstats[F_TEND]), chi),
         "slip_fraction": float(fstats[F_SLIDETIME] / fstats[F_TEND]) if fstats[F_TEND] > 0 else 0.0,
         "n_transitions": int(istats[I_TRANS]),
         "n_stick": int(istats[I_STICK]),
