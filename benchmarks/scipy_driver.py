@@ -221,10 +221,19 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
 
         events, kinds = [], []
 
+        t0 = t
+
         def add(fn, kind, terminal=True):
-            fn.terminal = terminal
-            fn.direction = -1
-            events.append(fn)
+            # An event function exactly 0 at the restart point (omega.a_i after a sign flip,
+            # alpha after a side change) would be 'detected' again at the first step end by
+            # solve_ivp (it counts g(t0) = 0 -> g(t1) <= 0 as a crossing) and located at t0:
+            # a restart loop that never advances. Treat an exact zero at t0 as 'just after'.
+            def g(tt, yy):
+                v = fn(tt, yy)
+                return v if (v != 0.0 or tt != t0) else 1e-300
+            g.terminal = terminal
+            g.direction = -1
+            events.append(g)
             kinds.append(kind)
 
         for i in range(3):
