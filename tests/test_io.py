@@ -281,3 +281,17 @@ def test_chunk_job_checks_its_id(tmp_path, tiny):
     assert batch.chunk_from_spec(chunk.spec_json) == chunk
     with pytest.raises(ValueError, match="hashes to"):
         batch.run_chunk_job(chunk.spec_json, "0" * 16, tmp_path / "x.nc")
+
+
+def test_verification_cache_skips_unchanged_files_only(tmp_path, tiny, monkeypatch):
+    plan = grid.plan_chunks(tiny)
+    paths = write_all(tiny, tmp_path)
+    assert io.check_existing_chunks(tmp_path, plan) == {}
+    calls = []
+    real = io.verify_chunk
+    monkeypatch.setattr(io, "verify_chunk", lambda p, c=None: calls.append(Path(p).stem) or real(p, c))
+    assert io.check_existing_chunks(tmp_path, plan) == {}
+    assert calls == []  # every file verified before and unchanged since
+    _damage(paths[2], "truncate")  # changes size and mtime
+    assert list(io.check_existing_chunks(tmp_path, plan)) == [paths[2].stem]
+    assert calls == [paths[2].stem]

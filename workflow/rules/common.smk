@@ -26,10 +26,12 @@ CHUNK_DIR = "results/chunks"
 # the main process verifies every existing chunk of the plan and moves damaged ones to
 # results/chunks/quarantine/, so Snakemake sees them as missing. Jobs (remote/subprocess
 # executions of this file) skip the check; a dry run only reports.
+# (The executor, hence workflow.dryrun, is chosen after parsing; output_settings knows -n.)
+DRYRUN = bool(getattr(workflow.output_settings, "dryrun", False) or workflow.dryrun)
 if workflow.is_main_process:
-    _damaged = sweep_io.check_existing_chunks(CHUNK_DIR, PLAN, act=not workflow.dryrun)
+    _damaged = sweep_io.check_existing_chunks(CHUNK_DIR, PLAN, act=not DRYRUN)
     for _cid, _reason in _damaged.items():
         print(f"sweep: chunk {_cid} is damaged ({_reason}); "
-              + ("a real run will quarantine and recompute it" if workflow.dryrun
+              + ("a real run will quarantine and recompute it" if DRYRUN
                  else "moved to results/chunks/quarantine/, it will be recomputed"),
               file=sys.stderr)

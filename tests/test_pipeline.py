@@ -1,0 +1,281 @@
+"""End to end: the tiny sweep through Snakemake in a temporary copy of the workflow.
+
+Runs `snakemake` (this interpreter's) with --snakefile/--directory pointing at a copy of
+Snakefile, workflow/ and config/ under pytest's tmp dir, so the real results/ is never touched.
+The tests of this module share that copy and run in file order (each builds on the last run).
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+import yaml
+
+import sweep
+from sweep import grid, io, outcomes
+
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).resolve().parents[1]
+SCHEMA = grid.load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml")
+# A Snakemake call here takes ~3 s to parse and, for a run, ~3 s per job on a busy 2-core
+# machine; 10 min flags a hang (e.g. a notebook kernel that never starts), not slowness.
+TIMEOUT_S = 600
+
+
+def copy_workflow(dest: Path) -> Path:
+    dest.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(ROOT / "Snakefile", dest / "Snakefile")
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".ipynb_checkpoints")
+    for d in ("workflow", "config"):
+        shutil.copytree(ROOT / d, dest / d, ignore=ignore)
+    return dest
+
+
+def smk(wd: Path, *args: str, check: bool = True) -> str:
+    """Run snakemake in `wd`; return its merged stdout/stderr."""
+    env = dict(os.environ)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(wd / "Snakefile"), "--directory", str(wd),
+           *args]
+    p = subprocess.run(cmd, cwd=wd, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
+    out = p.stdout + p.stderr
+    if check and p.returncode != 0:
+        raise AssertionError(f"{' '.join(cmd)} exited {p.returncode}:\n{out[-6000:]}")
+    return out
+
+
+def job_count(output: str, rule: str) -> int:
+    """Number of jobs of `rule` in Snakemake's 'Job stats' table (0 if absent)."""
+    m = re.search(rf"^{rule}\s+(\d+)\s*$", output, flags=re.M)
+    return int(m.group(1)) if m else 0
+
+
+def write_config(wd: Path, name: str, cfg: dict) -> str:
+    (wd / "config" / name).write_text(yaml.safe_dump(cfg))
+    return f"config/{name}"
+
+
+def tiny_config() -> dict:
+    return yaml.safe_load((ROOT / "config" / "tiny.yaml").read_text())
+
+
+def settings_of(cfg: dict) -> dict:
+    return grid.normalize(cfg, SCHEMA)
+
+
+@pytest.fixture(scope="module")
+def wd(tmp_path_factory) -> Path:
+    return copy_workflow(tmp_path_factory.mktemp("pipeline") / "wf")
+
+
+@pytest.fixture(scope="module")
+def first_run(wd):
+    t0 = time.perf_counter()
+    out = smk(wd, "-j2", "--configfile", "config/tiny.yaml")
+    return out, time.perf_counter() - t0
+
+
+def chunk_mtimes(wd: Path) -> dict[str, int]:
+    return {p.stem: p.stat().st_mtime_ns for p in (wd / "results" / "chunks").glob("*.nc")}
+
+
+# ------------------------------------------------------------------------------- static checks
+
+def test_lint_reports_only_the_software_environment(wd):
+    out = smk(wd, "--lint", "--configfile", "config/tiny.yaml", check=False)
+    lints = set(re.findall(r"^\s+\* (.+?):?$", out, flags=re.M))
+    # The project's software environment is the pinned venv of run.py (requirements.lock), not
+    # a per-rule conda env or container; that one lint is expected for each rule, nothing else.
+    assert lints <= {"Specify a conda environment or container for each rule."}, out
+
+
+def test_stored_notebooks_have_no_outputs():
+    import nbformat
+
+    for path in (ROOT / "workflow" / "notebooks").glob("*.ipynb"):
+        nb = nbformat.read(path, as_version=4)
+        for cell in nb.cells:
+            if cell.cell_type == "code":
+                assert not cell.outputs and cell.execution_count is None, path.name
+    assert {p.stem for p in (ROOT / "workflow" / "notebooks").glob("*.ipynb")} == set(grid.NOTEBOOKS)
+
+
+@pytest.mark.parametrize("mutate, fragment", [
+    (lambda c: c["grid"].__setitem__("mu_d", [0.2, 0.7]), "`grid.mu_d[1]`"),
+    (lambda c: c.__setitem__("levels", [0.3, 2.0]), "`levels[1]`"),
+    (lambda c: c["grid"].__setitem__("alpha0", [0.0]), "`grid.alpha0[0]`"),
+    (lambda c: c.__setitem__("extra", 1), "'extra'"),
+])
+def test_invalid_config_fails_before_any_job(tmp_path, mutate, fragment):
+    d = copy_workflow(tmp_path / "wf")
+    cfg = tiny_config()
+    mutate(cfg)
+    out = smk(d, "-j1", "--configfile", write_config(d, "bad.yaml", cfg), check=False)
+    assert fragment in out and "allowed" in out, out
+    assert not (d / "results").exists()
+
+
+# ------------------------------------------------------------------------------- the tiny run
+
+def test_tiny_run_produces_cube_figures_and_progress_logs(wd, first_run):
+    out, seconds = first_run
+    settings = settings_of(tiny_config())
+    plan = grid.plan_chunks(settings)
+    assert job_count(out, "simulate_chunk") == len(plan)
+    assert (wd / "results" / "cube.nc").exists()
+    for nb in settings["outputs"]["notebooks"]:
+        png = wd / "results" / "figures" / f"{nb}.png"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for cid in plan:
+        log = (wd / "results" / "logs" / "chunks" / f"{cid}.log").read_text()
+        assert re.search(r"done: \d+ scenes in [\d.]+ s \([\d.]+ scenes/s\)", log)
+    # the brief for CI: the tiny grid runs in well under a minute
+    assert seconds < 60, seconds
+
+
+def test_cube_contents(wd, first_run):
+    settings = settings_of(tiny_config())
+    with xr.open_dataset(wd / "results" / "cube.nc") as cube:
+        assert tuple(cube.outcome.dims) == grid.AXES
+        assert dict(cube.sizes) == {**{a: len(settings["grid"][a]) for a in grid.AXES},
+                                    "level": len(settings["levels"])}
+        for a in grid.AXES:
+            np.testing.assert_array_equal(cube[a].values, sorted(tiny_config()["grid"][a]))
+        np.testing.assert_array_equal(np.sort(cube.level.values), sorted(tiny_config()["levels"]))
+        for name in cube.variables:
+            assert cube[name].attrs.get("units") and cube[name].attrs.get("long_name"), name
+        halted = cube.outcome.values == outcomes.HALTED
+        assert halted.any()
+        # a halted scene reached every level and has all its energies, counts and costs
+        for name in ("t_level", "t_end", "energy_initial", "energy_final", "slip_fraction", "n_steps",
+                     "n_rhs", "n_transitions", "dissipation_sliding", "dissipation_k3", "wall_time"):
+            v = cube[name].values
+            assert np.isfinite(v[halted]).all(), name
+        # a finite halt time wherever the fit found one
+        fin = cube.halt_finite.values
+        assert np.isfinite(cube.t_halt.values[fin]).all()
+        assert (cube.t_halt.values[fin] >= cube.t_end.values[fin]).all()
+        assert cube.attrs["git_commit"] != ""
+        assert cube.attrs["sweep_version"] == sweep.__version__
+
+
+def test_cube_equals_scenes_run_one_by_one(wd, first_run):
+    settings = settings_of(tiny_config())
+    with xr.open_dataset(wd / "results" / "cube.nc") as cube:
+        for chunk in grid.plan_chunks(settings).values():
+            for point in chunk.points:
+                s = sweep.simulate(grid.scene(settings, point)).summary
+                at = cube.sel(dict(zip(grid.AXES, point)))
+                for var in io.VARIABLES:
+                    if var.name == "wall_time":  # a measurement, not a result
+                        continue
+                    want = [var.get(lv) for lv in s["levels"]] if var.per_level else var.get(s)
+                    # same code, same machine, same inputs: the integration is deterministic
+                    np.testing.assert_array_equal(np.asarray(at[var.name].values, dtype=float),
+                                                  np.asarray(want, dtype=float), err_msg=f"{var.name} at {point}")
+
+
+def test_rerun_does_nothing(wd, first_run):
+    out = smk(wd, "-j2", "--configfile", "config/tiny.yaml", "--dry-run")
+    assert "Nothing to be done" in out, out
+
+
+def test_executed_notebooks_have_no_errors(wd, first_run):
+    import nbformat
+
+    for nb in grid.NOTEBOOKS:
+        executed = nbformat.read(wd / "results" / "notebooks" / f"{nb}.ipynb", as_version=4)
+        outputs = [o for c in executed.cells if c.cell_type == "code" for o in c.outputs]
+        assert not [o for o in outputs if o.output_type == "error"], nb
+        assert any("saved" in o.get("text", "") for o in outputs), nb
+
+
+# ------------------------------------------------------------------------------- reruns
+
+def _extend_and_run(wd, base: dict, name: str, axis: str, value: float) -> dict:
+    """Add `value` to `axis` of config `base`, run, and check that exactly the chunks whose
+    content changed were computed and every other chunk file was left alone."""
+    old_plan = grid.plan_chunks(settings_of(base))
+    cfg = yaml.safe_load(yaml.safe_dump(base))
+    cfg["grid"][axis] = cfg["grid"][axis] + [value]
+    cfg["outputs"]["notebooks"] = []  # the figures were checked after the first run
+    new_plan = grid.plan_chunks(settings_of(cfg))
+    new_ids = set(new_plan) - set(old_plan)
+    # precondition, from the plan alone: some chunks are new and some are kept
+    assert new_ids and len(new_ids) < len(new_plan)
+    before = chunk_mtimes(wd)
+    with xr.open_dataset(wd / "results" / "cube.nc") as c:
+        old_cube = c.load()
+    out = smk(wd, "-j2", "--configfile", write_config(wd, name, cfg))
+    assert job_count(out, "simulate_chunk") == len(new_ids), out
+    after = chunk_mtimes(wd)
+    for cid in set(new_plan) & set(old_plan):
+        assert after[cid] == before[cid], cid  # kept chunk files were not rewritten
+    with xr.open_dataset(wd / "results" / "cube.nc") as cube:
+        assert cube.sizes[axis] == len(cfg["grid"][axis])
+        common = cube.sel({axis: old_cube[axis].values})
+        for var in ("t_halt", "t_level", "n_steps", "outcome"):
+            np.testing.assert_array_equal(common[var].values, old_cube[var].values)
+    return cfg
+
+
+def test_inserted_inner_value_reruns_only_changed_chunks(wd, first_run):
+    # alpha0 1.0 goes between the existing 0.9 and 1.1
+    _extend_and_run(wd, tiny_config(), "inner.yaml", "alpha0", 1.0)
+
+
+def test_new_outer_value_reruns_only_new_chunks(wd, first_run):
+    # mu_d 0.25 goes between the existing 0.2 and 0.3
+    base = yaml.safe_load((wd / "config" / "inner.yaml").read_text())
+    _extend_and_run(wd, base, "outer.yaml", "mu_d", 0.25)
+
+
+def test_damaged_chunk_is_recomputed_not_gathered(wd, first_run):
+    cfg = "config/outer.yaml"
+    settings = settings_of(yaml.safe_load((wd / cfg).read_text()))
+    plan = grid.plan_chunks(settings)
+    victim = wd / "results" / "chunks" / f"{next(iter(plan))}.nc"
+    with xr.open_dataset(wd / "results" / "cube.nc") as c:
+        before = c.load()
+    victim.write_bytes(victim.read_bytes()[:200])  # a truncated copy
+    out = smk(wd, "-j2", "--configfile", cfg, "--dry-run")
+    assert f"chunk {victim.stem} is damaged" in out and victim.exists()  # dry run: report only
+    (wd / "results" / "cube.nc").unlink()
+    out = smk(wd, "results/cube.nc", "-j2", "--configfile", cfg)
+    assert "moved to results/chunks/quarantine/" in out
+    assert job_count(out, "simulate_chunk") == 1
+    assert io.verify_chunk(victim, plan[victim.stem]) is None
+    assert list((wd / "results" / "chunks" / "quarantine").glob(victim.name + ".*"))
+    with xr.open_dataset(wd / "results" / "cube.nc") as after:
+        for var in io.VARIABLE_NAMES:
+            if var != "wall_time":
+                np.testing.assert_array_equal(after[var].values, before[var].values, err_msg=var)
+
+
+# ------------------------------------------------------------------------------- cluster profile
+
+def test_slurm_profile_dry_run_batches_chunk_jobs(tmp_path):
+    d = copy_workflow(tmp_path / "wf")
+    profile = yaml.safe_load((d / "workflow" / "profiles" / "slurm" / "config.yaml").read_text())
+    assert profile["executor"] == "slurm"
+    group = dict(g.split("=") for g in profile["groups"])["simulate_chunk"]
+    per_group = int(dict(g.split("=") for g in profile["group-components"])[group])
+    cfg = tiny_config()
+    cfg["grid"]["omega0"] = [10.0, 12.0, 14.457, 17.0, 20.0, 25.0]
+    cfg["chunk_size"] = 1  # one scene per chunk: many tiny jobs, the case grouping is for
+    n_chunks = len(grid.plan_chunks(settings_of(cfg)))
+    assert n_chunks > per_group
+    out = smk(d, "--profile", str(d / "workflow" / "profiles" / "slurm"),
+              "--configfile", write_config(d, "many.yaml", cfg), "--dry-run")
+    assert job_count(out, "simulate_chunk") == n_chunks
+    assert out.count(f"Group job {group}") == math.ceil(n_chunks / per_group), out[-3000:]
