@@ -87,6 +87,10 @@ def numpy_backend() -> Backend:
 
 # --- the driver ----------------------------------------------------------------------------------
 
+class _Timeout(Exception):
+    pass
+
+
 class _Counter:
     __slots__ = ("n",)
 
@@ -202,7 +206,12 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
         fdy = np.empty(n)
         faux = np.empty(N_AUX)
 
+        fcalls = [0]
+
         def fun(tt, yy):
+            fcalls[0] += 1
+            if fcalls[0] % 2000 == 0 and time.perf_counter() - w0 > max_wall:
+                raise _Timeout   # a single solve_ivp call can grind (e.g. LSODA at rtol 1e-12)
             rhs(tt, yy, p, smode, sside, ssig, sstuck, sn0x, sn0y, n, fdy, faux)
             return fdy.copy()
 
@@ -282,8 +291,13 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
 
         t_eval = st[isamp:]
         t_eval = t_eval[t_eval <= t_max]
-        sol = solve_ivp(fun, (t, t_max), y, method=method, rtol=rtol, atol=atol, events=events,
-                        t_eval=t_eval if t_eval.size else None)
+        try:
+            sol = solve_ivp(fun, (t, t_max), y, method=method, rtol=rtol, atol=atol, events=events,
+                            t_eval=t_eval if t_eval.size else None)
+        except _Timeout:
+            stats["nfev"] += fcalls[0]
+            outcome = outcomes.STEP_LIMIT
+            break
         stats["n_segments"] += 1
         stats["nfev"] += sol.nfev
         stats["njev"] += sol.njev
