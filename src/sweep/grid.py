@@ -226,8 +226,10 @@ def check_config(config: Mapping, schema: dict | None = None) -> dict:
     """
     schema = schema if schema is not None else load_schema()
     messages = schema_errors(config, schema)
-    if not messages:
-        messages = cross_field_errors(fill_defaults(config, schema))
+    try:  # report cross-field problems together with the schema's, where the types allow it
+        messages += [m for m in cross_field_errors(fill_defaults(config, schema)) if m not in messages]
+    except (TypeError, AttributeError):
+        pass  # a mistyped section: the schema errors above already say which
     if messages:
         raise SweepConfigError("invalid sweep configuration:\n  " + "\n  ".join(messages))
     return fill_defaults(config, schema)
