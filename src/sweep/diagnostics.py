@@ -8,7 +8,7 @@ three unknowns (c, t_halt, p) are fixed by the last three level times; t_halt so
 which has a root if and only if the gaps between level times shrink faster than the levels do
 (for decade levels: t3 - t2 < t2 - t1); that is the finite-time criterion. For geometric levels it
 is Aitken's delta-squared extrapolation. The error estimate is the change of t_halt when the fit
-uses the previous three levels instead.
+uses the previous three levels instead (or, where that fit has no root, the remainder t_halt - t3).
 
 Ramp exponent n of the precession frequency, Omega ~ (t_halt - t)^(-n): least squares of
 ln Omega_i against ln(t_halt - t_i) over the reached levels.
@@ -57,7 +57,8 @@ def _halt_from_three(t: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 def halt_time(level_t: np.ndarray, levels: np.ndarray) -> dict:
     """Fit the final approach law over the last reached levels (times in any unit, levels in rad).
 
-    Returns t_halt, t_halt_error (NaN if fewer than four levels were reached), approach exponent
+    Returns t_halt, t_halt_error (the change against the previous three levels, else the
+    extrapolated remainder t_halt - t_last), approach exponent
     p (beta ~ (t_halt - t)^p), and halt_finite (False where the gaps do not shrink fast enough).
     """
     ok = np.isfinite(level_t)
@@ -70,6 +71,10 @@ def halt_time(level_t: np.ndarray, levels: np.ndarray) -> dict:
     if not math.isfinite(th):
         return res
     res.update(t_halt=th, approach_exponent=p, halt_finite=True)
+    # Without a finite fit on the previous three levels (fewer than four reached, or the approach
+    # was not yet in its final law there), the extrapolated remainder t_halt - t_last itself is the
+    # error bar: the halt lies after the last reached level, at most about that far from t_halt.
+    res["t_halt_error"] = th - float(t[-1])
     if t.size >= 4:
         th2, _ = _halt_from_three(t[-4:-1], b[-4:-1])
         if math.isfinite(th2):

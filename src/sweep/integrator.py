@@ -19,7 +19,7 @@ from . import outcomes as oc
 from .events import (EV_CONE, EV_CONTACT, EV_FACE, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SLIPEND, EV_UNSTICK1,
                      N_DYN_EVENTS, N_EVENTS, brent_max_phi, dense_eval, event_values,
                      hermite_interior_root, locate)
-from .model import (N_AUX, N_CORE, N_FULL, P_K1, P_K2, P_K3, P_MUS, ROLL, SLIDE, X_F1, X_F2, X_G1, X_OK,
+from .model import (N_AUX, N_CORE, N_FULL, P_K1, P_K2, P_K3, P_MUS, P_UFREEZE, ROLL, SLIDE, X_F1, X_F2, X_G1, X_OK,
                     X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, energy,
                     project_velocity, rhs)
 from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
@@ -29,6 +29,16 @@ MIN_FACTOR = 0.2
 MAX_FACTOR = 10.0
 ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8)
 EPS = 2.220446049250313e-16
+# A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
+# increases, so such a step is an instability the error estimate did not see (explicit steps in the
+# stiff end phase of a slip). Adaptive mode rejects it; fixed-step mode halves it.
+ENERGY_GUARD = 10.0
+# Two rim-edge impacts (alpha = 0) closer than ZENO_DTAU in tau: the rocking between the edges has
+# collapsed (a Zeno sequence of plastic impacts), the disk stands on its flat edge: line_contact.
+ZENO_DTAU = 1e-6
+# A step-size collapse within BETA_SOFT_FACE rad of flat ends as face_contact: there the 3-1-2 angles
+# are singular (tan alpha > 1e5) and the precession time scale ~ beta/|omega3| reaches round-off.
+BETA_SOFT_FACE = 1e-5
 # Stiction: a slip slower than max(slip_tol, rtol |omega|) ends as soon as the static friction cone
 # holds for the rolling state. Near u = 0 the sliding equations are stiff (slip-direction rate
 # ~ mu_d Phi / u), explicit steps shrink like u, and a slip that creeps (required friction close to
@@ -185,6 +195,38 @@ def slip_onset_direction(t, y, p, side, sig, stuck, n, F1, F2, counter):
 
 
 @njit(cache=True)
+def refine_direction(t, y, p, side, sig, stuck, n, nu0, counter):
+    """Consistent slip direction near nu0 (a_P parallel to s, a_P.s > 0) by the secant method.
+
+    At most 8 iterations from nu0 and nu0 + 1e-4 rad; converged when the angle update is below
+    1e-12 rad. Falls back to nu0 if it does not converge or lands on a decaying direction.
+    """
+    y0 = y.copy()
+    y0[Y_U1] = 0.0
+    y0[Y_U2] = 0.0
+    dy = np.empty(n)
+    aux = np.empty(N_AUX)
+    xa = nu0
+    ca, da = _slip_accel(xa, t, y0, p, side, sig, stuck, n, dy, aux)
+    xb = nu0 + 1e-4
+    cb, db = _slip_accel(xb, t, y0, p, side, sig, stuck, n, dy, aux)
+    counter[0] += 2
+    for _ in range(8):
+        if cb == ca:
+            break
+        xc = xb - cb * (xb - xa) / (cb - ca)
+        xa, ca = xb, cb
+        xb = xc
+        cb, db = _slip_accel(xb, t, y0, p, side, sig, stuck, n, dy, aux)
+        counter[0] += 1
+        if abs(xb - xa) < 1e-12:
+            if db > 0.0:
+                return xb
+            break
+    return nu0
+
+
+@njit(cache=True)
 def _stick_or_flip(i, t, y, p, mode, side, sig, stuck, n0x, n0y, n, dy, aux, counter):
     """At omega.a_i = 0: stick if the moment can hold it (|sigma needed| <= 1), else flip sign.
 
@@ -253,6 +295,8 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
     npk = 0
     counter = np.zeros(1, np.int64)
 
+    p = p.copy()
+    p[P_UFREEZE] = u_tol     # friction direction frozen at slip speeds <= slip_tol (docs/model.md)
     y = y0.copy()
     t = 0.0
     mode = mode0
@@ -308,6 +352,9 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
         rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux)
         counter[0] += 1
     fstats[F_E0] = energy(y, p, side, mode)
+    e_cur = fstats[F_E0]
+    e_guard = ENERGY_GUARD * rtol * max(abs(fstats[F_E0]), 1e-300)
+    t_last_impact = -np.inf
     next_level = 0
     lev = level_e[0] if nl > 0 else np.nan
     event_values(y, aux, p, mode, side, sig, stuck, u_tol, lev, active, g_old)
@@ -392,14 +439,26 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
             hit_tmax = True
         if h <= 16.0 * EPS * max(abs(t), 1.0):
             if outcome < 0:
-                outcome = oc.STEP_SIZE_UNDERFLOW if not hit_tmax else oc.T_MAX
+                if hit_tmax:
+                    outcome = oc.T_MAX
+                elif 0.5 * math.pi - abs(y[Y_ALPHA]) < BETA_SOFT_FACE:
+                    outcome = oc.FACE_CONTACT
+                else:
+                    outcome = oc.STEP_SIZE_UNDERFLOW
             break
+        e_cur = energy(y, p, side, mode)
         _rk_step(t, y, f, h, n, p, mode, side, sig, stuck, n0x, n0y, K, y_new, f_new, aux_new, ytmp, dytmp, auxtmp)
         counter[0] += 12
         finite = True
         for i in range(n):
             if not math.isfinite(y_new[i]):
                 finite = False
+        if finite and energy(y_new, p, side, mode) > e_cur + e_guard:
+            finite = False      # treated like a non-finite step: rejected (adaptive) or halved (fixed)
+        if not adaptive and not finite:
+            istats[I_REJECTED] += 1
+            h *= 0.5
+            continue
         if adaptive:
             err = _error_norm(K, h, y, y_new, n, rtol, atol) if finite else np.inf
             if not err <= 1.0:
@@ -414,11 +473,7 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
             fac = MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** ERR_EXPONENT)
             h_next = h * fac
         else:
-            if not finite:
-                if outcome < 0:
-                    outcome = oc.NUMERICAL_ERROR
-                break
-            h_next = h_fixed
+            h_next = min(2.0 * h, h_fixed)   # after halvings, grow back to dt
         istats[I_STEPS] += 1
         if aux_new[X_OK] == 0.0 and outcome < 0:
             outcome = oc.NUMERICAL_ERROR
@@ -656,7 +711,9 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                 y[Y_ALPHA] = 0.0
                 for i in range(3):
                     stuck[i] = 0
-                if y[Y_W1] * side <= 0.0:
+                zeno = t - t_last_impact < ZENO_DTAU
+                t_last_impact = t
+                if y[Y_W1] * side <= 0.0 or zeno:
                     # the impact left no rotation towards the new side: the disk stands on its
                     # flat edge (line contact, alpha = 0), where this single-contact model ends
                     if outcome < 0:
@@ -690,11 +747,19 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                 g_old[kk] = g_new[kk]
             if nl > next_level:
                 g_old[EV_LEVEL] = energy(y, p, side, mode) - lev
-        if mode == SLIDE:
+        if mode == SLIDE and outcome < 0:
             un = math.hypot(y[Y_U1], y[Y_U2])
-            if un > 0.0:
+            if un > u_tol:
                 n0x = y[Y_U1] / un
                 n0y = y[Y_U2] / un
+            else:
+                # slip at or below slip_tol: the friction direction is frozen (p[P_UFREEZE]), so keep
+                # it the consistent one as the state moves on (cheap secant from the last one)
+                nu = refine_direction(t, y, p, side, sig, stuck, n, math.atan2(n0y, n0x), counter)
+                n0x = math.cos(nu)
+                n0y = math.sin(nu)
+                rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, auxtmp)
+                counter[0] += 1
         if hit_tmax and outcome < 0 and first_k < 0:
             outcome = oc.T_MAX
             fstats[F_TEND] = t

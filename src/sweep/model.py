@@ -29,7 +29,10 @@ N_FULL = 14   # with kinematics
 
 # --- parameter vector layout ---------------------------------------------------------------
 P_G, P_H, P_A, P_C, P_K1, P_K2, P_K3, P_MUS, P_MUD = 0, 1, 2, 3, 4, 5, 6, 7, 8
-N_PARAMS = 9
+# Slip speed at or below which the friction direction is the stored slip direction (n0x, n0y)
+# rather than u/|u|: 0 in the pure model; the integrator sets it to slip_tol (docs/model.md).
+P_UFREEZE = 9
+N_PARAMS = 10
 
 # --- auxiliary outputs of the right-hand side ----------------------------------------------
 X_PHI, X_F1, X_F2, X_SIG1, X_SIG2, X_SIG3, X_G1, X_G2, X_G3, X_OK = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
@@ -57,6 +60,7 @@ def make_params(k2_shape: float, radius: float, thickness: float, gravity: float
     p[P_K3] = k3 / radius
     p[P_MUS] = mu_s
     p[P_MUD] = mu_d
+    p[P_UFREEZE] = 0.0
     return p, chi
 
 
@@ -119,7 +123,7 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     sig[i]: sign of omega.a_i used in M_f (eq. 3.3) for a component that is not stuck.
     stuck[i] = 1: omega.a_i is held at 0 by the dry-friction moment (Filippov sliding); its
     effective sign sigma_i in [-1, 1] is solved from d/dtau(omega.a_i) = 0.
-    (n0x, n0y): slip direction used while the slip speed is exactly 0 (at slip onset).
+    (n0x, n0y): slip direction used while the slip speed is <= p[P_UFREEZE] (0: only at u = 0).
     nstate: number of state components to fill (N_CORE, or N_FULL with kinematics).
     aux: Phi, F1, F2 (friction on a1, a2), effective sigma_1..3, omega.a_1..3, ok-flag.
     """
@@ -151,7 +155,7 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
         u1 = y[Y_U1]
         u2 = y[Y_U2]
         un = math.hypot(u1, u2)
-        if un > 0.0:
+        if un > p[P_UFREEZE]:
             n1 = u1 / un
             n2 = u2 / un
         else:
