@@ -295,3 +295,27 @@ def test_verification_cache_skips_unchanged_files_only(tmp_path, tiny, monkeypat
     _damage(paths[2], "truncate")  # changes size and mtime
     assert list(io.check_existing_chunks(tmp_path, plan)) == [paths[2].stem]
     assert calls == [paths[2].stem]
+
+
+# ------------------------------------------------------------------------------- notebooks
+
+def test_notebooks_cope_with_length_one_axes_and_nans(tmp_path):
+    """Every figure notebook runs on a cube whose axes have 1-2 values and where half the
+    scenes failed (NaN everywhere) and one variable is NaN throughout."""
+    settings = settings_for(mu_d=[0.2, 0.3], k3=[3e-4], alpha0=[0.9, 1.1], omega0=[14.0])
+
+    def half_failed(point, levels):
+        if point[0] == 0.3:
+            return io.error_summary(len(levels))
+        s = fake_summary(point, levels)
+        s["ramp_exponent"] = math.nan
+        for lv in s["levels"]:
+            lv["normal_force_hz"] = math.nan
+        return s
+
+    paths = write_all(settings, tmp_path / "chunks", half_failed)
+    cube = io.gather(paths, settings, tmp_path / "cube.nc")
+    for nb in grid.NOTEBOOKS:
+        fig = io.run_notebook(ROOT / "workflow" / "notebooks" / f"{nb}.ipynb", cube,
+                              tmp_path / "figures" / f"{nb}.png", tmp_path / "executed" / f"{nb}.ipynb")
+        assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
