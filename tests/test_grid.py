@@ -174,6 +174,34 @@ def test_changing_a_setting_changes_every_chunk(change):
     assert len(new) == len(old) and not set(new) & set(old)
 
 
+def test_changing_the_physics_core_changes_every_chunk(monkeypatch):
+    cfg = load("tiny.yaml")
+    old = grid.plan_chunks(norm(cfg))
+    assert all(json_core(c) == grid.core_fingerprint() for c in old.values())
+    monkeypatch.setattr(grid, "core_fingerprint", lambda: "0" * 64)
+    new = grid.plan_chunks(norm(cfg))
+    assert len(new) == len(old) and not set(new) & set(old)
+
+
+def json_core(chunk) -> str:
+    return chunk.spec["core"]
+
+
+def test_core_fingerprint_covers_physics_not_pipeline(tmp_path, monkeypatch):
+    import shutil
+
+    src = Path(grid.__file__).parent
+    pkg = tmp_path / "sweep"
+    shutil.copytree(src, pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(grid, "__file__", str(pkg / "grid.py"))
+    base = grid.core_fingerprint()
+    assert base == grid.core_fingerprint()
+    (pkg / "io.py").write_text((pkg / "io.py").read_text() + "\n# pipeline edit\n")
+    assert grid.core_fingerprint() == base
+    (pkg / "model.py").write_text((pkg / "model.py").read_text() + "\n# physics edit\n")
+    assert grid.core_fingerprint() != base
+
+
 def test_output_choice_does_not_change_chunks():
     cfg = load("tiny.yaml")
     old = grid.plan_chunks(norm(cfg))

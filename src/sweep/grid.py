@@ -2,9 +2,10 @@
 
 A sweep is the Cartesian product of six axes (see `AXES`), every point one scene integrated by
 `sweep.simulate`. The grid is cut into *chunks*, one Snakemake job each, whose identity is the
-SHA-256 of the canonical JSON of their content (the point values and every setting that changes
-a scene's result). So a chunk file is reused exactly when its scenes would be recomputed
-identically, whatever the position of its points in the axes.
+SHA-256 of the canonical JSON of their content (the point values, every setting that changes a
+scene's result, and a fingerprint of the physics core's source). So a chunk file is reused
+exactly when its scenes would be recomputed identically, whatever the position of its points
+in the axes.
 
 Chunk layout (see docs/pipeline.md, "How reruns work"):
 
@@ -378,9 +379,26 @@ def split_inner(inner_points: list[tuple[float, ...]], chunk_size: int) -> list[
     return blocks
 
 
-def chunk_id_of(settings_part: Mapping, points: list[tuple[float, ...]]) -> tuple[str, str]:
-    spec = {"format": CHUNK_FORMAT, "settings": settings_part, "axes": list(AXES),
-            "points": [list(p) for p in points]}
+# Modules of the package that do not change a scene's result: the pipeline's own (chunk files
+# carry CHUNK_FORMAT instead) and the front ends. Every other module is physics.
+NON_CORE_MODULES = frozenset({"__init__.py", "__main__.py", "cli.py", "grid.py", "io.py", "batch.py"})
+
+
+def core_fingerprint() -> str:
+    """SHA-256 of the physics core's source files (every module of the package but
+    NON_CORE_MODULES), so that a change of the core gives every chunk a new identity."""
+    h = hashlib.sha256()
+    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        if path.name not in NON_CORE_MODULES:
+            h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def chunk_id_of(settings_part: Mapping, points: list[tuple[float, ...]],
+                core: str | None = None) -> tuple[str, str]:
+    """(id, canonical spec JSON) of a chunk; `core` defaults to core_fingerprint()."""
+    spec = {"format": CHUNK_FORMAT, "core": core if core is not None else core_fingerprint(),
+            "settings": settings_part, "axes": list(AXES), "points": [list(p) for p in points]}
     text = canonical_json(spec)
     return sha256_hex(text)[:CHUNK_ID_HEX], text
 
@@ -388,6 +406,7 @@ def chunk_id_of(settings_part: Mapping, points: list[tuple[float, ...]]) -> tupl
 def plan_chunks(settings: Mapping) -> dict[str, Chunk]:
     """All chunks of a normalised config, keyed by id, in grid order."""
     part = scene_settings(settings)
+    core = core_fingerprint()
     g = settings["grid"]
     inner = list(itertools.product(*(g[a] for a in INNER_AXES)))
     blocks = split_inner(inner, settings["chunk_size"])
@@ -395,7 +414,7 @@ def plan_chunks(settings: Mapping) -> dict[str, Chunk]:
     for outer in itertools.product(*(g[a] for a in OUTER_AXES)):
         for block in blocks:
             points = [tuple(outer) + tuple(p) for p in block]
-            cid, text = chunk_id_of(part, points)
+            cid, text = chunk_id_of(part, points, core)
             chunks[cid] = Chunk(cid, tuple(points), text)
     return chunks
 

@@ -374,7 +374,6 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
     `settings`: the normalised config (sweep.grid.normalize). Every grid point must be present
     exactly once; a damaged chunk file raises (after quarantining it) instead of being gathered.
     """
-    import dask.array as da
     import xarray as xr
 
     from . import __version__
@@ -449,6 +448,7 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             "config_json": config_json,
             "config_sha256": _grid.sha256_hex(config_json),
             "solver": _grid.canonical_json(settings["solver"]),
+            "sweep_core_sha256": _grid.core_fingerprint(),
             "stop": _grid.canonical_json(settings["stop"]),
             "created": created,
         }
