@@ -33,6 +33,11 @@ EPS = 2.220446049250313e-16
 # increases, so such a step is an instability the error estimate did not see (explicit steps in the
 # stiff end phase of a slip). Adaptive mode rejects it; fixed-step mode halves it.
 ENERGY_GUARD = 10.0
+# Minimum prominence of a located maximum of Phi over its bracket ends, relative to Phi (see the
+# peak tracking in `integrate`).
+PEAK_PROMINENCE = 1e-6
+# Minimum separation of two Phi maxima, as a fraction of the precession period 2 pi/|dtheta/dtau|.
+MIN_PEAK_SEPARATION = 0.01
 # Two rim-edge impacts (alpha = 0) closer than ZENO_DTAU in tau: the rocking between the edges has
 # collapsed (a Zeno sequence of plastic impacts), the disk stands on its flat edge: line_contact.
 ZENO_DTAU = 1e-6
@@ -54,7 +59,8 @@ N_SETTINGS = 9
 
 # integer statistics layout
 I_OUTCOME, I_STEPS, I_REJECTED, I_RHS, I_EVENTS, I_TRANS, I_STICK, I_IMPACTS, I_LEVELS, I_TRAJ, I_PEAKS = range(11)
-N_ISTATS = 11
+I_SLIDE_STEPS, I_SLIDE_REJECTED = 11, 12   # cost accounting: steps taken while sliding
+N_ISTATS = 13
 # float statistics layout
 F_TEND, F_SLIDETIME, F_DIMPACT, F_E0, F_EEND, F_HLAST = range(6)
 N_FSTATS = 6
@@ -463,6 +469,8 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
             err = _error_norm(K, h, y, y_new, n, rtol, atol) if finite else np.inf
             if not err <= 1.0:
                 istats[I_REJECTED] += 1
+                if mode == SLIDE:
+                    istats[I_SLIDE_REJECTED] += 1
                 fac = MIN_FACTOR if not math.isfinite(err) else max(MIN_FACTOR, SAFETY * err ** ERR_EXPONENT)
                 h *= fac
                 if not finite and h <= 16.0 * EPS * max(abs(t), 1.0):
@@ -475,6 +483,8 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
         else:
             h_next = min(2.0 * h, h_fixed)   # after halvings, grow back to dt
         istats[I_STEPS] += 1
+        if mode == SLIDE:
+            istats[I_SLIDE_STEPS] += 1
         if aux_new[X_OK] == 0.0 and outcome < 0:
             outcome = oc.NUMERICAL_ERROR
             break
@@ -602,6 +612,7 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                 phi_c = auxbuf[X_PHI]
             else:
                 phi_c = aux_new[X_PHI]
+            genuine = False
             if phi_b > phi_a and phi_b >= phi_c and prev_ok:
                 tp1, pv1 = brent_max_phi(t_a, t_b, Fprev, yprev, tprev, hprev, n, p, prev_mode, prev_side,
                                          prev_sig, prev_stuck, prev_n0x, prev_n0y, ybuf, dybuf, auxbuf, counter)
@@ -609,6 +620,22 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                                          ybuf, dybuf, auxbuf, counter)
                 tpk = tp1 if pv1 >= pv2 else tp2
                 pvk = pv1 if pv1 >= pv2 else pv2
+                # A maximum of Phi must stand out of its bracket: round-off wiggles (e.g. of a
+                # creeping slip) have no prominence. Real nutation peaks rise ~0.1 Phi above the
+                # bracket ends (two steps away); 1e-6 Phi is far below that. (Maxima at a restart
+                # point are kept: Phi peaks where omega_1 = 0, exactly where the k1 sign events are.)
+                genuine = pvk - max(phi_a, phi_c) > PEAK_PROMINENCE * abs(pvk)
+            if genuine and npk > 0:
+                # no physical Phi oscillation is faster than a small fraction of the precession
+                # period 2 pi/|theta'|: closer maxima (the sawtooth of a slip creeping at the slip
+                # tolerance) are merged into one, the higher
+                thd = abs(y[Y_W3] / math.cos(y[Y_ALPHA]))
+                if tpk - peaks[npk - 1, 0] < MIN_PEAK_SEPARATION * 2.0 * math.pi / max(thd, 1e-300):
+                    if pvk > peaks[npk - 1, 1]:
+                        peaks[npk - 1, 0] = tpk
+                        peaks[npk - 1, 1] = pvk
+                    genuine = False
+            if track_peaks and phi_b > phi_a and phi_b >= phi_c and prev_ok and genuine:
                 if npk == peaks.shape[0]:
                     bigger = np.empty((2 * npk, 2))
                     bigger[:npk] = peaks[:npk]
@@ -742,6 +769,7 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                         fstats[F_TEND] = t
                     break
                 event_values(y, aux_new, p, mode, side, sig, stuck, u_tol, lev, active, g_old)
+
         else:
             for kk in range(N_EVENTS):
                 g_old[kk] = g_new[kk]

@@ -10,7 +10,8 @@ import numpy as np
 from . import diagnostics, model, outcomes
 from .errors import ConfigError
 from .integrator import (F_DIMPACT, F_E0, F_EEND, F_SLIDETIME, F_TEND, I_EVENTS, I_IMPACTS,
-                         I_OUTCOME, I_REJECTED, I_RHS, I_STEPS, I_STICK, I_TRANS, N_SETTINGS,
+                         I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
+                         I_TRANS, N_SETTINGS,
                          S_ATOL, S_EXTRA, S_HFIXED, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX,
                          S_UTOL, TRAJ_COLS, integrate)
 from .scene import Scene, load_scene
@@ -149,6 +150,8 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
                         "k3": float(dis[3]), "impact": float(fstats[F_DIMPACT]) * escale},
         "n_steps": int(istats[I_STEPS]),
         "n_rejected": int(istats[I_REJECTED]),
+        "n_steps_sliding": int(istats[I_SLIDE_STEPS]),
+        "n_rejected_sliding": int(istats[I_SLIDE_REJECTED]),
         "n_rhs": int(istats[I_RHS]),
         "n_events": int(istats[I_EVENTS]),
         "wall_time": wall,
