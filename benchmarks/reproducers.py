@@ -33,17 +33,6 @@ def cfg_of(mods, max_steps=200_000):
     return cfg
 
 
-def energy_of(tr, sc):
-    E = np.empty(tr["t"].size)
-    y = np.zeros(model.N_FULL)
-    for i in range(E.size):
-        y[model.Y_ALPHA] = tr["alpha"][i]
-        y[model.Y_W1:model.Y_W3 + 1] = tr["omega"][i] * sc.chi
-        y[model.Y_U1:model.Y_U2 + 1] = tr["slip"][i] * sc.chi / sc.config["disk"]["radius"]
-        E[i] = model.energy(y, sc.params, 1 if y[0] > 0 else -1, int(tr["mode"][i]))
-    return E * sc.energy_scale
-
-
 def main(names):
     for name in names or CASES:
         sc = load_scene(cfg_of(CASES[name]))
@@ -54,7 +43,7 @@ def main(names):
                                  "n_stick", "n_impacts", "energy_initial", "energy_final", "slip_fraction")})
         t = tr["t"]
         dt = np.diff(t)
-        E = energy_of(tr, sc)
+        E = tr["energy"]
         rise = np.diff(E)
         i_rise = np.flatnonzero(rise > 1e-9 * E[0])
         if i_rise.size:

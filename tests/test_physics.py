@@ -42,15 +42,7 @@ def test_energy_never_increases_and_budget_closes(shape):
     cfg = make_scene(**TIGHT, disk__shape=shape, stop__levels=[0.1, 0.03])
     r = sweep.simulate(cfg, trajectory=True)
     s = r.summary
-    tr = r.trajectory
-    sc = r.scene
-    E = np.empty(tr["t"].size)
-    y = np.zeros(model.N_FULL)
-    for i in range(E.size):
-        y[model.Y_ALPHA] = tr["alpha"][i]
-        y[model.Y_W1:model.Y_W3 + 1] = tr["omega"][i] * sc.chi
-        y[model.Y_U1:model.Y_U2 + 1] = tr["slip"][i] * sc.chi / sc.config["disk"]["radius"]
-        E[i] = model.energy(y, sc.params, 1 if y[0] > 0 else -1, int(tr["mode"][i]))
+    E = r.trajectory["energy"]
     # between accepted steps the energy may rise only by the local truncation error (~rtol E)
     rise = np.max(np.diff(E)) / E[0]
     assert rise <= 10 * cfg["solver"]["rtol"], rise
@@ -130,11 +122,13 @@ def test_slip_tolerance_convergence():
 
 def test_fixed_step_converges_to_adaptive_at_its_order():
     base = dict(contact__mu_s=100.0, stop__t_max=2.0, stop__levels=[0.05])
+    # a loose tolerance: fixed steps are then never halved, so this measures the pure fixed step
+    loose = dict(solver__rtol=1e-2, solver__atol=1e-2)
     ref = sweep.simulate(make_scene(**base, solver__rtol=1e-13, solver__atol=1e-15), sample_times=[2.0]).samples
     errs = []
     dts = [0.03, 0.015, 0.0075]
     for dt in dts:
-        s = sweep.simulate(make_scene(**base, solver__method="fixed", solver__dt=dt), sample_times=[2.0]).samples
+        s = sweep.simulate(make_scene(**base, **loose, solver__method="fixed", solver__dt=dt), sample_times=[2.0]).samples
         errs.append(abs(s["alpha"][0] - ref["alpha"][0]) + CHI_PAPER * np.max(np.abs(s["omega"][0] - ref["omega"][0])))
     orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     print("fixed-step errors", errs, "orders", orders)
@@ -205,3 +199,15 @@ def test_results_do_not_depend_on_requested_outputs():
     assert [lv["t"] for lv in lean["levels"]] == [lv["t"] for lv in full["levels"]]
     assert math.isnan(lean["levels"][0]["normal_force_hz"]) and full["levels"][0]["normal_force_hz"] > 0
     assert lean["n_rhs"] < full["n_rhs"]          # the skipped diagnostics cost nothing
+
+
+def test_fixed_step_mode_refines_instead_of_returning_garbage():
+    """dt = 1 ms is far too coarse for the stiff end of a slip: the steps there are halved."""
+    cfg = make_scene(solver__method="fixed", solver__dt=1e-3, stop__levels=[0.1, 0.03])
+    r = sweep.simulate(cfg, trajectory=True)
+    s = r.summary
+    ref = sweep.simulate(make_scene(stop__levels=[0.1, 0.03])).summary
+    assert s["outcome"] == "halted" and s["n_rejected_sliding"] > 0
+    h = np.diff(r.trajectory["t"])
+    assert h.max() <= 1e-3 * (1 + 1e-9) and h.min() < 1e-5        # never above dt, refined where needed
+    assert abs(s["levels"][0]["t"] - ref["levels"][0]["t"]) / ref["levels"][0]["t"] < 1e-6

@@ -144,7 +144,10 @@ def schema_errors(config: Mapping, schema: dict) -> list[str]:
     messages: list[str] = []
     for path, value in _walk(config, []):
         if isinstance(value, float) and not math.isfinite(value):
-            desc = _subschema(schema, path).get("description", "")
+            # an axis item has no description of its own: its axis states the allowed range
+            desc = (_subschema(schema, path).get("description")
+                    or (_subschema(schema, path[:-1]).get("description", "") if path and isinstance(path[-1], int)
+                        else ""))
             messages.append(f"config key `{_key(path)}`: {value!r} is not a finite number"
                             + (f" ({desc})" if desc else ""))
     validator = jsonschema.Draft202012Validator(schema)
@@ -307,6 +310,17 @@ def check_scenes_valid(settings: Mapping) -> None:
                 msg = f"config key `{key}`: {err.value!r} is invalid; allowed {err.allowed}"
                 if msg not in messages:
                     messages.append(msg)
+            except (ArithmeticError, ValueError) as err:
+                # Values inside every documented range can still be numerically degenerate for
+                # the core's set-up (e.g. a subnormal radius: chi^2 = R/g underflows to 0). Stop
+                # here with a message rather than a traceback at parse time or a failed job; the
+                # disk and gravity are shared by every scene, so one message says it.
+                if not any(m.startswith("config keys `disk`, `gravity`") for m in messages):
+                    messages.append(
+                        f"config keys `disk`, `gravity`: the physics core cannot set up the scene at "
+                        f"{point} ({type(err).__name__}: {err}) with disk {settings['disk']} and "
+                        f"gravity {settings['gravity']!r}; allowed: values in the documented ranges "
+                        "that are not numerically degenerate (e.g. not a subnormal radius)")
     if messages:
         raise SweepConfigError("invalid sweep configuration (physics-core checks):\n  "
                                + "\n  ".join(messages))

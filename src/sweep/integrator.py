@@ -31,7 +31,8 @@ ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8)
 EPS = 2.220446049250313e-16
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
 # increases, so such a step is an instability the error estimate did not see (explicit steps in the
-# stiff end phase of a slip). Adaptive mode rejects it; fixed-step mode halves it.
+# stiff end phase of a slip). Adaptive mode rejects it; fixed-step mode halves it (as it halves any
+# step whose error estimate exceeds the scene's rtol/atol).
 ENERGY_GUARD = 10.0
 # Minimum prominence of a located maximum of Phi over its bracket ends, relative to Phi (see the
 # peak tracking in `integrate`).
@@ -69,11 +70,9 @@ TRAJ_COLS = 2 + N_FULL + 1
 
 
 @njit(cache=True)
-def _rk_step(t, y, f, h, n, p, mode, side, sig, stuck, n0x, n0y, K, y_new, f_new, aux_new, ytmp, dytmp, auxtmp):
-    """One DOP853 step; returns the (Hairer) scaled error norm factor inputs via K. 12 RHS calls."""
-    for i in range(n):
-        K[0, i] = f[i]
-    for s in range(1, 12):
+def _stages(first, last, t, y, h, n, p, mode, side, sig, stuck, n0x, n0y, K, ytmp, dytmp, auxtmp):
+    """Evaluate RK stages first..last-1 into K (stage s uses K[0:s] and row s of the tableau)."""
+    for s in range(first, last):
         for i in range(n):
             acc = 0.0
             for j in range(s):
@@ -82,6 +81,14 @@ def _rk_step(t, y, f, h, n, p, mode, side, sig, stuck, n0x, n0y, K, y_new, f_new
         rhs(t + RK_C[s] * h, ytmp, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
         for i in range(n):
             K[s, i] = dytmp[i]
+
+
+@njit(cache=True)
+def _rk_step(t, y, f, h, n, p, mode, side, sig, stuck, n0x, n0y, K, y_new, f_new, aux_new, ytmp, dytmp, auxtmp):
+    """One DOP853 step: stages 0..11 into K, y_new, and f_new = K[12] = f(t+h, y_new). 12 RHS calls."""
+    for i in range(n):
+        K[0, i] = f[i]
+    _stages(1, 12, t, y, h, n, p, mode, side, sig, stuck, n0x, n0y, K, ytmp, dytmp, auxtmp)
     for i in range(n):
         acc = 0.0
         for j in range(12):
@@ -121,15 +128,7 @@ def _error_norm(K, h, y, y_new, n, rtol, atol):
 @njit(cache=True)
 def _dense_coeffs(t, y, h, y_new, f_new, n, p, mode, side, sig, stuck, n0x, n0y, K, F, ytmp, dytmp, auxtmp):
     """Coefficients of the continuous extension (3 extra RHS calls: stages 13..15)."""
-    for s in range(13, 16):
-        for i in range(n):
-            acc = 0.0
-            for j in range(s):
-                acc += RK_A[s, j] * K[j, i]
-            ytmp[i] = y[i] + h * acc
-        rhs(t + RK_C[s] * h, ytmp, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
-        for i in range(n):
-            K[s, i] = dytmp[i]
+    _stages(13, 16, t, y, h, n, p, mode, side, sig, stuck, n0x, n0y, K, ytmp, dytmp, auxtmp)
     for i in range(n):
         dyv = y_new[i] - y[i]
         F[0, i] = dyv
@@ -461,8 +460,12 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                 finite = False
         if finite and energy(y_new, p, side, mode) > e_cur + e_guard:
             finite = False      # treated like a non-finite step: rejected (adaptive) or halved (fixed)
-        if not adaptive and not finite:
+        if not adaptive and (not finite or _error_norm(K, h, y, y_new, n, rtol, atol) > 1.0):
+            # fixed-step mode never accepts a step that is unstable or less accurate than the
+            # scene's rtol/atol (e.g. the stiff end of a slip): it is halved, then grows back to dt
             istats[I_REJECTED] += 1
+            if mode == SLIDE:
+                istats[I_SLIDE_REJECTED] += 1
             h *= 0.5
             continue
         if adaptive:

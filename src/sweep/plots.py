@@ -36,16 +36,8 @@ def paper_figures(result: SimulationResult, outdir) -> list[Path]:
     escale = result.scene.energy_scale
     paths = []
 
-    # energy along the trajectory, recomputed from the stored states (dimensionless, eq. 6.1)
+    E = tr["energy"] / escale          # dimensionless, as the paper's Fig. 3(b)
     from . import model
-    E = np.empty(tau.size)
-    y = np.zeros(model.N_FULL)
-    for i in range(tau.size):
-        y[model.Y_ALPHA] = tr["alpha"][i]
-        y[model.Y_W1:model.Y_W3 + 1] = tr["omega"][i] * chi
-        y[model.Y_U1:model.Y_U2 + 1] = tr["slip"][i] * chi / R
-        side = 1 if tr["alpha"][i] > 0 else -1
-        E[i] = model.energy(y, result.scene.params, side, int(tr["mode"][i]))
 
     fig, ax = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
     ax[0].plot(tau, tr["alpha"], lw=0.6)

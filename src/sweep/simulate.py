@@ -27,7 +27,7 @@ class SimulationResult:
 
     samples: dict with t (s), alpha (rad), omega (n x 3, rad/s on e1, e2, e3), energy (J) at the
     requested sample times (NaN after the scene ended). trajectory: dict of arrays at every
-    accepted step (t, alpha, omega, slip, theta, psi, x, y, Phi, mode) if requested, else None.
+    accepted step (t, alpha, omega, slip, theta, psi, x, y, Phi, mode, energy in J) if requested.
     """
 
     scene: Scene
@@ -79,6 +79,16 @@ def run_kernel(scene: Scene, sample_tau: np.ndarray | None = None, traj_cap: int
     y0, mode = initial_state(scene)
     st = np.zeros(0) if sample_tau is None else np.ascontiguousarray(sample_tau, dtype=float)
     return integrate(y0, scene.params, mode, _settings(scene), level_energies(scene), st, traj_cap)
+
+
+def trajectory_energy(traj: np.ndarray, scene: Scene) -> np.ndarray:
+    """Dimensionless energy (eq. 6.1, corrected) at every row of the kernel's trajectory buffer."""
+    E = np.empty(traj.shape[0])
+    for i in range(traj.shape[0]):
+        y = traj[i, 1:1 + model.N_FULL]
+        side = 1 if y[model.Y_ALPHA] > 0 else -1
+        E[i] = model.energy(y, scene.params, side, int(traj[i, 2 + model.N_FULL]))
+    return E
 
 
 def _max_normal_force_hz(peak_tau: np.ndarray, tau_end: float, chi: float) -> float:
@@ -180,5 +190,6 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
             "phi": traj[:, 1 + model.N_FULL].copy(),
             "mode": traj[:, 2 + model.N_FULL].astype(np.int8),
             "tau": traj[:, 0].copy(),
+            "energy": trajectory_energy(traj, sc) * escale,
         }
     return SimulationResult(scene=sc, summary=summary, samples=samples, trajectory=tr, peaks=peaks * [chi, 1.0])
