@@ -369,3 +369,21 @@ def steady_rolling_energy(beta, p):
     w3sq = steady_rolling_w3sq(beta, p)
     h = p[P_H]
     return 0.5 * (p[P_A] + p[P_C] * h * h) * w3sq + p[P_G] * height_above_flat(0.5 * math.pi - beta, h)
+
+
+@njit(cache=True)
+def steady_rolling_max_level(p, step):
+    """Largest inclination (rad, on a grid of `step`) below which the steady centre-fixed rolling
+    motion exists and its energy increases with beta: where the energy-equivalent inclination is
+    defined. Scanned upwards from `step`; see scene.max_level."""
+    prev = 0.0
+    b = step
+    while b < 0.5 * math.pi:
+        if steady_rolling_w3sq(b, p) <= 0.0:
+            return b - step
+        e = steady_rolling_energy(b, p)
+        if not e > prev:
+            return b - step
+        prev = e
+        b += step
+    return b - step

@@ -110,16 +110,7 @@ def max_level(params: np.ndarray) -> float:
     (and above the root of f = 0), and its energy must increase with beta; found on a grid with
     1e-4 rad spacing, which is far finer than the spacing of any sensible level set.
     """
-    betas = np.arange(1e-4, HALF_PI, 1e-4)
-    prev = 0.0
-    for b in betas:
-        if model.steady_rolling_w3sq(b, params) <= 0.0:
-            return float(b - 1e-4)
-        e = model.steady_rolling_energy(b, params)
-        if not e > prev:
-            return float(b - 1e-4)
-        prev = e
-    return float(betas[-1])
+    return float(model.steady_rolling_max_level(params, 1e-4))
 
 
 def load_scene(src) -> Scene:
