@@ -19,7 +19,7 @@ from . import outcomes as oc
 from .events import (EV_CONE, EV_CONTACT, EV_FACE, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SLIPEND, EV_UNSTICK1,
                      N_DYN_EVENTS, N_EVENTS, brent_max_phi, dense_eval, event_values,
                      hermite_interior_root, locate)
-from .model import (N_AUX, N_CORE, N_FULL, P_K1, P_K2, P_K3, P_MUS, P_UFREEZE, ROLL, SLIDE, X_F1, X_F2, X_G1, X_OK,
+from .model import (N_AUX, N_CORE, N_FULL, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, ROLL, SLIDE, X_F1, X_F2, X_G1, X_OK,
                     X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, energy,
                     project_velocity, rhs)
 from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
@@ -53,6 +53,18 @@ BETA_SOFT_FACE = 1e-5
 # is slip_tol itself and every slip end stays on the located slip_tol event (first-order
 # convergence in slip_tol, tests/test_physics.py).
 STICTION_FACTOR = 1.0
+# A slip below CREEP_MAX_SLIP (u_hat; ~5e-5 m/s for the paper's disk) also sticks (cone permitting)
+# when it creeps -- the step is stability-limited (mu_d Phi h > CREEP_STIFF u: the slip-direction
+# mode relaxes within a step) and at its current rate it would need more than CREEP_STEPS such steps
+# to end -- or when it would end within the next step while it is inside the error band
+# HOVER_FACTOR (atol + rtol |omega|) that the step-size control does not resolve (explicit steps
+# across u = 0, where the friction direction jumps, make such a slip hover instead of ending). At
+# tight tolerances that band lies below slip_tol, and every ordinary slip end stays on the located
+# slip_tol event (slip_tol convergence test).
+CREEP_MAX_SLIP = 1e-4
+CREEP_STIFF = 0.1
+CREEP_STEPS = 100.0
+HOVER_FACTOR = 10.0
 
 # settings vector layout
 S_RTOL, S_ATOL, S_HFIXED, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS, S_EXTRA = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -537,11 +549,23 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                     first_k = k
                     first_t = rb
                     first_ta = ra
-        u_stick = max(STICTION_FACTOR * u_tol, rtol * math.sqrt(y_new[Y_W1] ** 2 + y_new[Y_W2] ** 2 + y_new[Y_W3] ** 2))
-        if first_k < 0 and mode == SLIDE and math.hypot(y_new[Y_U1], y_new[Y_U2]) < u_stick:
-            # creeping slip: the slip speed is negligible and static friction can hold the rolling
-            # state -> stick now (detected at the step end; steps are stability-limited, h ~ u,
-            # so the time error is ~h, far below the slip-tolerance error itself)
+        creeping = False
+        if first_k < 0 and mode == SLIDE:
+            un = math.hypot(y_new[Y_U1], y_new[Y_U2])
+            u_stick = max(STICTION_FACTOR * u_tol, rtol * math.sqrt(y_new[Y_W1] ** 2 + y_new[Y_W2] ** 2 + y_new[Y_W3] ** 2))
+            # a tiny slip that either creeps (the explicit step at its stability limit,
+            # h ~ u/(mu_d Phi), and so slow that ending it would take more than CREEP_STEPS such
+            # steps) or would reach zero within one more step at its current rate (the step would
+            # cross the discontinuity of u/|u| at u = 0, where explicit steps make it hover)
+            udot = abs(y_new[Y_U1] * f_new[Y_U1] + y_new[Y_U2] * f_new[Y_U2]) / max(un, 1e-300)
+            slow = p[P_MUD] * aux_new[X_PHI] * h > CREEP_STIFF * un and un > CREEP_STEPS * h * udot
+            wn = math.sqrt(y_new[Y_W1] ** 2 + y_new[Y_W2] ** 2 + y_new[Y_W3] ** 2)
+            within = un <= h * udot and un < HOVER_FACTOR * (atol + rtol * wn)
+            creeping = un < u_stick or (un < CREEP_MAX_SLIP and (slow or within))
+        if creeping:
+            # the slip speed is negligible and static friction can hold the rolling state -> stick
+            # now (detected at the step end; steps are stability-limited, h ~ u, so the time error
+            # is ~h, far below the slip-tolerance error itself)
             for i in range(n):
                 ytmp[i] = y_new[i]
             ytmp[Y_U1] = 0.0
