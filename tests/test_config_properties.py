@@ -350,14 +350,15 @@ def test_level_below_the_core_minimum_names_levels_and_the_range():
 
 
 def test_degenerate_disk_is_a_config_error_not_a_crash():
-    # A subnormal radius is inside the schema's (0, 10] m, but the core's set-up divides by an
-    # underflowed chi^2 (ZeroDivisionError); the parse must still stop with a readable message.
+    # A subnormal radius is inside the schema's (0, 10] m; the core's scene validation rejects it
+    # (radius >= 1e-6 m: below, chi^2 underflows), and the parse stops naming the key and range.
     cfg = base()
     cfg["disk"].update(radius=5e-324, thickness=5e-324)
     cfg["grid"].update(k1=[0.0], k2=[0.0], k3=[0.0])
     with pytest.raises(grid.SweepConfigError) as exc:
         grid.normalize(cfg, SCHEMA)
-    assert "disk" in str(exc.value) and "ZeroDivisionError" in str(exc.value), str(exc.value)
+    msg = str(exc.value)
+    assert "disk.radius" in msg and "allowed" in msg and "1e-06" in msg, msg
 
 
 # ------------------------------------------------------------------------------- end to end (snakemake -n)

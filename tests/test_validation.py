@@ -47,16 +47,16 @@ def test_valid_scenes_load_with_finite_parameters(cfg):
 
 # (field path, bad value) pairs: out of range, NaN/inf, wrong type
 BAD_VALUES = {
-    "disk.radius": [0.0, -0.03, float("nan"), float("inf"), "3cm", None.__class__],
+    "disk.radius": [0.0, -0.03, 5e-324, 1e-300, float("nan"), float("inf"), "3cm", None.__class__],
     "disk.thickness": [0.0, -1.0, float("nan"), 10.0],
-    "disk.mass": [0.0, -1.0, float("inf"), True],
+    "disk.mass": [0.0, -1.0, 1e-300, float("inf"), True],
     "disk.shape": ["cube", 1, None],
     "contact.mu_s": [-0.1, float("nan")],
     "contact.mu_d": [-0.1, 0.51, float("inf")],
     "contact.k1": [-1e-6, 1.0, float("nan")],
     "contact.k2": [-1e-6, "x"],
     "contact.k3": [-1e-6, float("inf")],
-    "gravity": [0.0, -9.81, float("nan")],
+    "gravity": [0.0, -9.81, 1e-300, float("nan")],
     "initial.alpha": [0.0, math.pi / 2, -math.pi / 2, 2.0, float("nan"), "1"],
     "initial.omega": [[0.0, 0.0], [0.0, 0.0, float("nan")], "spin", [0, 0, 1e9]],
     "initial.slip": [[0.0], [float("inf"), 0.0]],

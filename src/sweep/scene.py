@@ -130,10 +130,12 @@ def load_scene(src) -> Scene:
     cfg = _merge("", raw if raw is not None else {}, DEFAULTS)
 
     d = cfg["disk"]
-    d["radius"] = _num("disk.radius", d["radius"], 0.0, 10.0, lo_open=True)
+    # lower bounds keep chi, the energy scale m R^2/chi^2 and every dimensionless group normal
+    # floating-point numbers (a subnormal radius divided by zero); no rigid disk is below them
+    d["radius"] = _num("disk.radius", d["radius"], 1e-6, 10.0)
     d["thickness"] = _num("disk.thickness", d["thickness"], 0.0, 4.0 * d["radius"], lo_open=True,
                           allowed=f"a finite number in (0, 4*radius] = (0, {4 * d['radius']:g}] m")
-    d["mass"] = _num("disk.mass", d["mass"], 0.0, 1e4, lo_open=True)
+    d["mass"] = _num("disk.mass", d["mass"], 1e-9, 1e4)
     if not isinstance(d["shape"], str) or d["shape"] not in SHAPES:
         raise ConfigError("disk.shape", d["shape"], "one of: solid, shell")
     c = cfg["contact"]
@@ -144,7 +146,7 @@ def load_scene(src) -> Scene:
     for k in ("k1", "k2", "k3"):
         c[k] = _num(f"contact.{k}", c[k], 0.0, d["radius"],
                     allowed=f"a finite length in [0, radius] = [0, {d['radius']:g}] m")
-    cfg["gravity"] = _num("gravity", cfg["gravity"], 0.0, 1e3, lo_open=True)
+    cfg["gravity"] = _num("gravity", cfg["gravity"], 1e-3, 1e3)
     ini = cfg["initial"]
     a = _num("initial.alpha", ini["alpha"], -HALF_PI, HALF_PI, lo_open=True, hi_open=True,
              allowed="a number in (-pi/2, pi/2), not 0 (alpha = 0 is line contact, +-pi/2 lies flat)")
