@@ -19,8 +19,8 @@ from . import outcomes as oc
 from .events import (EV_CONE, EV_CONTACT, EV_FACE, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SLIPEND, EV_UNSTICK1,
                      N_DYN_EVENTS, N_EVENTS, brent_max_phi, dense_eval, event_values,
                      hermite_interior_root, locate)
-from .model import (N_AUX, N_CORE, N_FULL, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, ROLL, SLIDE, X_F1, X_F2, X_G1, X_OK,
-                    X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, energy,
+from .model import (N_AUX, N_CORE, N_FULL, N_THETA, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, ROLL, SLIDE, X_F1, X_F2, X_G1, X_OK,
+                    X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, energy,
                     project_velocity, rhs)
 from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
 
@@ -285,7 +285,8 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
     y0: initial state (N_FULL); mode0: ROLL or SLIDE; settings: see S_* indices;
     level_e: energies of the halt levels, decreasing; sample_tau: increasing output times;
     traj_cap: initial capacity of the trajectory buffer (0: no trajectory stored).
-    Returns istats, fstats, level_out (n_levels x 4: tau, alpha, dtheta/dtau, f_hat),
+    Returns istats, fstats, level_out (n_levels x 4: tau, alpha, dtheta/dtau, f_hat; with peak
+    tracking dtheta/dtau is the mean over the three-peak window of f_hat, else instantaneous),
     samples (n_samples x N_FULL, plus energy in an extra column), trajectory (rows x TRAJ_COLS),
     peaks (tau, Phi of the located maxima of the normal force; empty unless tracked).
     """
@@ -295,8 +296,10 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
     t_max = settings[S_TMAX]
     u_tol = settings[S_UTOL]
     max_steps = int(settings[S_MAXSTEPS])
-    n = N_FULL if settings[S_KIN] > 0.0 else N_CORE
     track_peaks = settings[S_PEAKS] > 0.0
+    # theta is integrated (passively) whenever Phi peaks are tracked: the mean precession rate over
+    # the same three-peak window as f_hat is (theta_k - theta_{k-2}) / (t_k - t_{k-2})
+    n = N_FULL if settings[S_KIN] > 0.0 else (N_THETA if track_peaks else N_CORE)
     extra_steps = int(settings[S_EXTRA])
     adaptive = h_fixed <= 0.0
 
@@ -308,7 +311,7 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
     samples = np.full((ns, N_FULL + 1), np.nan)
     traj = np.empty((max(traj_cap, 1), TRAJ_COLS))
     ntraj = 0
-    peaks = np.empty((64 if track_peaks else 1, 2))
+    peaks = np.empty((64 if track_peaks else 1, 3))    # tau, Phi, theta at each located maximum
     npk = 0
     counter = np.zeros(1, np.int64)
 
@@ -647,6 +650,11 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                                          ybuf, dybuf, auxbuf, counter)
                 tpk = tp1 if pv1 >= pv2 else tp2
                 pvk = pv1 if pv1 >= pv2 else pv2
+                if pv1 >= pv2:
+                    dense_eval(Fprev, yprev, tprev, hprev, tpk, n, ybuf)
+                else:
+                    dense_eval(Fd, y, t, h, tpk, n, ybuf)
+                thk = ybuf[Y_THETA]
                 # A maximum of Phi must stand out of its bracket: round-off wiggles (e.g. of a
                 # creeping slip) have no prominence. Real nutation peaks rise ~0.1 Phi above the
                 # bracket ends (two steps away); 1e-6 Phi is far below that. (Maxima at a restart
@@ -661,14 +669,16 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                     if pvk > peaks[npk - 1, 1]:
                         peaks[npk - 1, 0] = tpk
                         peaks[npk - 1, 1] = pvk
+                        peaks[npk - 1, 2] = thk
                     genuine = False
             if track_peaks and phi_b > phi_a and phi_b >= phi_c and prev_ok and genuine:
                 if npk == peaks.shape[0]:
-                    bigger = np.empty((2 * npk, 2))
+                    bigger = np.empty((2 * npk, 3))
                     bigger[:npk] = peaks[:npk]
                     peaks = bigger
                 peaks[npk, 0] = tpk
                 peaks[npk, 1] = pvk
+                peaks[npk, 2] = thk
                 npk += 1
                 # resolve levels that now have a peak after them: f_hat = 2 / (t_k - t_{k-2})
                 for L in range(nl):
@@ -678,6 +688,9 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                             j -= 1
                         if j >= 2:
                             level_out[L, 3] = 2.0 / (peaks[j, 0] - peaks[j - 2, 0])
+                            # mean precession rate over the same window (replaces the instantaneous
+                            # rate, which the nutation makes jitter by orders of magnitude)
+                            level_out[L, 2] = (peaks[j, 2] - peaks[j - 2, 2]) / (peaks[j, 0] - peaks[j - 2, 0])
                         pending[L] = 0
                         n_pending -= 1
             # shift the window; keep this step's dense output for the next bracket

@@ -24,8 +24,9 @@ from numba import njit
 Y_ALPHA, Y_W1, Y_W2, Y_W3, Y_U1, Y_U2 = 0, 1, 2, 3, 4, 5
 Y_DSLIDE, Y_DK1, Y_DK2, Y_DK3 = 6, 7, 8, 9            # dissipated energy per mechanism
 Y_THETA, Y_PSI, Y_X, Y_Y = 10, 11, 12, 13              # kinematics, integrated only on request
-N_CORE = 10   # always integrated
-N_FULL = 14   # with kinematics
+N_CORE = 10   # always integrated, and the only components in the error control
+N_THETA = 11  # with theta (for the mean precession rate between normal-force maxima)
+N_FULL = 14   # with all kinematics
 
 # --- parameter vector layout ---------------------------------------------------------------
 P_G, P_H, P_A, P_C, P_K1, P_K2, P_K3, P_MUS, P_MUD = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -124,7 +125,7 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     stuck[i] = 1: omega.a_i is held at 0 by the dry-friction moment (Filippov sliding); its
     effective sign sigma_i in [-1, 1] is solved from d/dtau(omega.a_i) = 0.
     (n0x, n0y): slip direction used while the slip speed is <= p[P_UFREEZE] (0: only at u = 0).
-    nstate: number of state components to fill (N_CORE, or N_FULL with kinematics).
+    nstate: number of state components to fill (N_CORE, N_THETA, or N_FULL with kinematics).
     aux: Phi, F1, F2 (friction on a1, a2), effective sigma_1..3, omega.a_1..3, ok-flag.
     """
     G = p[P_G]
@@ -246,12 +247,13 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     dy[Y_DK2] = k2 * phi * sig2 * g2
     dy[Y_DK3] = k3 * phi * sig3 * g3
     if nstate > N_CORE:
+        dy[Y_THETA] = thd
+    if nstate > N_CORE + 1:
         th = y[Y_THETA]
         vx = u1 + q          # centre velocity on a1 (eq. 2.5 solved for v-bar)
         vy = u2 - e * w1     # centre velocity on a2
         ct = math.cos(th)
         stt = math.sin(th)
-        dy[Y_THETA] = thd
         dy[Y_PSI] = w2 - w3 * t
         dy[Y_X] = vx * ct - vy * stt
         dy[Y_Y] = vx * stt + vy * ct

@@ -192,4 +192,4 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
             "tau": traj[:, 0].copy(),
             "energy": trajectory_energy(traj, sc) * escale,
         }
-    return SimulationResult(scene=sc, summary=summary, samples=samples, trajectory=tr, peaks=peaks * [chi, 1.0])
+    return SimulationResult(scene=sc, summary=summary, samples=samples, trajectory=tr, peaks=peaks[:, :2] * [chi, 1.0])
