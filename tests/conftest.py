@@ -1,5 +1,7 @@
 import copy
 import math
+import shutil
+from pathlib import Path
 
 import pytest
 
@@ -21,3 +23,17 @@ def make_scene(**mods):
 @pytest.fixture
 def scene():
     return make_scene
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def copy_workflow(dest: Path) -> Path:
+    """Snakefile, workflow/ and config/ copied to `dest` (a temporary working directory), so that
+    pipeline tests never touch the real results/."""
+    dest.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(ROOT / "Snakefile", dest / "Snakefile")
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".ipynb_checkpoints")
+    for d in ("workflow", "config"):
+        shutil.copytree(ROOT / d, dest / d, ignore=ignore)
+    return dest

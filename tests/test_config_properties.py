@@ -22,6 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sweep import grid
+from conftest import copy_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_PATH = ROOT / "workflow" / "schemas" / "config.schema.yaml"
@@ -363,14 +364,6 @@ def test_degenerate_disk_is_a_config_error_not_a_crash():
 
 # ------------------------------------------------------------------------------- end to end (snakemake -n)
 
-def copy_workflow(dest: Path) -> Path:
-    """Snakefile, workflow/ and config/ in a temporary directory (as tests/test_pipeline.py)."""
-    dest.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(ROOT / "Snakefile", dest / "Snakefile")
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".ipynb_checkpoints")
-    for d in ("workflow", "config"):
-        shutil.copytree(ROOT / d, dest / d, ignore=ignore)
-    return dest
 
 
 def snakemake(wd: Path, *args: str) -> subprocess.CompletedProcess:

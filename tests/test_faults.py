@@ -37,6 +37,7 @@ import yaml
 
 import sweep
 from sweep import batch, grid, io, outcomes
+from conftest import copy_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_PATH = ROOT / "workflow" / "schemas" / "config.schema.yaml"
@@ -76,14 +77,6 @@ def settings_of(cfg: dict) -> dict:
 
 # ------------------------------------------------------------------------------- helpers
 
-def copy_workflow(dest: Path) -> Path:
-    """Snakefile, workflow/ and config/ in a temporary directory (as tests/test_pipeline.py)."""
-    dest.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(ROOT / "Snakefile", dest / "Snakefile")
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".ipynb_checkpoints")
-    for d in ("workflow", "config"):
-        shutil.copytree(ROOT / d, dest / d, ignore=ignore)
-    return dest
 
 
 def smk_cmd(wd: Path, *args: str) -> list[str]:

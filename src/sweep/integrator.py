@@ -244,6 +244,18 @@ def refine_direction(t, y, p, side, sig, stuck, n, nu0, counter):
 
 
 @njit(cache=True)
+def _start_slip(t, y, p, side, sig, stuck, n, F1, F2, counter):
+    """Roll -> slip: zero slip speed, direction from slip_onset_direction (F: rolling friction).
+
+    Returns the slip direction (n0x, n0y); the caller sets mode = SLIDE and counts the transition.
+    """
+    nu = slip_onset_direction(t, y, p, side, sig, stuck, n, F1, F2, counter)
+    y[Y_U1] = 0.0
+    y[Y_U2] = 0.0
+    return math.cos(nu), math.sin(nu)
+
+
+@njit(cache=True)
 def _stick_or_flip(i, t, y, p, mode, side, sig, stuck, n0x, n0y, n, dy, aux, counter):
     """At omega.a_i = 0: stick if the moment can hold it (|sigma needed| <= 1), else flip sign.
 
@@ -362,12 +374,8 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
     rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux)
     counter[0] += 1
     if mode == ROLL and aux[X_PHI] > 0.0 and p[P_MUS] * aux[X_PHI] < math.hypot(aux[X_F1], aux[X_F2]):
-        nu = slip_onset_direction(t, y, p, side, sig, stuck, n, aux[X_F1], aux[X_F2], counter)
+        n0x, n0y = _start_slip(t, y, p, side, sig, stuck, n, aux[X_F1], aux[X_F2], counter)
         mode = SLIDE
-        n0x = math.cos(nu)
-        n0y = math.sin(nu)
-        y[Y_U1] = 0.0
-        y[Y_U2] = 0.0
         istats[I_TRANS] += 1
         rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux)
         counter[0] += 1
@@ -752,12 +760,8 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
             elif k == EV_CONE:
                 rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, dytmp, auxtmp)
                 counter[0] += 1
-                nu = slip_onset_direction(t, y, p, side, sig, stuck, n, auxtmp[X_F1], auxtmp[X_F2], counter)
+                n0x, n0y = _start_slip(t, y, p, side, sig, stuck, n, auxtmp[X_F1], auxtmp[X_F2], counter)
                 mode = SLIDE
-                n0x = math.cos(nu)
-                n0y = math.sin(nu)
-                y[Y_U1] = 0.0
-                y[Y_U2] = 0.0
                 istats[I_TRANS] += 1
             elif k == EV_SLIPEND:
                 loss = project_velocity(y, p, side, SLIDE, side, ROLL)
@@ -790,25 +794,20 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
                 else:
                     istats[I_STICK] += _consistent_signs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, active, dytmp, auxtmp, counter)
                     restart_check_cone = mode == ROLL
-            if True:
+            rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux_new)
+            counter[0] += 1
+            if restart_check_cone and p[P_MUS] * aux_new[X_PHI] < math.hypot(aux_new[X_F1], aux_new[X_F2]):
+                n0x, n0y = _start_slip(t, y, p, side, sig, stuck, n, aux_new[X_F1], aux_new[X_F2], counter)
+                mode = SLIDE
+                istats[I_TRANS] += 1
                 rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux_new)
                 counter[0] += 1
-                if restart_check_cone and p[P_MUS] * aux_new[X_PHI] < math.hypot(aux_new[X_F1], aux_new[X_F2]):
-                    nu = slip_onset_direction(t, y, p, side, sig, stuck, n, aux_new[X_F1], aux_new[X_F2], counter)
-                    mode = SLIDE
-                    n0x = math.cos(nu)
-                    n0y = math.sin(nu)
-                    y[Y_U1] = 0.0
-                    y[Y_U2] = 0.0
-                    istats[I_TRANS] += 1
-                    rhs(t, y, p, mode, side, sig, stuck, n0x, n0y, n, f, aux_new)
-                    counter[0] += 1
-                if aux_new[X_OK] == 0.0:
-                    if outcome < 0:
-                        outcome = oc.NUMERICAL_ERROR
-                        fstats[F_TEND] = t
-                    break
-                event_values(y, aux_new, p, mode, side, sig, stuck, u_tol, lev, active, g_old)
+            if aux_new[X_OK] == 0.0:
+                if outcome < 0:
+                    outcome = oc.NUMERICAL_ERROR
+                    fstats[F_TEND] = t
+                break
+            event_values(y, aux_new, p, mode, side, sig, stuck, u_tol, lev, active, g_old)
 
         else:
             for kk in range(N_EVENTS):
