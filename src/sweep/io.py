@@ -66,7 +66,7 @@ VARIABLES: tuple[Var, ...] = (
         lambda s: s["ramp_exponent"]),
     Var("t_level", "float", "s", "time at which the inclination first reaches the level",
         lambda lv: lv["t"], per_level=True),
-    Var("precession_hz", "float", "Hz", "precession frequency at the level", lambda lv: lv["precession_hz"],
+    Var("precession_hz", "float", "Hz", "mean precession frequency over the three normal-force maxima before the level", lambda lv: lv["precession_hz"],
         per_level=True),
     Var("normal_force_hz", "float", "Hz", "normal-force oscillation frequency at the level",
         lambda lv: lv["normal_force_hz"], per_level=True),
