@@ -9,7 +9,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from . import model  # noqa: E402
 from .simulate import SimulationResult  # noqa: E402
+
+
+def _save(fig, path: Path, paths: list[Path]) -> None:
+    """Write one figure (120 dpi), record its path, and free it."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    paths.append(path)
 
 
 def normal_force_frequency(peaks_tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -37,7 +46,6 @@ def paper_figures(result: SimulationResult, outdir) -> list[Path]:
     paths = []
 
     E = tr["energy"] / escale          # dimensionless, as the paper's Fig. 3(b)
-    from . import model
 
     fig, ax = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
     ax[0].plot(tau, tr["alpha"], lw=0.6)
@@ -50,10 +58,7 @@ def paper_figures(result: SimulationResult, outdir) -> list[Path]:
     ax[1].set_xlabel(r"$\tau = t/\chi$")
     ax[1].legend(loc="upper right")
     fig.suptitle(f"Fig. 3 analogue: inclination and energy (chi = {chi:.6g} s, E(0) = {E[0] * escale:.4g} J)")
-    paths.append(out / "fig3_alpha_energy.png")
-    fig.tight_layout()
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
+    _save(fig, out / "fig3_alpha_energy.png", paths)
 
     fig, ax = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
     ok = np.isfinite(tr["phi"])
@@ -68,10 +73,7 @@ def paper_figures(result: SimulationResult, outdir) -> list[Path]:
     sec = ax[1].secondary_yaxis("right", functions=(lambda f: f / chi, lambda hz: hz * chi))
     sec.set_ylabel("Hz")
     fig.suptitle("Fig. 4 analogue: normal force and its frequency")
-    paths.append(out / "fig4_normal_force.png")
-    fig.tight_layout()
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
+    _save(fig, out / "fig4_normal_force.png", paths)
 
     fig, ax = plt.subplots(figsize=(6, 6))
     ax.plot(tr["x"] / R, tr["y"] / R, lw=0.4)
@@ -79,10 +81,7 @@ def paper_figures(result: SimulationResult, outdir) -> list[Path]:
     ax.set_xlabel(r"$\hat x = x/R$")
     ax.set_ylabel(r"$\hat y = y/R$")
     ax.set_title("Fig. 5 analogue: path of the centre of mass")
-    paths.append(out / "fig5_centre_path.png")
-    fig.tight_layout()
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
+    _save(fig, out / "fig5_centre_path.png", paths)
 
     fig, ax = plt.subplots(figsize=(7, 4))
     thd = tr["omega"][:, 2] * chi / np.cos(tr["alpha"])
@@ -90,8 +89,5 @@ def paper_figures(result: SimulationResult, outdir) -> list[Path]:
     ax.set_xlabel(r"$\tau$")
     ax.set_ylabel(r"$d\theta/d\tau = \hat\omega_3 \sec\alpha$")
     ax.set_title("Fig. 6 analogue: precession rate")
-    paths.append(out / "fig6_precession.png")
-    fig.tight_layout()
-    fig.savefig(paths[-1], dpi=120)
-    plt.close(fig)
+    _save(fig, out / "fig6_precession.png", paths)
     return paths
