@@ -79,6 +79,8 @@ F_TEND, F_SLIDETIME, F_DIMPACT, F_E0, F_EEND, F_HLAST = range(6)
 N_FSTATS = 6
 # trajectory columns: tau, y[0:N_FULL], Phi, mode
 TRAJ_COLS = 2 + N_FULL + 1
+# sample columns: y[0:N_FULL], energy, Phi, mode
+SAMPLE_COLS = N_FULL + 3
 
 
 @njit(cache=True)
@@ -320,7 +322,7 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
     nl = level_e.shape[0]
     level_out = np.full((nl, 4), np.nan)
     ns = sample_tau.shape[0]
-    samples = np.full((ns, N_FULL + 1), np.nan)
+    samples = np.full((ns, SAMPLE_COLS), np.nan)
     traj = np.empty((max(traj_cap, 1), TRAJ_COLS))
     ntraj = 0
     peaks = np.empty((64 if track_peaks else 1, 3))    # tau, Phi, theta at each located maximum
@@ -396,6 +398,8 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
         for i in range(n):
             samples[isamp, i] = y[i]
         samples[isamp, N_FULL] = energy(y, p, side, mode)
+        samples[isamp, N_FULL + 1] = aux[X_PHI]
+        samples[isamp, N_FULL + 2] = mode
         isamp += 1
     if traj_cap > 0:
         traj[0, 0] = t
@@ -636,9 +640,13 @@ def integrate(y0, p, mode0, settings, level_e, sample_tau, traj_cap):
         # --- samples in the segment ----------------------------------------------------------
         while isamp < ns and sample_tau[isamp] <= seg_end and (outcome < 0 or sample_tau[isamp] <= fstats[F_TEND]):
             dense_eval(Fd, y, t, h, sample_tau[isamp], n, ybuf)
+            rhs(sample_tau[isamp], ybuf, p, mode, side, sig, stuck, n0x, n0y, n, dybuf, auxbuf)
+            counter[0] += 1
             for i in range(n):
                 samples[isamp, i] = ybuf[i]
             samples[isamp, N_FULL] = energy(ybuf, p, side, mode)
+            samples[isamp, N_FULL + 1] = auxbuf[X_PHI]
+            samples[isamp, N_FULL + 2] = mode
             isamp += 1
 
         # --- normal-force peaks: Phi at step ends a < b > c brackets a maximum ------------------

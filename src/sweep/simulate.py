@@ -25,8 +25,9 @@ EXTRA_STEPS_FOR_PEAKS = 5000
 class SimulationResult:
     """What one scene produced. `summary` is JSON-able (SI units); arrays are numpy.
 
-    samples: dict with t (s), alpha (rad), omega (n x 3, rad/s on e1, e2, e3), energy (J) at the
-    requested sample times (NaN after the scene ended). trajectory: dict of arrays at every
+    samples: dict at the requested sample times (NaN after the scene ended), from the dense output:
+    t (s), alpha (rad), omega (n x 3, rad/s on e1, e2, e3), slip (n x 2, m/s on a1, a2), theta, psi
+    (rad), x, y (m, centre of mass), normal_force (N), mode (0 rolling, 1 sliding), energy (J). trajectory: dict of arrays at every
     accepted step (t, alpha, omega, slip, theta, psi, x, y, Phi, mode, energy in J) if requested.
     """
 
@@ -107,11 +108,13 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
     """Run one scene. `scene`: path to a YAML scene file or a dict of the same structure.
 
     sample_times: times (s, >= 0, increasing) at which alpha, omega and energy are returned.
-    trajectory: also return the state at every accepted step (forces kinematics on).
+    trajectory: also return the state at every accepted step.
+    Either request integrates the passive kinematics (theta, psi, x, y); they are left out of the
+    error control, so the steps, events and summary are the same as without them.
     Raises ConfigError for invalid input, before any integration.
     """
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
-    if trajectory and not sc.config["outputs"]["kinematics"]:
+    if (trajectory or sample_times is not None) and not sc.config["outputs"]["kinematics"]:
         cfg = {**sc.config, "outputs": {**sc.config["outputs"], "kinematics": True}}
         sc = load_scene(cfg)
     sample_tau = None
@@ -168,10 +171,18 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
     }
     samples = None
     if sample_tau is not None:
+        R = sc.config["disk"]["radius"]
         samples = {
             "t": sample_tau * chi,
             "alpha": samp[:, model.Y_ALPHA].copy(),
             "omega": samp[:, model.Y_W1:model.Y_W3 + 1] / chi,
+            "slip": samp[:, model.Y_U1:model.Y_U2 + 1] * R / chi,
+            "theta": samp[:, model.Y_THETA].copy(),
+            "psi": samp[:, model.Y_PSI].copy(),
+            "x": samp[:, model.Y_X] * R,
+            "y": samp[:, model.Y_Y] * R,
+            "normal_force": samp[:, model.N_FULL + 1] * sc.config["disk"]["mass"] * R / chi**2,
+            "mode": samp[:, model.N_FULL + 2].copy(),
             "energy": samp[:, model.N_FULL] * escale,
         }
     tr = None
