@@ -7,13 +7,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import diagnostics, model, outcomes
+from . import diagnostics, outcomes
+from .core import model
+from .core.integrate import integrate
+from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_IMPACTS,
+                          I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
+                          I_TRANS, N_SETTINGS, S_ATOL, S_EXTRA, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL,
+                          S_TMAX, S_UTOL)
 from .errors import ConfigError
-from .integrator import (F_DIMPACT, F_E0, F_EEND, F_SLIDETIME, F_TEND, I_EVENTS, I_IMPACTS,
-                         I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
-                         I_TRANS, N_SETTINGS,
-                         S_ATOL, S_EXTRA, S_HFIXED, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX,
-                         S_UTOL, TRAJ_COLS, integrate)
 from .scene import Scene, load_scene
 
 # After the smallest level, the normal-force frequency of that level needs the next peak of Phi;
@@ -39,7 +40,8 @@ class SimulationResult:
 
 
 def initial_state(scene: Scene) -> tuple[np.ndarray, int]:
-    """Dimensionless initial state and mode (SLIDE if the initial slip is non-zero)."""
+    """Dimensionless initial state and mode (SLIDE if the initial slip is non-zero; the kernel
+    makes a slip at or below slip_tol a slaved one)."""
     cfg = scene.config
     chi, R = scene.chi, cfg["disk"]["radius"]
     y0 = np.zeros(model.N_FULL)
@@ -60,7 +62,7 @@ def _settings(scene: Scene) -> np.ndarray:
     s = np.zeros(N_SETTINGS)
     s[S_RTOL] = so["rtol"]
     s[S_ATOL] = so["atol"]
-    s[S_HFIXED] = so["dt"] / scene.chi if so["method"] == "fixed" else 0.0
+    s[S_HMAX] = so["dt"] / scene.chi if so["method"] == "fixed" else 0.0
     s[S_TMAX] = st["t_max"] / scene.chi
     s[S_UTOL] = so["slip_tol"] * scene.chi / cfg["disk"]["radius"]
     s[S_MAXSTEPS] = st["max_steps"]
@@ -76,10 +78,10 @@ def level_energies(scene: Scene) -> np.ndarray:
 
 
 def run_kernel(scene: Scene, sample_tau: np.ndarray | None = None, traj_cap: int = 0):
-    """Call the numba kernel for a validated scene; returns its raw output tuple."""
-    y0, mode = initial_state(scene)
+    """Call the numba kernel for a validated scene; returns its KernelOutput (named arrays)."""
+    y0, _ = initial_state(scene)
     st = np.zeros(0) if sample_tau is None else np.ascontiguousarray(sample_tau, dtype=float)
-    return integrate(y0, scene.params, mode, _settings(scene), level_energies(scene), st, traj_cap)
+    return integrate(y0, scene.params, _settings(scene), level_energies(scene), st, traj_cap)
 
 
 def trajectory_energy(traj: np.ndarray, scene: Scene) -> np.ndarray:
@@ -88,16 +90,8 @@ def trajectory_energy(traj: np.ndarray, scene: Scene) -> np.ndarray:
     for i in range(traj.shape[0]):
         y = traj[i, 1:1 + model.N_FULL]
         side = 1 if y[model.Y_ALPHA] > 0 else -1
-        E[i] = model.energy(y, scene.params, side, int(traj[i, 2 + model.N_FULL]))
+        E[i] = model.energy(y, scene.params, side, min(int(traj[i, 2 + model.N_FULL]), 1))
     return E
-
-
-def _max_normal_force_hz(peak_tau: np.ndarray, tau_end: float, chi: float) -> float:
-    """Largest normal-force frequency f_hat/chi (Hz), f_hat = 2/T over three consecutive Phi peaks up to t_end."""
-    tp = peak_tau[peak_tau <= tau_end]
-    if tp.size < 3:
-        return math.nan
-    return float(np.max(2.0 / (tp[2:] - tp[:-2])) / chi)
 
 
 def _finite_or_nan(x: float) -> float:
@@ -127,7 +121,8 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
     chi = sc.chi
     escale = sc.energy_scale
     t0 = time.perf_counter()
-    istats, fstats, lev, samp, traj, peaks, y_end = run_kernel(sc, sample_tau, 4096 if trajectory else 0)
+    out = run_kernel(sc, sample_tau, 4096 if trajectory else 0)
+    istats, fstats, lev, samp, traj, peaks, y_end = out
     wall = time.perf_counter() - t0
 
     levels = sc.levels
@@ -152,7 +147,7 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
              "precession_hz": _finite_or_nan(prec_hz[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
             for i, b in enumerate(levels)
         ],
-        "normal_force_hz_max": _max_normal_force_hz(peaks[:, 0], float(fstats[F_TEND]), chi),
+        "normal_force_hz_max": float(fstats[F_NFMAX]) / chi if fstats[F_NFMAX] > 0.0 else math.nan,
         "slip_fraction": float(fstats[F_SLIDETIME] / fstats[F_TEND]) if fstats[F_TEND] > 0 else 0.0,
         "n_transitions": int(istats[I_TRANS]),
         "n_stick": int(istats[I_STICK]),
@@ -182,7 +177,7 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
             "x": samp[:, model.Y_X] * R,
             "y": samp[:, model.Y_Y] * R,
             "normal_force": samp[:, model.N_FULL + 1] * sc.config["disk"]["mass"] * R / chi**2,
-            "mode": samp[:, model.N_FULL + 2].copy(),
+            "mode": np.minimum(samp[:, model.N_FULL + 2], 1.0),   # 1: sliding (also the slaved slip)
             "energy": samp[:, model.N_FULL] * escale,
         }
     tr = None
@@ -199,7 +194,7 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
             "y": traj[:, 1 + model.Y_Y] * R,
             "normal_force": traj[:, 1 + model.N_FULL] * sc.config["disk"]["mass"] * R / chi**2,
             "phi": traj[:, 1 + model.N_FULL].copy(),
-            "mode": traj[:, 2 + model.N_FULL].astype(np.int8),
+            "mode": np.minimum(traj[:, 2 + model.N_FULL], 1).astype(np.int8),
             "tau": traj[:, 0].copy(),
             "energy": trajectory_energy(traj, sc) * escale,
         }

@@ -1,0 +1,271 @@
+"""Random-scene convergence harness (issue #8): does the integrator converge everywhere?
+
+    python benchmarks/convergence.py [--quick] [--scenes N] [--seed S] [--jobs J] [--tag NAME]
+
+Draws scenes over wide physical ranges (radius 3 mm..30 cm, thickness/radius 0.01..2, solid or
+shell, mu_s 0.05..1.6, mu_d/mu_s 0..1, each k_i/R 0 or 1e-6..5e-2, |alpha0| 0.03..1.5 rad with both
+signs, omega_hat ~ -e3 of 0.1..10, some with random omega1, omega2 and an initial slip), runs each
+at rtol 1e-9 ... 1e-13 (atol = rtol/100) and once more with alpha0 + 1e-10 rad at rtol 1e-13, and
+reports:
+
+* outcomes, exceptions, NaNs, step_size_underflow, step_limit (allowed only past 100 s simulated),
+  the dissipation budget |E0 - E_end - sum(dissipated)| / E0 (target <= 1e-9);
+* for every quantity (level times, t_halt, alpha at tau = 10, 30, 100, 300): its numerical error
+  (difference to rtol 1e-13) and its sensitivity (change under alpha0 + 1e-10 rad at rtol 1e-13);
+  among well-conditioned quantities (sensitivity < 1e-8 relative) the share within 1e-6 of rtol
+  1e-13 at the default rtol 1e-10 (target >= 99.5 %), and whether errors shrink with rtol;
+* whether the event sequence (roll<->slip transitions, stick phases, impacts) is the same from
+  rtol 1e-10 down;
+* cost at the default rtol: median, p90, p99, max of steps and wall time, total CPU time.
+
+Per-scene records go to benchmarks/out/convergence-<tag>.jsonl, the table to stdout and to
+benchmarks/out/convergence-<tag>.md. The scene set depends only on --seed and --scenes.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing as mp
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+OUT = Path(__file__).resolve().parent / "out"
+RTOLS = [1e-9, 1e-10, 1e-11, 1e-12, 1e-13]
+DEFAULT_RTOL = 1e-10
+REF_RTOL = 1e-13
+LEVELS = [0.1, 0.01, 0.001]
+SAMPLE_TAU = [10.0, 30.0, 100.0, 300.0]
+T_MAX = 300.0
+PERTURB = 1e-10
+WELL_CONDITIONED = 1e-8
+AGREE = 1e-6
+DENSITY = 7800.0
+
+
+def draw_scene(rng: np.random.Generator) -> dict:
+    """One random scene (SI) over the harness ranges."""
+    R = math.exp(rng.uniform(math.log(3e-3), math.log(0.3)))
+    L = R * math.exp(rng.uniform(math.log(0.01), math.log(2.0)))
+    shell = rng.uniform() < 0.2
+    k2shape = 2.0 if shell else 1.0
+    g = 9.81
+    chi = math.sqrt((k2shape + 4.0) / 4.0 * R / g)
+    mu_s = math.exp(rng.uniform(math.log(0.05), math.log(1.6)))
+    mu_d = mu_s * rng.uniform()
+    ks = []
+    for _ in range(3):
+        ks.append(0.0 if rng.uniform() < 0.1 else R * math.exp(rng.uniform(math.log(1e-6), math.log(5e-2))))
+    alpha = math.exp(rng.uniform(math.log(0.03), math.log(1.5))) * (1.0 if rng.uniform() < 0.5 else -1.0)
+    w_hat = math.exp(rng.uniform(math.log(0.1), math.log(10.0)))
+    w = [0.0, 0.0, -w_hat]
+    if rng.uniform() < 0.25:
+        w[0] = rng.normal(0.0, 0.3)
+        w[1] = rng.normal(0.0, 0.3)
+    slip = [0.0, 0.0]
+    if rng.uniform() < 0.2:
+        slip = [rng.normal(0.0, 0.1) * R / chi, rng.normal(0.0, 0.1) * R / chi]
+    mass = DENSITY * math.pi * R * R * L * (0.1 if shell else 1.0)
+    return {
+        "disk": {"radius": R, "thickness": L, "mass": mass, "shape": "shell" if shell else "solid"},
+        "contact": {"mu_s": mu_s, "mu_d": mu_d, "k1": ks[0], "k2": ks[1], "k3": ks[2]},
+        "gravity": g,
+        "initial": {"alpha": alpha, "omega": [x / chi for x in w], "slip": slip},
+        "stop": {"levels": list(LEVELS), "t_max": T_MAX},
+    }
+
+
+def _valid_levels(cfg: dict) -> dict:
+    """Keep only the levels for which the energy-equivalent inclination is defined for this disk."""
+    from sweep import model
+    from sweep.scene import SHAPES, max_level
+
+    d, c = cfg["disk"], cfg["contact"]
+    p, _ = model.make_params(SHAPES[d["shape"]], d["radius"], d["thickness"], cfg["gravity"],
+                             c["mu_s"], c["mu_d"], c["k1"], c["k2"], c["k3"])
+    bmax = max_level(p)
+    lv = [b for b in LEVELS if b < bmax]
+    cfg["stop"]["levels"] = lv or [0.5 * bmax]
+    return cfg
+
+
+def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0) -> dict:
+    import sweep
+
+    c = json.loads(json.dumps(cfg))
+    c["solver"] = {"rtol": rtol, "atol": rtol * 1e-2}
+    c["initial"]["alpha"] += d_alpha
+    chi = math.sqrt((({"solid": 1.0, "shell": 2.0}[c["disk"]["shape"]]) + 4.0) / 4.0
+                    * c["disk"]["radius"] / c["gravity"])
+    times = [tau * chi for tau in SAMPLE_TAU if tau * chi < T_MAX]
+    t0 = time.process_time()
+    try:
+        r = sweep.simulate(c, sample_times=times)
+    except Exception as exc:  # noqa: BLE001 - the harness reports every exception
+        return {"rtol": rtol, "exception": f"{type(exc).__name__}: {exc}"}
+    cpu = time.process_time() - t0
+    s = r.summary
+    dis = s["dissipation"]
+    budget = abs(s["energy_initial"] - s["energy_final"] - sum(dis.values())) / s["energy_initial"]
+    q = {f"t_level_{lv['inclination']:g}": lv["t"] for lv in s["levels"]}
+    q["t_halt"] = s["t_halt"]
+    for tau, a in zip(SAMPLE_TAU, r.samples["alpha"]):
+        q[f"alpha_tau_{tau:g}"] = float(a)
+    return {"rtol": rtol, "outcome": s["outcome"], "t_end": s["t_end"], "q": q,
+            "events": [s["n_transitions"], s["n_stick"], s["n_impacts"]], "n_steps": s["n_steps"] + s["n_rejected"],
+            "cpu": cpu, "budget": budget, "nan_in_summary": _has_bad(s)}
+
+
+def _has_bad(s: dict) -> bool:
+    """A NaN/inf where a value must exist: energies, dissipation, counts, t_end."""
+    vals = [s["t_end"], s["energy_initial"], s["energy_final"], *s["dissipation"].values()]
+    return not all(math.isfinite(v) for v in vals)
+
+
+def run_scene(args) -> dict:
+    idx, cfg = args
+    cfg = _valid_levels(cfg)
+    rec = {"index": idx, "scene": cfg, "runs": [_one_run(cfg, rt) for rt in RTOLS]}
+    rec["perturbed"] = _one_run(cfg, REF_RTOL, PERTURB * math.copysign(1.0, cfg["initial"]["alpha"]))
+    return rec
+
+
+def _rel(a, b) -> float:
+    if a is None or b is None or not (math.isfinite(a) and math.isfinite(b)):
+        return math.nan if (a is None or b is None or math.isfinite(a) != math.isfinite(b)) else 0.0
+    return abs(a - b) / max(abs(b), 1e-300)
+
+
+def analyse(recs: list[dict]) -> str:
+    lines = []
+    n = len(recs)
+    by_rtol = {rt: [next(r for r in rec["runs"] if r["rtol"] == rt) for rec in recs] for rt in RTOLS}
+    default = by_rtol[DEFAULT_RTOL]
+    outcomes: dict[str, int] = {}
+    for r in default:
+        outcomes[r.get("outcome", "exception")] = outcomes.get(r.get("outcome", "exception"), 0) + 1
+    lines.append(f"scenes: {n}")
+    lines.append("outcomes at rtol 1e-10: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
+    allruns = [r for rec in recs for r in rec["runs"]] + [rec["perturbed"] for rec in recs]
+    exc = [r for r in allruns if "exception" in r]
+    lines.append(f"exceptions (all runs): {len(exc)}" + (f"  e.g. {exc[0]['exception']}" if exc else ""))
+    nan = sum(1 for r in allruns if r.get("nan_in_summary"))
+    lines.append(f"NaN/inf where a value must exist (all runs): {nan}")
+    und = [rec["index"] for rec in recs for r in rec["runs"] if r.get("outcome") == "step_size_underflow"]
+    lines.append(f"step_size_underflow (all rtols): {len(und)} runs, scenes {sorted(set(und))[:10]}")
+    bad_limit = [rec["index"] for rec in recs for r in rec["runs"]
+                 if r.get("outcome") == "step_limit" and r["t_end"] <= 100.0]
+    lines.append(f"step_limit before 100 s simulated (all rtols): {len(bad_limit)} runs, scenes {sorted(set(bad_limit))[:10]}")
+    budgets = np.array([r["budget"] for r in default if "budget" in r])
+    nb = int(np.sum(~(budgets <= 1e-9)))
+    lines.append(f"dissipation budget at rtol 1e-10: max {np.nanmax(budgets):.2e} E0, scenes over 1e-9 E0: {nb}")
+
+    # convergence of well-conditioned quantities
+    keys = sorted({k for rec in recs for r in rec["runs"] if "q" in r for k in r["q"]})
+    n_wc = n_ok = 0
+    worst = []
+    shrink_total = shrink_ok = 0
+    n_q_all = 0
+    for rec in recs:
+        ref = next(r for r in rec["runs"] if r["rtol"] == REF_RTOL)
+        pert = rec["perturbed"]
+        if "q" not in ref or "q" not in pert:
+            continue
+        for k in keys:
+            vref = ref["q"].get(k)
+            if vref is None or not math.isfinite(vref):
+                continue
+            n_q_all += 1
+            sens = _rel(pert["q"].get(k), vref)
+            if not sens < WELL_CONDITIONED:
+                continue
+            n_wc += 1
+            rd = next(r for r in rec["runs"] if r["rtol"] == DEFAULT_RTOL)
+            err = _rel(rd.get("q", {}).get(k), vref)
+            if err <= AGREE:
+                n_ok += 1
+            else:
+                worst.append((err, rec["index"], k))
+            errs = [_rel(r.get("q", {}).get(k), vref) for r in rec["runs"] if r["rtol"] in (1e-10, 1e-11, 1e-12)]
+            if all(math.isfinite(e) for e in errs):
+                shrink_total += 1
+                # shrinking, up to a round-off floor of 1e-12
+                if errs[1] <= max(errs[0], 1e-12) * 1.5 and errs[2] <= max(errs[1], 1e-12) * 1.5:
+                    shrink_ok += 1
+    lines.append(f"quantities: {n_q_all}, well-conditioned (sensitivity < {WELL_CONDITIONED:g}): {n_wc}")
+    share = 100.0 * n_ok / max(n_wc, 1)
+    lines.append(f"well-conditioned within {AGREE:g} of rtol 1e-13 at rtol 1e-10: {n_ok}/{n_wc} = {share:.2f} %")
+    lines.append(f"errors shrinking 1e-10 -> 1e-11 -> 1e-12 (to a 1e-12 floor): {shrink_ok}/{shrink_total}")
+    worst.sort(reverse=True)
+    if worst:
+        lines.append("worst: " + "; ".join(f"scene {i} {k} {e:.2e}" for e, i, k in worst[:8]))
+    same = 0
+    diff_idx = []
+    for rec in recs:
+        seqs = [tuple(r["events"]) for r in rec["runs"] if r["rtol"] <= DEFAULT_RTOL and "events" in r]
+        if len(seqs) == 4 and len(set(seqs)) == 1:
+            same += 1
+        else:
+            diff_idx.append(rec["index"])
+    lines.append(f"same event counts (transitions, sticks, impacts) rtol 1e-10..1e-13: {same}/{n}"
+                 + (f"; differ: scenes {diff_idx[:12]}" if diff_idx else ""))
+    steps = np.array([r.get("n_steps", 0) for r in default])
+    cpu = np.array([r.get("cpu", 0.0) for r in default])
+    pct = lambda a, q: float(np.percentile(a, q))  # noqa: E731
+    lines.append(f"cost at rtol 1e-10: steps median {pct(steps, 50):.0f}, p90 {pct(steps, 90):.0f}, "
+                 f"p99 {pct(steps, 99):.0f}, max {steps.max():.0f}")
+    lines.append(f"cpu at rtol 1e-10: median {1e3 * pct(cpu, 50):.1f} ms, p90 {1e3 * pct(cpu, 90):.1f} ms, "
+                 f"p99 {1e3 * pct(cpu, 99):.1f} ms, max {1e3 * cpu.max():.1f} ms, total {cpu.sum():.1f} s, "
+                 f"p99/median {pct(cpu, 99) / max(pct(cpu, 50), 1e-9):.1f}")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="100 scenes instead of 500")
+    ap.add_argument("--scenes", type=int, default=None)
+    ap.add_argument("--seed", type=int, default=20261122)
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--tag", default=None)
+    ap.add_argument("--analyse", metavar="JSONL", help="only analyse an existing record file")
+    a = ap.parse_args(argv)
+    OUT.mkdir(exist_ok=True)
+    if a.analyse:
+        recs = [json.loads(x) for x in Path(a.analyse).read_text().splitlines() if x.strip()]
+        print(analyse(recs))
+        return 0
+    n = a.scenes or (100 if a.quick else 500)
+    tag = a.tag or f"n{n}-seed{a.seed}"
+    rng = np.random.default_rng(a.seed)
+    scenes = [(i, draw_scene(rng)) for i in range(n)]
+    path = OUT / f"convergence-{tag}.jsonl"
+    t0 = time.time()
+    recs = []
+    with path.open("w") as fh:
+        if a.jobs > 1:
+            with mp.get_context("spawn").Pool(a.jobs) as pool:
+                it = pool.imap_unordered(run_scene, scenes)
+                for rec in it:
+                    recs.append(rec)
+                    fh.write(json.dumps(rec) + "\n")
+                    fh.flush()
+        else:
+            for sc in scenes:
+                rec = run_scene(sc)
+                recs.append(rec)
+                fh.write(json.dumps(rec) + "\n")
+                fh.flush()
+                if len(recs) % 10 == 0:
+                    print(f"  {len(recs)}/{n} scenes, {time.time() - t0:.0f} s", file=sys.stderr, flush=True)
+    recs.sort(key=lambda r: r["index"])
+    table = analyse(recs) + f"\nwall time of the harness: {time.time() - t0:.0f} s (jobs {a.jobs})"
+    print(table)
+    (OUT / f"convergence-{tag}.md").write_text(table + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,14 @@
+"""The physics core: small numba kernels, plain arrays in and out, no allocation in the step loop.
+
+    model.py     the Kessler-O'Reilly equations (dimensionless right-hand side, energy, steady motion)
+    layout.py    named slots of the state, contact-state, work, settings and statistics arrays
+    contact.py   contact modes (roll, slide, slaved slip), event functions, discrete updates
+    impulse.py   plastic contact impulse (side change)
+    tableau.py   DOP853 coefficients
+    dop853.py    step, error norm, dense output, starting step
+    roots.py     event location and Phi maxima on the dense output
+    tracking.py  halt levels, samples, normal-force maxima, trajectory
+    integrate.py the main loop (`run`) and its CPU entry point (`integrate`)
+
+Everything here decides the result of a scene: the sweep's chunk fingerprint hashes this package.
+"""

@@ -1,0 +1,322 @@
+"""The contact as a hybrid system: right-hand side per contact state, event functions, and the
+discrete updates at events. Every decision here reads the state and physical parameters only.
+
+Modes (docs/model.md, 'Contact modes'):
+  ROLL    no slip; friction is what rolling needs, inside the static cone |F| <= mu_s Phi.
+  SLIDE   slip speed |u| > slip_tol; friction -mu_d Phi u/|u| (eq. 4.7).
+  SLAVED  slip speed u <= slip_tol, stored as y[U1] = u >= 0 (y[U2] = 0); the slip direction nu is
+          the quasi-static one, where the slip acceleration is parallel to the slip (its direction
+          rate, ~ mu_d Phi / u, is the stiff mode of the sliding equations; slaving it is the
+          leading order of the singular perturbation in u). The slip ends where u reaches 0
+          (located event: no impulse, the velocity is continuous), and hands back to SLIDE where
+          u grows past slip_tol.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from .impulse import project_velocity
+from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
+                     W_DYTMP, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
+from .model import (P_K1, P_K2, P_K3, P_MUS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_U1,
+                    Y_U2, Y_W1, Y_W2, Y_W3, energy, rhs)
+
+# event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
+EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against its moment's sign
+EV_UNSTICK1, EV_UNSTICK2, EV_UNSTICK3 = 3, 4, 5  # a stuck component needs more than k_i |N|
+EV_CONE = 6        # ROLL: the friction needed leaves the static cone, mu_s Phi - |F| = 0
+EV_SLIP_SLOW = 7   # SLIDE: |u| falls to slip_tol -> SLAVED
+EV_SLIP_STOP = 8   # SLAVED: u reaches 0 -> ROLL
+EV_SLIP_FAST = 9   # SLAVED: u grows to slip_tol -> SLIDE
+EV_CONTACT = 10    # Phi = 0: contact lost
+EV_SIDE = 11       # alpha = 0: the other rim edge takes the contact
+EV_FACE = 12       # pi/2 - |alpha| = BETA_FACE: the face reaches the table
+N_DYN_EVENTS = 13
+EV_LEVEL = 13      # energy reaches the next halt level (recorded, no restart)
+N_EVENTS = 14
+
+# Inclination (rad) at which the face is taken to touch the table: the disk lies flat. At 1e-8 rad
+# alpha still carries 8 significant digits of the inclination (ulp(pi/2) = 2.2e-16).
+BETA_FACE = 1e-8
+# Two rim-edge impacts closer than ZENO_DTAU (tau) end the scene as line contact.
+ZENO_DTAU = 1e-6
+# Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
+DIR_TOL = 1e-14
+DIR_MAXIT = 30
+
+
+@njit(cache=True)
+def _model(t, y, p, cs, n, dy, aux, n0x, n0y, istats):
+    """The model's right-hand side for the contact state cs (SLAVED evaluates as sliding)."""
+    mode = SLIDE if cs[CS_MODE] != ROLL else ROLL
+    rhs(t, y, p, mode, int(cs[CS_SIDE]), cs[CS_SIG:CS_SIG + 3], cs[CS_STUCK:CS_STUCK + 3],
+        n0x, n0y, n, dy, aux)
+    istats[I_RHS] += 1
+
+
+@njit(cache=True)
+def slip_rates(nu, u, t, y, p, cs, n, dy, aux, ys, istats):
+    """(cross, dot) of the slip acceleration with the slip direction s = (cos nu, sin nu), for the
+    slip vector u s; the full right-hand side is left in dy, aux."""
+    c = math.cos(nu)
+    s = math.sin(nu)
+    for i in range(n):
+        ys[i] = y[i]
+    ys[Y_U1] = u * c
+    ys[Y_U2] = u * s
+    _model(t, ys, p, cs, n, dy, aux, c, s, istats)
+    return dy[Y_U2] * c - dy[Y_U1] * s, dy[Y_U1] * c + dy[Y_U2] * s
+
+
+@njit(cache=True)
+def slaved_direction(nu0, u, t, y, p, cs, n, dy, aux, ys, istats):
+    """Slip direction near nu0 at which the slip acceleration is parallel to the slip (secant).
+
+    Returns nu; dy, aux hold the right-hand side there. aux[X_OK] = 0 if it does not converge.
+    """
+    xa = nu0
+    ca, da = slip_rates(xa, u, t, y, p, cs, n, dy, aux, ys, istats)
+    if ca == 0.0:
+        return xa
+    xb = nu0 + 1e-6
+    cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
+    for _ in range(DIR_MAXIT):
+        if cb == 0.0 or abs(xb - xa) < DIR_TOL:
+            return xb
+        if cb == ca:
+            break
+        xc = xb - cb * (xb - xa) / (cb - ca)
+        xa, ca = xb, cb
+        xb = xc
+        cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
+    aux[X_OK] = 0.0
+    return xb
+
+
+@njit(cache=True)
+def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
+    """d y/d tau and contact quantities (aux) for the contact state cs; counts its model calls."""
+    mode = cs[CS_MODE]
+    if mode == SLAVED:
+        nu = slaved_direction(cs[CS_NU], y[Y_U1], t, y, p, cs, n, dy, aux, wk[W_YSLIP], istats)
+        # the slaved slip speed obeys du/dtau = s . du_vec/dtau (dy holds the root's evaluation)
+        dy[Y_U1] = dy[Y_U1] * math.cos(nu) + dy[Y_U2] * math.sin(nu)
+        dy[Y_U2] = 0.0
+    elif mode == SLIDE:
+        un = math.hypot(y[Y_U1], y[Y_U2])
+        nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
+        ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
+        _model(t, y, p, cs, n, dy, aux, nx, ny, istats)
+    else:
+        _model(t, y, p, cs, n, dy, aux, 1.0, 0.0, istats)
+
+
+@njit(cache=True)
+def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
+    """Slip direction at the onset of sliding (u = 0), consistent with the sliding that follows.
+
+    The direction s must be one along which the slip then grows: slip acceleration parallel to s
+    with a positive component along it. The paper's rule s = -F/|F| (section 6.2) is exact only for
+    an isotropic contact inverse inertia; it is the initial guess. The cross product is scanned on 64
+    angles for sign changes with a growing slip, each root is refined by the secant method, and the
+    root nearest the guess is taken (the guess itself if no consistent root exists).
+    """
+    dy = wk[W_DYTMP]
+    aux = wk[W_AUXTMP]
+    ys = wk[W_YSLIP]
+    guess = math.atan2(-F2, -F1)
+    best = guess
+    bestd = 1e300
+    m = 64
+    xa = guess - math.pi
+    ca, da = slip_rates(xa, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+    for j in range(1, m + 1):
+        xb = guess - math.pi + 2.0 * math.pi * j / m
+        cb, db = slip_rates(xb, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+        if (ca > 0.0) != (cb > 0.0):
+            lo, hi, clo = xa, xb, ca
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                cm, dm = slip_rates(mid, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+                if (cm > 0.0) == (clo > 0.0):
+                    lo, clo = mid, cm
+                else:
+                    hi = mid
+                if hi - lo < 1e-13:
+                    break
+            root = 0.5 * (lo + hi)
+            cr, dr = slip_rates(root, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+            dist = abs(math.atan2(math.sin(root - guess), math.cos(root - guess)))
+            if dr > 0.0 and dist < bestd:
+                best = root
+                bestd = dist
+        xa, ca, da = xb, cb, db
+    return best
+
+
+@njit(cache=True)
+def start_slip(t, y, p, cs, n, wk, istats):
+    """ROLL -> SLAVED at zero slip speed, in the onset direction. Counts the transition."""
+    _model(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0, istats)
+    F1 = wk[W_AUXTMP, X_F1]
+    F2 = wk[W_AUXTMP, X_F2]
+    cs[CS_MODE] = SLAVED
+    cs[CS_NU] = onset_direction(t, y, p, cs, n, F1, F2, wk, istats)
+    y[Y_U1] = 0.0
+    y[Y_U2] = 0.0
+    istats[I_TRANS] += 1
+
+
+@njit(cache=True)
+def set_slip(t, y, p, cs, n, u_tol, wk, istats):
+    """Contact state for a Cartesian slip vector y[U1:U3]: SLIDE above slip_tol, else SLAVED with
+    the quasi-static direction nearest the slip's own."""
+    un = math.hypot(y[Y_U1], y[Y_U2])
+    nu = math.atan2(y[Y_U2], y[Y_U1])
+    if un > u_tol:
+        cs[CS_MODE] = SLIDE
+        cs[CS_NU] = nu
+        return
+    cs[CS_MODE] = SLAVED
+    y[Y_U1] = un
+    y[Y_U2] = 0.0
+    cs[CS_NU] = slaved_direction(nu, un, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP], istats)
+
+
+@njit(cache=True)
+def cone_violated(t, y, p, cs, n, wk, istats):
+    """Rolling: the friction needed lies outside the static cone |F| <= mu_s Phi."""
+    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+    aux = wk[W_AUXTMP]
+    return aux[X_PHI] > 0.0 and p[P_MUS] * aux[X_PHI] < math.hypot(aux[X_F1], aux[X_F2])
+
+
+@njit(cache=True)
+def stick_or_flip(i, t, y, p, cs, n, wk, istats):
+    """At omega.a_i = 0: stick if the moment can hold it (|sigma needed| <= 1), else flip its sign
+    to the one the motion will take."""
+    cs[CS_STUCK + i] = 1.0
+    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+    need = wk[W_AUXTMP, X_SIG1 + i]
+    if abs(need) < 1.0:
+        istats[I_STICK] += 1
+        return
+    cs[CS_STUCK + i] = 0.0
+    cs[CS_SIG + i] = 1.0 if need > 0.0 else -1.0
+
+
+@njit(cache=True)
+def consistent_signs(t, y, p, cs, n, wk, istats):
+    """Every free moment sign agrees with omega.a_i; an exact zero gets the stick test."""
+    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+    k = (p[P_K1], p[P_K2], p[P_K3])
+    for i in range(3):
+        if k[i] > 0.0 and cs[CS_STUCK + i] == 0.0:
+            g = wk[W_AUXTMP, X_G1 + i]
+            if g > 0.0:
+                cs[CS_SIG + i] = 1.0
+            elif g < 0.0:
+                cs[CS_SIG + i] = -1.0
+            else:
+                stick_or_flip(i, t, y, p, cs, n, wk, istats)
+
+
+@njit(cache=True)
+def event_values(y, aux, p, cs, u_tol, level_e, g):
+    """g[k] for every event k (inf where not active). `aux` must belong to `y`."""
+    for k in range(N_EVENTS):
+        g[k] = math.inf
+    k = (p[P_K1], p[P_K2], p[P_K3])
+    for i in range(3):
+        if k[i] > 0.0:
+            if cs[CS_STUCK + i] == 1.0:
+                g[EV_UNSTICK1 + i] = 1.0 - abs(aux[X_SIG1 + i])
+            else:
+                g[EV_SIGN1 + i] = cs[CS_SIG + i] * aux[X_G1 + i]
+    mode = cs[CS_MODE]
+    if mode == ROLL:
+        g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
+    elif mode == SLIDE:
+        g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - u_tol
+    else:
+        g[EV_SLIP_STOP] = y[Y_U1]
+        g[EV_SLIP_FAST] = u_tol - y[Y_U1]
+    g[EV_CONTACT] = aux[X_PHI]
+    g[EV_SIDE] = cs[CS_SIDE] * y[Y_ALPHA]
+    g[EV_FACE] = (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
+    if not math.isnan(level_e):
+        g[EV_LEVEL] = energy(y, p, int(cs[CS_SIDE]), 0 if mode == ROLL else 1) - level_e
+
+
+@njit(cache=True)
+def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
+    """Discrete update at a located event k (state y at the event, changed in place).
+
+    Returns the outcome code that ends the scene, or -1 to continue. The caller re-evaluates the
+    right-hand side and the event functions afterwards.
+    """
+    mode = cs[CS_MODE]
+    check_cone = False
+    if k <= EV_SIGN3:
+        stick_or_flip(k, t, y, p, cs, n, wk, istats)
+    elif k <= EV_UNSTICK3:
+        i = k - EV_UNSTICK1
+        eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+        cs[CS_SIG + i] = 1.0 if wk[W_AUXTMP, X_SIG1 + i] > 0.0 else -1.0
+        cs[CS_STUCK + i] = 0.0
+    elif k == EV_CONE:
+        start_slip(t, y, p, cs, n, wk, istats)
+    elif k == EV_SLIP_SLOW:
+        set_slip(t, y, p, cs, n, u_tol, wk, istats)
+    elif k == EV_SLIP_STOP:
+        y[Y_U1] = 0.0
+        y[Y_U2] = 0.0
+        cs[CS_MODE] = ROLL
+        istats[I_TRANS] += 1
+        check_cone = True
+    elif k == EV_SLIP_FAST:
+        u = y[Y_U1]
+        y[Y_U1] = u * math.cos(cs[CS_NU])
+        y[Y_U2] = u * math.sin(cs[CS_NU])
+        cs[CS_MODE] = SLIDE
+    elif k == EV_CONTACT:
+        return 1   # outcomes.CONTACT_LOST
+    elif k == EV_FACE:
+        return 8   # outcomes.FACE_CONTACT (the caller records it as a halt)
+    elif k == EV_SIDE:
+        return side_change(t, y, p, cs, n, u_tol, wk, istats, fstats)
+    if check_cone and cone_violated(t, y, p, cs, n, wk, istats):
+        start_slip(t, y, p, cs, n, wk, istats)
+    return -1
+
+
+@njit(cache=True)
+def side_change(t, y, p, cs, n, u_tol, wk, istats, fstats):
+    """alpha = 0: plastic impact of the other rim edge. Ends the scene (line contact, outcome 4)
+    when no rotation towards the new side is left, or when two impacts come within ZENO_DTAU (the
+    rocking between the edges has collapsed into a Zeno sequence of impacts)."""
+    mode = cs[CS_MODE]
+    side = cs[CS_SIDE]
+    if mode == SLAVED:     # the slaved slip as a Cartesian vector
+        u = y[Y_U1]
+        y[Y_U1] = u * math.cos(cs[CS_NU])
+        y[Y_U2] = u * math.sin(cs[CS_NU])
+    loss = project_velocity(y, p, int(side), int(-side), mode != ROLL, wk[W_SCRATCH:W_SCRATCH + 6])
+    fstats[F_DIMPACT] += loss
+    cs[CS_SIDE] = -side
+    istats[I_IMPACTS] += 1
+    y[Y_ALPHA] = 0.0
+    for i in range(3):
+        cs[CS_STUCK + i] = 0.0
+    zeno = t - fstats[F_TIMPACT] < ZENO_DTAU
+    fstats[F_TIMPACT] = t
+    if y[Y_W1] * cs[CS_SIDE] <= 0.0 or zeno:
+        return 4   # outcomes.LINE_CONTACT: the disk stands on its flat edge
+    if mode != ROLL:
+        set_slip(t, y, p, cs, n, u_tol, wk, istats)
+    consistent_signs(t, y, p, cs, n, wk, istats)
+    if mode == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
+        start_slip(t, y, p, cs, n, wk, istats)
+    return -1

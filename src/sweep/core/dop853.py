@@ -1,0 +1,151 @@
+"""DOP853 (Dormand & Prince 8(5,3)) step, error norm, dense output and starting step.
+
+Step-size control follows Hairer, Norsett & Wanner (1993), II.4 and II.10: the error norm of
+dop853 (5th/3rd-order embedded estimates), safety 0.9, factor in [0.2, 10], exponent -1/8.
+The right-hand side is `contact.eval_rhs` (the model for the current contact state); stage counts
+come from the tableau (tableau.py).
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from .contact import eval_rhs
+from .layout import W_AUXTMP, W_DYTMP, W_YTMP
+from .model import N_CORE
+from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
+from .tableau import N_STAGES, N_STAGES_EXTENDED
+
+SAFETY = 0.9
+MIN_FACTOR = 0.2
+MAX_FACTOR = 10.0
+ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8)
+N_DENSE = 7                 # rows of dense-output coefficients
+
+
+@njit(cache=True)
+def stages(first, last, t, y, h, n, p, cs, K, wk, istats):
+    """Evaluate RK stages first..last-1 into K (stage s uses K[0:s] and row s of the tableau)."""
+    ytmp = wk[W_YTMP]
+    for s in range(first, last):
+        for i in range(n):
+            acc = 0.0
+            for j in range(s):
+                acc += RK_A[s, j] * K[j, i]
+            ytmp[i] = y[i] + h * acc
+        eval_rhs(t + RK_C[s] * h, ytmp, p, cs, n, K[s], wk[W_AUXTMP], wk, istats)
+
+
+@njit(cache=True)
+def rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats):
+    """One DOP853 step from (t, y, f): y_new, and f_new = K[12] = f(t + h, y_new)."""
+    for i in range(n):
+        K[0, i] = f[i]
+    stages(1, N_STAGES, t, y, h, n, p, cs, K, wk, istats)
+    for i in range(n):
+        acc = 0.0
+        for j in range(N_STAGES):
+            acc += RK_B[j] * K[j, i]
+        y_new[i] = y[i] + h * acc
+    eval_rhs(t + h, y_new, p, cs, n, f_new, aux_new, wk, istats)
+    for i in range(n):
+        K[N_STAGES, i] = f_new[i]
+
+
+@njit(cache=True)
+def error_norm(K, h, y, y_new, n, rtol, atol):
+    """Hairer's dop853 error norm over the dynamic state and the dissipation quadratures only.
+
+    theta, psi, x, y (when integrated) are passive quadratures that never feed back into the
+    dynamics; leaving them out keeps the step sequence, and so every result, identical whether or
+    not a scene asks for them.
+    """
+    n = min(n, N_CORE)
+    e5 = 0.0
+    e3 = 0.0
+    for i in range(n):
+        sc = atol + rtol * max(abs(y[i]), abs(y_new[i]))
+        a5 = 0.0
+        a3 = 0.0
+        for j in range(N_STAGES + 1):
+            a5 += RK_E5[j] * K[j, i]
+            a3 += RK_E3[j] * K[j, i]
+        e5 += (a5 / sc) ** 2
+        e3 += (a3 / sc) ** 2
+    if e5 == 0.0 and e3 == 0.0:
+        return 0.0
+    den = e5 + 0.01 * e3
+    return abs(h) * e5 / math.sqrt(den * n)
+
+
+@njit(cache=True)
+def step_factor(err):
+    """Step-size factor after an error norm `err` (accepted if err <= 1)."""
+    if err == 0.0:
+        return MAX_FACTOR
+    if not math.isfinite(err):
+        return MIN_FACTOR
+    return min(MAX_FACTOR, max(MIN_FACTOR, SAFETY * err ** ERR_EXPONENT))
+
+
+@njit(cache=True)
+def dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats):
+    """Coefficients F[0:7] of the continuous extension (3 extra RHS calls: stages 13..15)."""
+    stages(N_STAGES + 1, N_STAGES_EXTENDED, t, y, h, n, p, cs, K, wk, istats)
+    for i in range(n):
+        dyv = y_new[i] - y[i]
+        F[0, i] = dyv
+        F[1, i] = h * K[0, i] - dyv
+        F[2, i] = 2.0 * dyv - h * (f_new[i] + K[0, i])
+        for r in range(4):
+            acc = 0.0
+            for j in range(N_STAGES_EXTENDED):
+                acc += RK_D[r, j] * K[j, i]
+            F[3 + r, i] = h * acc
+
+
+@njit(cache=True)
+def dense_eval(F, row0, y_old, t_old, h, t, n, out):
+    """7th-order continuous extension (coefficients F[row0:row0+7]) at t in [t_old, t_old + h]."""
+    x = (t - t_old) / h
+    x1 = 1.0 - x
+    for i in range(n):
+        v = F[row0 + 6, i]
+        v = F[row0 + 5, i] + x * v
+        v = F[row0 + 4, i] + x1 * v
+        v = F[row0 + 3, i] + x * v
+        v = F[row0 + 2, i] + x1 * v
+        v = F[row0 + 1, i] + x * v
+        v = F[row0, i] + x1 * v
+        out[i] = y_old[i] + x * v
+
+
+@njit(cache=True)
+def initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats):
+    """Starting step size (Hairer & Wanner II.4, 'starting step size'), on the dynamic state."""
+    nc = min(n, N_CORE)
+    d0 = 0.0
+    d1 = 0.0
+    for i in range(nc):
+        sc = atol + rtol * abs(y[i])
+        d0 += (y[i] / sc) ** 2
+        d1 += (f[i] / sc) ** 2
+    d0 = math.sqrt(d0 / nc)
+    d1 = math.sqrt(d1 / nc)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    ytmp = wk[W_YTMP]
+    dytmp = wk[W_DYTMP]
+    for i in range(n):
+        ytmp[i] = y[i] + h0 * f[i]
+    eval_rhs(t + h0, ytmp, p, cs, n, dytmp, wk[W_AUXTMP], wk, istats)
+    d2 = 0.0
+    for i in range(nc):
+        sc = atol + rtol * abs(y[i])
+        d2 += ((dytmp[i] - f[i]) / sc) ** 2
+    d2 = math.sqrt(d2 / nc) / h0
+    if max(d1, d2) <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
+    return min(100.0 * h0, h1)

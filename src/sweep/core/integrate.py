@@ -1,0 +1,313 @@
+"""The hybrid integrator: one scene, DOP853 steps of the current smooth mode, located events.
+
+`run` (numba, no allocation) steps the current contact state, scans the accepted step for events,
+locates the earliest on the dense output, restarts there with the new discrete state (keeping the
+step size) and records what the scene asked for. Every discrete decision is taken in
+contact.apply_event from the state at the located event; the step size, rtol and atol only decide
+where the steps fall. `integrate` (Python) allocates the buffers and names the outputs.
+"""
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .. import outcomes as oc
+from .contact import (EV_FACE, EV_LEVEL, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
+                      cone_violated, eval_rhs, event_values, set_slip, slaved_direction, start_slip)
+from .dop853 import dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
+from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
+                     I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
+                     N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
+                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT,
+                     T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
+                     W_FNEW, W_GBUF, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSLIP)
+from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1, energy
+from .roots import hermite_interior_root, locate
+from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
+                       track_peaks)
+
+EPS = 2.220446049250313e-16
+# A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
+# increases, so such a step is an instability the error estimate did not see; it is rejected.
+ENERGY_GUARD = 10.0
+SIGN_SCAN = 17     # dense-output points that confirm a double sign crossing found by Hermite
+
+KernelOutput = namedtuple("KernelOutput", "istats fstats levels samples trajectory peaks y_end")
+
+
+@njit(cache=True)
+def _mode_energy(y, p, cs):
+    return energy(y, p, int(cs[CS_SIDE]), 0 if cs[CS_MODE] == ROLL else 1)
+
+
+@njit(cache=True)
+def start(y, p, cs, n, u_tol, wk, istats):
+    """Initial discrete state: moment signs, slip mode, and slip onset if rolling cannot hold."""
+    cs[CS_SIDE] = 1.0 if y[Y_ALPHA] > 0.0 else -1.0
+    for i in range(3):
+        cs[CS_SIG + i] = 1.0
+    if y[Y_U1] != 0.0 or y[Y_U1 + 1] != 0.0:
+        set_slip(0.0, y, p, cs, n, u_tol, wk, istats)
+    else:
+        cs[CS_MODE] = ROLL
+    consistent_signs(0.0, y, p, cs, n, wk, istats)
+    if cs[CS_MODE] == ROLL and cone_violated(0.0, y, p, cs, n, wk, istats):
+        start_slip(0.0, y, p, cs, n, wk, istats)
+
+
+@njit(cache=True)
+def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats):
+    """Earliest event on the accepted step [t, t + h]: (k, bracket start, restart time, dense?).
+
+    A sign function that is positive at both ends can still cross zero twice inside the step: the
+    cubic Hermite interpolant (no RHS calls) flags it, the dense output confirms it.
+    """
+    g_old = wk[W_GOLD]
+    g_new = wk[W_GNEW]
+    have_dense = False
+    first_k = -1
+    first_t = t + h
+    for k in range(N_DYN_EVENTS):
+        ta = -1.0
+        ga = 0.0
+        tb = 0.0
+        gb = 0.0
+        if g_old[k] > 0.0 and g_new[k] <= 0.0:
+            ta, ga, tb, gb = t, g_old[k], t + h, g_new[k]
+        elif k <= EV_SIGN3 and g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf:
+            if hermite_interior_root(k, cs[CS_SIG + k], y, f, y_new, f_new, g_old[k], g_new[k], h) > 0.0:
+                if not have_dense:
+                    dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
+                    have_dense = True
+                prevt = t
+                prevg = g_old[k]
+                for j in range(1, SIGN_SCAN):
+                    tj = t + h * j / SIGN_SCAN
+                    dense_eval(F, 0, y, t, h, tj, n, wk[W_YBUF])
+                    eval_rhs(tj, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+                    event_values(wk[W_YBUF], wk[W_AUXBUF], p, cs, u_tol, lev, wk[W_GBUF])
+                    if prevg > 0.0 and wk[W_GBUF, k] <= 0.0:
+                        ta, ga, tb, gb = prevt, prevg, tj, wk[W_GBUF, k]
+                        break
+                    prevt = tj
+                    prevg = wk[W_GBUF, k]
+        if ta >= 0.0 and ta < first_t:
+            if not have_dense:
+                dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
+                have_dense = True
+            ra, rb = locate(k, ta, ga, tb, gb, F, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+            if rb < first_t or first_k < 0:
+                first_k = k
+                first_t = rb
+    return first_k, first_t, have_dense
+
+
+@njit(cache=True)
+def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, level_out, samples, traj,
+        peaks, y_end):
+    """Integrate one scene in place of the given buffers (see integrate for their shapes)."""
+    rtol = settings[S_RTOL]
+    atol = settings[S_ATOL]
+    h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
+    t_max = settings[S_TMAX]
+    u_tol = settings[S_UTOL]
+    max_steps = int(settings[S_MAXSTEPS])
+    peaks_on = settings[S_PEAKS] > 0.0
+    n = N_FULL if settings[S_KIN] > 0.0 else (N_THETA if peaks_on else N_CORE)
+    extra_steps = int(settings[S_EXTRA])
+    nl = level_e.shape[0]
+    want_traj = traj.shape[0] > 0
+    f = wk[W_F]
+    aux = wk[W_AUX]
+    y_new = wk[W_YNEW]
+    f_new = wk[W_FNEW]
+    aux_new = wk[W_AUXNEW]
+    g_old = wk[W_GOLD]
+    g_new = wk[W_GNEW]
+
+    p[P_UFREEZE] = u_tol
+    fstats[F_TIMPACT] = -math.inf
+    t = 0.0
+    start(y, p, cs, n, u_tol, wk, istats)
+    eval_rhs(t, y, p, cs, n, f, aux, wk, istats)
+    fstats[F_E0] = _mode_energy(y, p, cs)
+    e_guard = ENERGY_GUARD * rtol * max(abs(fstats[F_E0]), 1e-300)
+    lev = level_e[0] if nl > 0 else math.nan
+    event_values(y, aux, p, cs, u_tol, lev, g_old)
+    outcome = -1
+    if aux[X_PHI] <= 0.0:
+        outcome = oc.CONTACT_LOST
+    if aux[X_OK] == 0.0:
+        outcome = oc.NUMERICAL_ERROR
+    ns = sample_tau.shape[0]
+    while int(trk[T_NEXT_SAMPLE]) < ns and sample_tau[int(trk[T_NEXT_SAMPLE])] <= 0.0:
+        record_sample(y, aux, p, cs, n, samples[int(trk[T_NEXT_SAMPLE])])
+        trk[T_NEXT_SAMPLE] += 1.0
+    if want_traj:
+        record_traj(t, y, aux[X_PHI], cs[CS_MODE], n, traj, istats)
+    trk[T_PHI_B] = aux[X_PHI]
+    h = initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats)
+    h = min(h, h_max)
+
+    while outcome < 0 or (trk[T_PENDING] > 0.0 and trk[T_AFTER_HALT] < extra_steps):
+        running = outcome < 0
+        if not running:
+            trk[T_AFTER_HALT] += 1.0
+        if istats[I_STEPS] + istats[I_REJECTED] >= max_steps:
+            if running:
+                outcome = oc.STEP_LIMIT
+            break
+        hit_tmax = running and t + h >= t_max
+        if hit_tmax:
+            h = t_max - t
+        if h <= 16.0 * EPS * max(abs(t), 1.0):
+            if running:
+                outcome = oc.T_MAX if hit_tmax else oc.STEP_SIZE_UNDERFLOW
+            break
+        e_cur = _mode_energy(y, p, cs)
+        rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats)
+        finite = True
+        for i in range(n):
+            if not math.isfinite(y_new[i]):
+                finite = False
+        if finite and _mode_energy(y_new, p, cs) > e_cur + e_guard:
+            finite = False
+        err = error_norm(K, h, y, y_new, n, rtol, atol) if finite else math.inf
+        if not err <= 1.0:
+            istats[I_REJECTED] += 1
+            if cs[CS_MODE] != ROLL:
+                istats[I_SLIDE_REJECTED] += 1
+            h *= step_factor(err)
+            continue
+        h_next = min(h * step_factor(err), h_max)
+        istats[I_STEPS] += 1
+        if cs[CS_MODE] != ROLL:
+            istats[I_SLIDE_STEPS] += 1
+        if aux_new[X_OK] == 0.0 and running:
+            outcome = oc.NUMERICAL_ERROR
+            break
+
+        # --- events, levels, samples, peaks on [t, seg_end] -------------------------------------
+        event_values(y_new, aux_new, p, cs, u_tol, lev, g_new)
+        first_k, first_t, have_dense = first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats)
+        seg_end = first_t if first_k >= 0 else t + h
+        if not have_dense:
+            dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
+        y_seg = wk[W_YSLIP]   # free here: the state at the segment end
+        if first_k >= 0:
+            dense_eval(F, 0, y, t, h, seg_end, n, y_seg)
+        else:
+            for i in range(n):
+                y_seg[i] = y_new[i]
+        if running:
+            t_halt = record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk, peaks_on,
+                                   u_tol, wk, istats)
+            if t_halt >= 0.0:
+                outcome = oc.HALTED
+                fstats[F_TEND] = t_halt
+                dense_eval(F, 0, y, t, h, t_halt, n, y_end)
+            elif int(trk[T_NEXT_LEVEL]) < nl:
+                lev = level_e[int(trk[T_NEXT_LEVEL])]
+        record_samples(t, y, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, F, n, p, cs, sample_tau,
+                       samples, trk, wk, istats)
+        if peaks_on:
+            if first_k >= 0:
+                eval_rhs(seg_end, y_seg, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+                phi_c = wk[W_AUXBUF, X_PHI]
+            else:
+                phi_c = aux_new[X_PHI]
+            track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running)
+            shift_peak_window(t, y, h, seg_end, phi_c, F, n, cs, trk, wk)
+
+        # --- advance ------------------------------------------------------------------------------
+        if cs[CS_MODE] != ROLL and running:
+            fstats[F_SLIDETIME] += (seg_end if outcome < 0 else fstats[F_TEND]) - t
+        for i in range(n):
+            y[i] = y_seg[i]
+        t = seg_end
+        if first_k < 0:
+            for i in range(n):
+                f[i] = f_new[i]
+        if want_traj and outcome < 0:
+            record_traj(t, y, aux_new[X_PHI] if first_k < 0 else math.nan, cs[CS_MODE], n, traj, istats)
+
+        if first_k >= 0:
+            istats[I_EVENTS] += 1
+            code = apply_event(first_k, t, y, p, cs, n, u_tol, wk, istats, fstats)
+            if code == oc.FACE_CONTACT and running:
+                # the disk lies flat: it has halted (docs/model.md, 'Halt')
+                halt_flat(t, level_out, trk, level_e)
+                outcome = oc.HALTED
+                fstats[F_TEND] = t
+                for i in range(n):
+                    y_end[i] = y[i]
+            elif code >= 0:
+                if running:
+                    outcome = code
+                    fstats[F_TEND] = t
+                break
+            if code >= 0:
+                break
+            eval_rhs(t, y, p, cs, n, f, aux_new, wk, istats)
+            if aux_new[X_OK] == 0.0:
+                if running:
+                    outcome = oc.NUMERICAL_ERROR
+                    fstats[F_TEND] = t
+                break
+            event_values(y, aux_new, p, cs, u_tol, lev, g_old)
+        else:
+            for k in range(N_DYN_EVENTS + 1):
+                g_old[k] = g_new[k]
+            g_old[EV_LEVEL] = _mode_energy(y, p, cs) - lev if int(trk[T_NEXT_LEVEL]) < nl else math.inf
+            if cs[CS_MODE] == SLAVED:
+                # continuation of the slaved direction from this step end
+                cs[CS_NU] = slaved_direction(cs[CS_NU], y[Y_U1], t, y, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF],
+                                             wk[W_YBUF], istats)
+        if hit_tmax and outcome < 0 and first_k < 0:
+            outcome = oc.T_MAX
+            fstats[F_TEND] = t
+        h = h_next
+
+    if outcome < 0:
+        outcome = oc.STEP_LIMIT
+    if outcome != oc.HALTED or fstats[F_TEND] == 0.0:
+        fstats[F_TEND] = t
+        for i in range(n):
+            y_end[i] = y[i]
+    istats[I_OUTCOME] = outcome
+    fstats[F_EEND] = _mode_energy(y_end, p, cs)
+    fstats[F_HLAST] = h
+
+
+def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=256):
+    """Run one scene (CPU). Allocates the buffers, grows the trajectory/peak buffers and reruns
+    (the run is deterministic) if they overflowed. Returns a KernelOutput of arrays:
+    istats, fstats (layout.I_*, F_*), levels (n_levels x 5: tau, alpha, dtheta/dtau, f_hat,
+    pending), samples (layout.SAMPLE_COLS), trajectory (layout.TRAJ_COLS), peaks (tau, Phi, theta),
+    y_end (N_FULL)."""
+    while True:
+        istats = np.zeros(N_ISTATS, np.int64)
+        fstats = np.zeros(N_FSTATS)
+        levels = np.full((level_e.shape[0], LEVEL_COLS + 1), np.nan)
+        levels[:, LEVEL_COLS] = 0.0
+        samples = np.full((sample_tau.shape[0], SAMPLE_COLS), np.nan)
+        traj = np.empty((traj_cap, TRAJ_COLS))
+        peaks = np.empty((peak_cap if settings[S_PEAKS] > 0.0 else 0, PEAK_COLS))
+        y = np.zeros(N_FULL)
+        y[:y0.shape[0]] = y0
+        y_end = np.zeros(N_FULL)
+        run(y, p.copy(), settings, level_e, sample_tau, np.zeros(N_CS), np.zeros((N_WORK, N_FULL)),
+            np.zeros((16, N_FULL)), np.zeros((14, N_FULL)), np.zeros(N_TRACK), istats, fstats, levels, samples,
+            traj, peaks, y_end)
+        over = istats[I_OVERFLOW]
+        if over == 0:
+            break
+        if over & 1:
+            traj_cap = 4 * max(traj_cap, 256)
+        if over & 2:
+            peak_cap *= 4
+    return KernelOutput(istats, fstats, levels[:, :LEVEL_COLS], samples, traj[:istats[I_TRAJ]],
+                        peaks[:istats[I_PEAKS]], y_end)

@@ -1,0 +1,73 @@
+"""Named slots of the plain arrays that the kernels pass around (no Python objects in a kernel).
+
+Contact state `cs` (float64, N_CS): the discrete state of the hybrid system.
+    CS_MODE    ROLL, SLIDE (slip faster than slip_tol, friction along -u/|u|) or SLAVED (slip at
+               most slip_tol, its direction slaved to the quasi-static one; docs/model.md)
+    CS_SIDE    +1/-1: which rim edge carries the contact (sign of alpha)
+    CS_SIG     3 slots: sign of omega.a_i used in the moment M_f (eq. 3.3)
+    CS_STUCK   3 slots: 1 where omega.a_i is held at 0 by the dry-friction moment (Filippov)
+    CS_NU      slip direction angle on (a1, a2) (rad): the frozen/slaved friction direction
+Work buffer `wk` (float64, N_WORK x N_FULL): rows used as vectors; `K` (16 x N_FULL) holds the RK
+stages, `F` (14 x N_FULL) the dense-output coefficients of this step (rows 0..6) and of the
+previous step (rows 7..13, for Phi maxima that straddle a step end).
+"""
+from __future__ import annotations
+
+from .model import N_AUX, N_FULL  # noqa: F401  (re-exported sizes)
+
+# --- modes -------------------------------------------------------------------------------------
+ROLL, SLIDE, SLAVED = 0, 1, 2
+
+# --- contact state ----------------------------------------------------------------------------
+CS_MODE = 0
+CS_SIDE = 1
+CS_SIG = 2       # 2, 3, 4
+CS_STUCK = 5     # 5, 6, 7
+CS_NU = 8
+N_CS = 9
+
+# --- work-buffer rows ---------------------------------------------------------------------------
+W_Y = 0          # state at the step start
+W_F = 1          # its derivative
+W_YNEW = 2       # state at the step end
+W_FNEW = 3
+W_YTMP = 4       # stage state / trial state
+W_DYTMP = 5
+W_YBUF = 6       # dense-output evaluations
+W_DYBUF = 7
+W_YSLIP = 8      # state with the slaved slip vector (SLAVED mode right-hand side)
+W_AUX = 9        # aux of the step start
+W_AUXNEW = 10
+W_AUXTMP = 11
+W_AUXBUF = 12
+W_GOLD = 13      # event values at the step start
+W_GNEW = 14      # at the step end
+W_GBUF = 15      # at a dense-output point
+W_YPREV = 16     # state at the previous step's start (its dense output is F[7:14])
+W_CSPREV = 17    # contact state of the previous step
+W_SCRATCH = 18   # 6 rows: the 5x6 augmented system of the plastic impulse
+N_WORK = 24
+
+# --- settings vector ----------------------------------------------------------------------------
+S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS, S_EXTRA = 0, 1, 2, 3, 4, 5, 6, 7, 8
+N_SETTINGS = 9
+
+# --- integer statistics -------------------------------------------------------------------------
+I_OUTCOME, I_STEPS, I_REJECTED, I_RHS, I_EVENTS, I_TRANS, I_STICK, I_IMPACTS, I_LEVELS, I_TRAJ, I_PEAKS = range(11)
+I_SLIDE_STEPS, I_SLIDE_REJECTED, I_OVERFLOW = 11, 12, 13   # steps while sliding; buffers too small
+N_ISTATS = 14
+
+# --- float statistics ---------------------------------------------------------------------------
+F_TEND, F_SLIDETIME, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_NFMAX, F_TIMPACT = range(8)
+N_FSTATS = 8
+
+# --- tracking state of the level/peak/sample recorders (float64) ----------------------------------
+T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PHI_A, T_PHI_B, T_TA, T_TB, T_PREV_OK, T_TPREV, T_HPREV = range(9)
+T_PENDING, T_AFTER_HALT, T_NPK = 9, 10, 11
+N_TRACK = 12
+
+# --- output buffers -----------------------------------------------------------------------------
+TRAJ_COLS = 2 + N_FULL + 1     # tau, y[0:N_FULL], Phi, mode
+SAMPLE_COLS = N_FULL + 3       # y[0:N_FULL], energy, Phi, mode
+LEVEL_COLS = 4                 # tau, alpha, dtheta/dtau, f_hat
+PEAK_COLS = 3                  # tau, Phi, theta

@@ -1,0 +1,391 @@
+"""The Kessler-O'Reilly (2002) rigid-disk model in dimensionless form: numba kernels.
+
+Units (paper eq. 4.4-4.6): lengths in R, mass in m, time tau = t/chi with
+chi = sqrt((k^2+4)/4 * R/g); angular velocities omega_hat = chi*omega; slip velocities
+u_hat = chi*u/R; normal force Phi = chi^2 N/(m R); friction force chi^2 F/(m R); energy
+chi^2 E/(m R^2). In these units gravity is G = (k^2+4)/4.
+
+Frames (paper eq. 2.1): E fixed; a = E turned by theta about E3; e = a turned by alpha about a1.
+e2 is the symmetry axis, e3 lies in the disk plane and points from the contact point towards the
+centre side, e1 = a1 is horizontal. Contact point P is at -H e2 - R e3 from the centre,
+H = (L/2) side, side = sign(alpha).
+
+All kernels take plain arrays/scalars. See docs/model.md for the derivation; every equation here
+is checked in tests/test_model_equations.py against a world-frame Newton-Euler formulation.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# --- state vector layout -------------------------------------------------------------------
+Y_ALPHA, Y_W1, Y_W2, Y_W3, Y_U1, Y_U2 = 0, 1, 2, 3, 4, 5
+Y_DSLIDE, Y_DK1, Y_DK2, Y_DK3 = 6, 7, 8, 9            # dissipated energy per mechanism
+Y_THETA, Y_PSI, Y_X, Y_Y = 10, 11, 12, 13              # kinematics, integrated only on request
+N_CORE = 10   # always integrated, and the only components in the error control
+N_THETA = 11  # with theta (for the mean precession rate between normal-force maxima)
+N_FULL = 14   # with all kinematics
+
+# --- parameter vector layout ---------------------------------------------------------------
+P_G, P_H, P_A, P_C, P_K1, P_K2, P_K3, P_MUS, P_MUD = 0, 1, 2, 3, 4, 5, 6, 7, 8
+# Slip speed at or below which the friction direction is the stored slip direction (n0x, n0y)
+# rather than u/|u|: 0 in the pure model; the integrator sets it to slip_tol (docs/model.md).
+P_UFREEZE = 9
+N_PARAMS = 10
+
+# --- auxiliary outputs of the right-hand side ----------------------------------------------
+X_PHI, X_F1, X_F2, X_SIG1, X_SIG2, X_SIG3, X_G1, X_G2, X_G3, X_OK = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
+N_AUX = 10
+
+ROLL, SLIDE = 0, 1
+
+
+def make_params(k2_shape: float, radius: float, thickness: float, gravity: float,
+                mu_s: float, mu_d: float, k1: float, k2: float, k3: float) -> tuple[np.ndarray, float]:
+    """Dimensionless parameter vector and the time scale chi (s) from SI values.
+
+    k2_shape: k^2 of eq. (2.4): 1 for the solid cylinder, 2 for the thin shell.
+    radius, thickness (m); gravity (m/s^2); k1..k3 (m, moment = k_i |N|).
+    """
+    h = 0.5 * thickness / radius
+    chi = math.sqrt((k2_shape + 4.0) / 4.0 * radius / gravity)
+    p = np.empty(N_PARAMS)
+    p[P_G] = (k2_shape + 4.0) / 4.0
+    p[P_H] = h
+    p[P_A] = k2_shape / 4.0 + h * h / 3.0   # transverse inertia / (m R^2), eq. (2.4)
+    p[P_C] = k2_shape / 2.0                 # axial inertia / (m R^2)
+    p[P_K1] = k1 / radius
+    p[P_K2] = k2 / radius
+    p[P_K3] = k3 / radius
+    p[P_MUS] = mu_s
+    p[P_MUD] = mu_d
+    p[P_UFREEZE] = 0.0
+    return p, chi
+
+
+@njit(cache=True)
+def moment_axes_rates(y):
+    """omega.a_i for i = 1, 2, 3 (the arguments of the sign terms of M_f, eq. 3.3)."""
+    s = math.sin(y[Y_ALPHA])
+    c = math.cos(y[Y_ALPHA])
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    return w1, w2 * c - w3 * s, w2 * s + w3 * c
+
+
+@njit(cache=True)
+def height_above_flat(alpha, habs):
+    """e - |h|: centre height above its flat-lying value, in R, without cancellation near pi/2.
+
+    e = cos(alpha) + |h| |sin(alpha)| (eq. 4.9 with h = |h| sign(alpha));
+    1 - |sin a| = cos(a)^2 / (1 + |sin a|).
+    """
+    c = math.cos(alpha)
+    return c - habs * c * c / (1.0 + abs(math.sin(alpha)))
+
+
+@njit(cache=True)
+def energy(y, p, side, mode):
+    """Total energy chi^2 E/(m R^2), zero for the disk lying flat at rest (eq. 6.1, corrected).
+
+    1/2 (u1 + w2 - h w3)^2 + 1/2 (u2 - e w1)^2 + 1/2 f^2 w1^2 + 1/2 A (w1^2 + w3^2)
+    + 1/2 C w2^2 + G (e - |h|).
+    """
+    h = side * p[P_H]
+    a = y[Y_ALPHA]
+    s = math.sin(a)
+    c = math.cos(a)
+    e = c + h * s
+    f = h * c - s
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    u1 = 0.0
+    u2 = 0.0
+    if mode == SLIDE:
+        u1, u2 = y[Y_U1], y[Y_U2]
+    vx = u1 + w2 - h * w3
+    vy = u2 - e * w1
+    vz = f * w1
+    kin = 0.5 * (vx * vx + vy * vy + vz * vz) + 0.5 * p[P_A] * (w1 * w1 + w3 * w3) + 0.5 * p[P_C] * w2 * w2
+    return kin + p[P_G] * height_above_flat(a, p[P_H])
+
+
+@njit(cache=True)
+def _solve2(m11, m12, m21, m22, b1, b2):
+    det = m11 * m22 - m12 * m21
+    return (m22 * b1 - m12 * b2) / det, (m11 * b2 - m21 * b1) / det
+
+
+@njit(cache=True)
+def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
+    """Time derivatives d y/d tau of the state, and contact quantities in `aux`.
+
+    mode: ROLL (eq. 5.3, corrected) or SLIDE (eq. 4.7). side = sign(alpha) = +-1 selects H.
+    sig[i]: sign of omega.a_i used in M_f (eq. 3.3) for a component that is not stuck.
+    stuck[i] = 1: omega.a_i is held at 0 by the dry-friction moment (Filippov sliding); its
+    effective sign sigma_i in [-1, 1] is solved from d/dtau(omega.a_i) = 0.
+    (n0x, n0y): slip direction used while the slip speed is <= p[P_UFREEZE] (0: only at u = 0).
+    nstate: number of state components to fill (N_CORE, N_THETA, or N_FULL with kinematics).
+    aux: Phi, F1, F2 (friction on a1, a2), effective sigma_1..3, omega.a_1..3, ok-flag.
+    """
+    G = p[P_G]
+    h = side * p[P_H]
+    A = p[P_A]
+    C = p[P_C]
+    k1, k2, k3 = p[P_K1], p[P_K2], p[P_K3]
+    mud = p[P_MUD]
+    a = y[Y_ALPHA]
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    s = math.sin(a)
+    c = math.cos(a)
+    t = s / c
+    e = c + h * s              # centre height / R (eq. 4.9)
+    f = h * c - s              # de/dalpha
+    q = w2 - h * w3            # (centre velocity + slip) . a1 in rolling: w2 - h w3
+    thd = w3 / c               # dtheta/dtau = w3 sec(alpha), eq. (2.3)
+    phi0 = G - e * w1 * w1     # Phi = phi0 + f dw1/dtau  (vertical balance, eq. 4.6)
+
+    sig1 = sig[0]
+    sig2 = sig[1]
+    sig3 = sig[2]
+    u1 = 0.0
+    u2 = 0.0
+    n1 = 0.0
+    n2 = 0.0
+    if mode == SLIDE:
+        u1 = y[Y_U1]
+        u2 = y[Y_U2]
+        un = math.hypot(u1, u2)
+        if un > p[P_UFREEZE]:
+            n1 = u1 / un
+            n2 = u2 / un
+        else:
+            n1 = n0x
+            n2 = n0y
+        # e1 balance: A dw1 = C w2 w3 - A w3^2 t + Phi (e F2/Phi - f - k1 sig1), F = -mud Phi n
+        a1 = A
+        r1 = C * w2 * w3 - A * w3 * w3 * t
+        q1 = -mud * e * n2 - f
+    else:
+        # e1 balance with the rolling constraint substituted (eq. 5.3_2 with Phi kept)
+        a1 = A + 1.0 + h * h
+        r1 = C * w2 * w3 - A * w3 * w3 * t + e * thd * q - G * f
+        q1 = 0.0
+    ok = 1.0
+    if stuck[0] == 1 and k1 > 0.0:
+        dw1 = 0.0
+        phi = phi0
+        sig1 = (r1 + q1 * phi) / (k1 * phi)
+    else:
+        qq = q1 - k1 * sig1
+        den = a1 - qq * f
+        if den <= 0.0:
+            ok = 0.0   # Painleve-type inconsistency: no acceleration satisfies the contact law
+        dw1 = (r1 + qq * phi0) / den
+        phi = phi0 + f * dw1
+
+    # e2, e3 balances: M [dw2, dw3] = b0 - Phi [kb2, kb3], kb from eq. (4.8)
+    if mode == SLIDE:
+        m11, m12, m21, m22 = C, 0.0, 0.0, A
+        b2 = mud * phi * n1
+        b3 = -C * w1 * w2 + A * w1 * w3 * t - h * mud * phi * n1
+    else:
+        m11, m12, m21, m22 = C + 1.0, -h, -h, A + h * h
+        b2 = -e * w1 * thd
+        b3 = -C * w1 * w2 + A * w1 * w3 * t + h * e * w1 * thd
+    st2 = stuck[1] == 1 and k2 > 0.0
+    st3 = stuck[2] == 1 and k3 > 0.0
+    if st2 or st3:
+        # dw = W0 + sig2 W2 + sig3 W3; hold d/dtau(omega.a2) and/or d/dtau(omega.a3) at 0.
+        x0, y0 = _solve2(m11, m12, m21, m22, b2, b3)
+        x2, y2 = _solve2(m11, m12, m21, m22, -phi * k2 * c, phi * k2 * s)
+        x3, y3 = _solve2(m11, m12, m21, m22, -phi * k3 * s, -phi * k3 * c)
+        # d/dtau(w2 c - w3 s) = dw2 c - dw3 s - w1 (w2 s + w3 c)
+        # d/dtau(w2 s + w3 c) = dw2 s + dw3 c + w1 (w2 c - w3 s)
+        r2 = w1 * (w2 * s + w3 * c)
+        r3 = -w1 * (w2 * c - w3 * s)
+        if st2 and st3:
+            sig2, sig3 = _solve2(x2 * c - y2 * s, x3 * c - y3 * s, x2 * s + y2 * c, x3 * s + y3 * c,
+                                 r2 - (x0 * c - y0 * s), r3 - (x0 * s + y0 * c))
+        elif st2:
+            sig2 = (r2 - (x0 * c - y0 * s) - sig3 * (x3 * c - y3 * s)) / (x2 * c - y2 * s)
+        else:
+            sig3 = (r3 - (x0 * s + y0 * c) - sig2 * (x2 * s + y2 * c)) / (x3 * s + y3 * c)
+        dw2 = x0 + sig2 * x2 + sig3 * x3
+        dw3 = y0 + sig2 * y2 + sig3 * y3
+    else:
+        kb2 = k2 * sig2 * c + k3 * sig3 * s
+        kb3 = k3 * sig3 * c - k2 * sig2 * s
+        dw2, dw3 = _solve2(m11, m12, m21, m22, b2 - phi * kb2, b3 - phi * kb3)
+
+    if mode == SLIDE:
+        F1 = -mud * phi * n1
+        F2 = -mud * phi * n2
+        # derivatives of the slip components on a1, a2 (eq. 4.7_1,2)
+        du1 = thd * u2 + F1 - dw2 + h * dw3 - e * w1 * thd
+        du2 = -thd * u1 + F2 + e * dw1 - thd * q + f * w1 * w1
+    else:
+        # friction needed to roll (eq. 5.2_1)
+        F1 = dw2 - h * dw3 + e * w1 * thd
+        F2 = -e * dw1 + thd * q - f * w1 * w1
+        du1 = 0.0
+        du2 = 0.0
+
+    g1 = w1
+    g2 = w2 * c - w3 * s
+    g3 = w2 * s + w3 * c
+    dy[Y_ALPHA] = w1
+    dy[Y_W1] = dw1
+    dy[Y_W2] = dw2
+    dy[Y_W3] = dw3
+    dy[Y_U1] = du1
+    dy[Y_U2] = du2
+    # power of each dissipative mechanism (>= 0 when the signs are consistent):
+    # -F.v_P = mud Phi |u|;  -M_f.omega = Phi sum k_i sig_i (omega.a_i)
+    dy[Y_DSLIDE] = mud * phi * (u1 * n1 + u2 * n2)
+    dy[Y_DK1] = k1 * phi * sig1 * g1
+    dy[Y_DK2] = k2 * phi * sig2 * g2
+    dy[Y_DK3] = k3 * phi * sig3 * g3
+    if nstate > N_CORE:
+        dy[Y_THETA] = thd
+    if nstate > N_CORE + 1:
+        th = y[Y_THETA]
+        vx = u1 + q          # centre velocity on a1 (eq. 2.5 solved for v-bar)
+        vy = u2 - e * w1     # centre velocity on a2
+        ct = math.cos(th)
+        stt = math.sin(th)
+        dy[Y_PSI] = w2 - w3 * t
+        dy[Y_X] = vx * ct - vy * stt
+        dy[Y_Y] = vx * stt + vy * ct
+    aux[X_PHI] = phi
+    aux[X_F1] = F1
+    aux[X_F2] = F2
+    aux[X_SIG1] = sig1
+    aux[X_SIG2] = sig2
+    aux[X_SIG3] = sig3
+    aux[X_G1] = g1
+    aux[X_G2] = g2
+    aux[X_G3] = g3
+    aux[X_OK] = ok
+
+
+@njit(cache=True)
+def physical_velocity(y, p, side, mode, out):
+    """Centre velocity (on e1, e2, e3) and angular velocity (on e1, e2, e3) of the reduced state."""
+    h = side * p[P_H]
+    a = y[Y_ALPHA]
+    s = math.sin(a)
+    c = math.cos(a)
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    u1 = 0.0
+    u2 = 0.0
+    if mode == SLIDE:
+        u1, u2 = y[Y_U1], y[Y_U2]
+    # v = v_P - omega x r, r = -h e2 - e3; v_P = u1 a1 + u2 a2, a2 = c e2 - s e3
+    out[0] = u1 + w2 - h * w3
+    out[1] = u2 * c - w1
+    out[2] = -u2 * s + h * w1
+    out[3] = w1
+    out[4] = w2
+    out[5] = w3
+
+
+@njit(cache=True)
+def project_velocity(y, p, side_old, mode_old, side_new, mode_new):
+    """Perfectly plastic contact impulse: the kinetic-energy-metric projection of the velocity.
+
+    The physical velocity (v, omega) of the old state is projected, in the metric of the kinetic
+    energy (diag(1,1,1,A,C,A) on e-frame components), onto the velocities allowed by the new
+    contact (new side: the other rim edge after alpha crossed 0; new mode: ROLL kills the slip).
+    This is Gauss' principle for an impulsive constraint: the energy lost is
+    1/2 |V - V_new|^2_M >= 0, returned as the first output. y is updated in place.
+    """
+    V = np.empty(6)
+    physical_velocity(y, p, side_old, mode_old, V)
+    h = side_new * p[P_H]
+    a = y[Y_ALPHA]
+    s = math.sin(a)
+    c = math.cos(a)
+    W = np.array([1.0, 1.0, 1.0, p[P_A], p[P_C], p[P_A]])
+    nq = 5 if mode_new == SLIDE else 3
+    # columns: d V / d (w1, w2, w3, u1, u2) for the new contact
+    J = np.zeros((6, 5))
+    J[0, 1] = 1.0
+    J[0, 2] = -h
+    J[1, 0] = -1.0
+    J[2, 0] = h
+    J[3, 0] = 1.0
+    J[4, 1] = 1.0
+    J[5, 2] = 1.0
+    J[0, 3] = 1.0
+    J[1, 4] = c
+    J[2, 4] = -s
+    M = np.zeros((nq, nq))
+    b = np.zeros(nq)
+    for i in range(nq):
+        for k in range(6):
+            b[i] += J[k, i] * W[k] * V[k]
+            for j in range(nq):
+                M[i, j] += J[k, i] * W[k] * J[k, j]
+    qn = np.linalg.solve(M, b)
+    loss = 0.0
+    for k in range(6):
+        vk = 0.0
+        for j in range(nq):
+            vk += J[k, j] * qn[j]
+        loss += 0.5 * W[k] * (V[k] - vk) ** 2
+    y[Y_W1] = qn[0]
+    y[Y_W2] = qn[1]
+    y[Y_W3] = qn[2]
+    if mode_new == SLIDE:
+        y[Y_U1] = qn[3]
+        y[Y_U2] = qn[4]
+    else:
+        y[Y_U1] = 0.0
+        y[Y_U2] = 0.0
+    return loss
+
+
+@njit(cache=True)
+def steady_rolling_w3sq(beta, p):
+    """omega_3^2 of the steady centre-fixed rolling motion at inclination beta = pi/2 - |alpha|.
+
+    From the e1 balance of (5.3) with w1 = 0, w2 = |h| w3 (centre at rest) and no moment:
+    w3^2 (C h - A tan alpha) = G f. Negative where no such motion exists.
+    """
+    h = p[P_H]
+    a = 0.5 * math.pi - beta
+    s = math.sin(a)
+    c = math.cos(a)
+    return p[P_G] * (h * c - s) * c / (p[P_C] * h * c - p[P_A] * s)
+
+
+@njit(cache=True)
+def steady_rolling_energy(beta, p):
+    """Energy of the steady centre-fixed rolling motion at inclination beta (dimensionless).
+
+    E_ss = 1/2 (A + C h^2) w3^2 + G (e - |h|); it is ~ G beta (3/2 + C h^2/(2A)) for small beta.
+    The energy-equivalent inclination of a state is E_ss^{-1}(E): it is monotone in time because E
+    is, so its level crossings do not jitter with the nutation (docs/model.md, 'Halt levels').
+    """
+    w3sq = steady_rolling_w3sq(beta, p)
+    h = p[P_H]
+    return 0.5 * (p[P_A] + p[P_C] * h * h) * w3sq + p[P_G] * height_above_flat(0.5 * math.pi - beta, h)
+
+
+@njit(cache=True)
+def steady_rolling_max_level(p, step):
+    """Largest inclination (rad, on a grid of `step`) below which the steady centre-fixed rolling
+    motion exists and its energy increases with beta: where the energy-equivalent inclination is
+    defined. Scanned upwards from `step`; see scene.max_level."""
+    prev = 0.0
+    b = step
+    while b < 0.5 * math.pi:
+        if steady_rolling_w3sq(b, p) <= 0.0:
+            return b - step
+        e = steady_rolling_energy(b, p)
+        if not e > prev:
+            return b - step
+        prev = e
+        b += step
+    return b - step

@@ -1,0 +1,177 @@
+"""Roots and maxima on the dense output of one accepted step (numba kernels).
+
+Events are roots of g_k (g > 0 before the event). Roots are bracketed on the accepted step and
+refined with the Illinois variant of regula falsi on the 7th-order dense output until the bracket
+is shorter than EVENT_TOL_TAU (or 4 ulp of tau); the restart point is the right end of the
+bracket, where the event has certainly happened, so a restart can never re-detect the crossing.
+The maxima of the normal force Phi are found by Brent's method on the same dense output.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from .contact import eval_rhs, event_values
+from .dop853 import dense_eval
+from .layout import W_AUXBUF, W_DYBUF, W_GBUF, W_YBUF
+from .model import X_PHI, Y_ALPHA, Y_W1, Y_W2, Y_W3
+
+# Location tolerance on tau; below 4 ulp of tau the bracket cannot shrink further.
+EVENT_TOL_TAU = 1e-12
+# Interior points at which the cubic Hermite interpolant of a sign function is checked for a pair
+# of roots inside one step (a grazing double crossing leaves the end signs equal).
+HERMITE_CHECKS = 8
+
+
+@njit(cache=True)
+def _sign_rate(k, y, dy):
+    """d/dtau of omega.a_k (k = 0, 1, 2) from the state and its derivative."""
+    a = y[Y_ALPHA]
+    s = math.sin(a)
+    c = math.cos(a)
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    if k == 0:
+        return dy[Y_W1]
+    if k == 1:
+        return dy[Y_W2] * c - dy[Y_W3] * s - w1 * (w2 * s + w3 * c)
+    return dy[Y_W2] * s + dy[Y_W3] * c + w1 * (w2 * c - w3 * s)
+
+
+@njit(cache=True)
+def hermite_interior_root(k, sgn, y0, f0, y1, f1, g0, g1, h):
+    """First x in (0, 1) where the cubic Hermite interpolant of sgn * omega.a_k changes sign, else -1.
+
+    Uses values and tau-derivatives at both step ends (all already computed), so it costs no
+    right-hand-side evaluation; it catches double crossings that leave the end signs equal.
+    """
+    d0 = sgn * _sign_rate(k, y0, f0) * h
+    d1 = sgn * _sign_rate(k, y1, f1) * h
+    prev = g0
+    for j in range(1, HERMITE_CHECKS + 1):
+        x = j / (HERMITE_CHECKS + 1.0)
+        h00 = (1.0 + 2.0 * x) * (1.0 - x) ** 2
+        h10 = x * (1.0 - x) ** 2
+        h01 = x * x * (3.0 - 2.0 * x)
+        h11 = x * x * (x - 1.0)
+        v = h00 * g0 + h10 * d0 + h01 * g1 + h11 * d1
+        if prev > 0.0 and v <= 0.0:
+            return x
+        prev = v
+    return -1.0
+
+
+@njit(cache=True)
+def event_value_at(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
+    """g_k at time t on a step's dense output (coefficients F[row0:row0+7]): one RHS evaluation."""
+    dense_eval(F, row0, y_old, t_old, h, t, n, wk[W_YBUF])
+    eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+    event_values(wk[W_YBUF], wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
+    return wk[W_GBUF, k]
+
+
+@njit(cache=True)
+def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
+    """Illinois regula falsi for g_k on [ta, tb] with g(ta) > 0 >= g(tb). Returns (ta, tb) bracket.
+
+    At most 200 iterations: Illinois converges superlinearly, and bisection steps are forced
+    whenever the bracket fails to halve twice in a row, so 200 is never reached for a finite g.
+    """
+    side_kept = 0
+    for _ in range(200):
+        tol = max(EVENT_TOL_TAU, 4.0 * 2.220446049250313e-16 * max(abs(ta), abs(tb)))
+        if tb - ta <= tol:
+            break
+        width = tb - ta
+        tm = tb - gb * (tb - ta) / (gb - ga)
+        if not (tm > ta and tm < tb) or side_kept >= 2:
+            tm = 0.5 * (ta + tb)
+            side_kept = 0
+        gm = event_value_at(k, tm, F, 0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats)
+        if math.isnan(gm):
+            tb = tm
+            gb = -1.0
+            continue
+        if gm > 0.0:
+            ta = tm
+            ga = gm
+            gb *= 0.5      # Illinois: halve the retained end's value
+        else:
+            tb = tm
+            gb = gm
+            ga *= 0.5
+        if tb - ta > 0.5 * width:
+            side_kept += 1
+        else:
+            side_kept = 0
+    return ta, tb
+
+
+@njit(cache=True)
+def _phi_at(t, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
+    dense_eval(F, row0, y_old, t_old, h, t, n, wk[W_YBUF])
+    eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+    return wk[W_AUXBUF, X_PHI]
+
+
+@njit(cache=True)
+def brent_max_phi(ta, tb, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
+    """Time of the maximum of Phi on [ta, tb] by Brent's parabolic/golden-section search.
+
+    The location of a smooth maximum is determined only to ~sqrt(eps) relative to the bracket
+    (the function is flat there), so xtol = 1e-8 * (tb - ta) + 1e-14 is the useful precision.
+    """
+    cgold = 0.3819660112501051
+    a = ta
+    b = tb
+    x = w = v = a + cgold * (b - a)
+    fx = fw = fv = -_phi_at(x, F, row0, y_old, t_old, h, n, p, cs, wk, istats)
+    d = 0.0
+    e = 0.0
+    for _ in range(100):
+        xm = 0.5 * (a + b)
+        tol1 = 1e-8 * (tb - ta) + 1e-14
+        tol2 = 2.0 * tol1
+        if abs(x - xm) <= tol2 - 0.5 * (b - a):
+            break
+        use_golden = True
+        if abs(e) > tol1:
+            r = (x - w) * (fx - fv)
+            q = (x - v) * (fx - fw)
+            pp = (x - v) * q - (x - w) * r
+            q = 2.0 * (q - r)
+            if q > 0.0:
+                pp = -pp
+            q = abs(q)
+            etemp = e
+            e = d
+            if not (abs(pp) >= abs(0.5 * q * etemp) or pp <= q * (a - x) or pp >= q * (b - x)):
+                d = pp / q
+                u = x + d
+                if u - a < tol2 or b - u < tol2:
+                    d = tol1 if xm - x >= 0 else -tol1
+                use_golden = False
+        if use_golden:
+            e = (a - x) if x >= xm else (b - x)
+            d = cgold * e
+        u = x + d if abs(d) >= tol1 else x + (tol1 if d >= 0 else -tol1)
+        fu = -_phi_at(u, F, row0, y_old, t_old, h, n, p, cs, wk, istats)
+        if fu <= fx:
+            if u >= x:
+                a = x
+            else:
+                b = x
+            v, w, x = w, x, u
+            fv, fw, fx = fw, fx, fu
+        else:
+            if u < x:
+                a = u
+            else:
+                b = u
+            if fu <= fw or w == x:
+                v, w = w, u
+                fv, fw = fw, fu
+            elif fu <= fv or v == x or v == w:
+                v = u
+                fv = fu
+    return x, -fx

@@ -1,0 +1,194 @@
+"""Recorders that read an accepted step's dense output: halt levels, samples, Phi maxima, trajectory.
+
+They never change the trajectory. `trk` (float64, layout.T_*) carries their state between steps;
+level_out columns: tau, alpha, dtheta/dtau, f_hat (paper's 2/T over three Phi maxima), pending.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from .contact import eval_rhs
+from .dop853 import dense_eval
+from .layout import (CS_MODE, CS_SIDE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, N_CS, ROLL, T_NEXT_LEVEL,
+                     T_NEXT_SAMPLE, T_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
+                     T_NPK, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
+from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA, Y_W3, energy
+from .roots import brent_max_phi, locate
+
+# Minimum prominence of a located maximum of Phi over its bracket ends, relative to Phi.
+PEAK_PROMINENCE = 1e-6
+# Minimum separation of two Phi maxima, as a fraction of the precession period 2 pi/|dtheta/dtau|.
+MIN_PEAK_SEPARATION = 0.01
+
+
+@njit(cache=True)
+def _energy(y, p, cs):
+    return energy(y, p, int(cs[CS_SIDE]), 0 if cs[CS_MODE] == ROLL else 1)
+
+
+@njit(cache=True)
+def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk, track_peaks, u_tol, wk, istats):
+    """Record the halt levels crossed on [t, seg_end] (energy is monotone: one root each).
+
+    Returns the tau of the last level if it was reached in this segment (the scene halts), else -1.
+    """
+    nl = level_e.shape[0]
+    while int(trk[T_NEXT_LEVEL]) < nl:
+        L = int(trk[T_NEXT_LEVEL])
+        gl = _energy(y_seg, p, cs) - level_e[L]
+        if not gl <= 0.0:
+            return -1.0
+        gl0 = _energy(y, p, cs) - level_e[L]
+        if gl0 <= 0.0:
+            ta = t
+            tb = t
+        else:
+            ta, tb = locate(13, t, gl0, seg_end, gl, F, y, t, h, n, p, cs, u_tol, level_e[L], wk, istats)
+        tl = 0.5 * (ta + tb)
+        ybuf = wk[W_YBUF]
+        dense_eval(F, 0, y, t, h, tl, n, ybuf)
+        level_out[L, 0] = tl
+        level_out[L, 1] = ybuf[Y_ALPHA]
+        level_out[L, 2] = ybuf[Y_W3] / math.cos(ybuf[Y_ALPHA])
+        if track_peaks:
+            level_out[L, 4] = 1.0
+            trk[T_PENDING] += 1.0
+        trk[T_NEXT_LEVEL] = L + 1
+        istats[I_LEVELS] = L + 1
+        if L + 1 == nl:
+            return tl
+    return -1.0
+
+
+@njit(cache=True)
+def halt_flat(t, level_out, trk, level_e):
+    """The disk lies flat at t: the levels not yet crossed are crossed now (the face impact
+    dissipates what is left); levels recorded with the instantaneous precession rate unknown."""
+    nl = level_e.shape[0]
+    for L in range(int(trk[T_NEXT_LEVEL]), nl):
+        level_out[L, 0] = t
+    trk[T_NEXT_LEVEL] = nl
+
+
+@njit(cache=True)
+def record_sample(y, aux, p, cs, n, row):
+    """One sample row: state, energy, Phi, mode."""
+    for i in range(n):
+        row[i] = y[i]
+    row[N_FULL] = _energy(y, p, cs)
+    row[N_FULL + 1] = aux[X_PHI]
+    row[N_FULL + 2] = cs[CS_MODE]
+
+
+@njit(cache=True)
+def record_samples(t, y, h, seg_end, t_stop, F, n, p, cs, sample_tau, samples, trk, wk, istats):
+    """Samples with tau in (t, seg_end] (and <= t_stop) from the dense output."""
+    ns = sample_tau.shape[0]
+    while int(trk[T_NEXT_SAMPLE]) < ns:
+        j = int(trk[T_NEXT_SAMPLE])
+        ts = sample_tau[j]
+        if ts > seg_end or ts > t_stop:
+            return
+        dense_eval(F, 0, y, t, h, ts, n, wk[W_YBUF])
+        eval_rhs(ts, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+        record_sample(wk[W_YBUF], wk[W_AUXBUF], p, cs, n, samples[j])
+        trk[T_NEXT_SAMPLE] = j + 1
+
+
+@njit(cache=True)
+def record_traj(t, y, phi, mode, n, traj, istats):
+    """Append one trajectory row (flags an overflow instead of growing the buffer)."""
+    i = istats[I_TRAJ]
+    if i >= traj.shape[0]:
+        istats[I_OVERFLOW] |= 1
+        return
+    traj[i, 0] = t
+    for j in range(n):
+        traj[i, 1 + j] = y[j]
+    traj[i, 1 + N_FULL] = phi
+    traj[i, 2 + N_FULL] = mode
+    istats[I_TRAJ] = i + 1
+
+
+@njit(cache=True)
+def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running):
+    """Phi at the last three segment ends a < b >= c brackets a maximum: locate it (Brent) on the
+    two steps' dense outputs, keep it if it stands out of its bracket and is not closer than a small
+    fraction of the precession period to the previous one, and resolve pending levels' f_hat."""
+    npk = int(trk[T_NPK])
+    pa = trk[T_PHI_A]
+    pb = trk[T_PHI_B]
+    if pb > pa and pb >= phi_c and trk[T_PREV_OK] > 0.0:
+        cprev = wk[W_CSPREV, :N_CS]
+        tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], F, 7, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], n, p,
+                                 cprev, wk, istats)
+        tp2, pv2 = brent_max_phi(t, seg_end, F, 0, y, t, h, n, p, cs, wk, istats)
+        ybuf = wk[W_YBUF]
+        if pv1 >= pv2:
+            tpk, pvk = tp1, pv1
+            dense_eval(F, 7, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], tpk, n, ybuf)
+        else:
+            tpk, pvk = tp2, pv2
+            dense_eval(F, 0, y, t, h, tpk, n, ybuf)
+        thk = ybuf[Y_THETA]
+        # round-off wiggles (e.g. of a creeping slip) have no prominence; real nutation peaks rise
+        # ~0.1 Phi above the bracket ends
+        genuine = pvk - max(pa, phi_c) > PEAK_PROMINENCE * abs(pvk)
+        if genuine and npk > 0:
+            thd = abs(y[Y_W3] / math.cos(y[Y_ALPHA]))
+            if tpk - peaks[npk - 1, 0] < MIN_PEAK_SEPARATION * 2.0 * math.pi / max(thd, 1e-300):
+                if pvk > peaks[npk - 1, 1]:
+                    peaks[npk - 1, 0] = tpk
+                    peaks[npk - 1, 1] = pvk
+                    peaks[npk - 1, 2] = thk
+                genuine = False
+        if genuine:
+            if npk >= peaks.shape[0]:
+                istats[I_OVERFLOW] |= 2
+            else:
+                _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running)
+                npk += 1
+    trk[T_NPK] = npk
+    istats[I_PEAKS] = npk
+
+
+@njit(cache=True)
+def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running):
+    peaks[npk, 0] = tpk
+    peaks[npk, 1] = pvk
+    peaks[npk, 2] = thk
+    if npk >= 2 and (running or tpk <= fstats[F_TEND]):
+        fstats[F_NFMAX] = max(fstats[F_NFMAX], 2.0 / (tpk - peaks[npk - 2, 0]))
+    # resolve levels that now have a maximum after them: f_hat = 2 / (t_k - t_{k-2}) and the mean
+    # precession rate over the same window
+    for L in range(level_out.shape[0]):
+        if level_out[L, 4] == 1.0 and tpk > level_out[L, 0]:
+            j = npk - 1
+            while j >= 0 and peaks[j, 0] > level_out[L, 0]:
+                j -= 1
+            if j >= 2:
+                level_out[L, 3] = 2.0 / (peaks[j, 0] - peaks[j - 2, 0])
+                level_out[L, 2] = (peaks[j, 2] - peaks[j - 2, 2]) / (peaks[j, 0] - peaks[j - 2, 0])
+            level_out[L, 4] = 0.0
+            trk[T_PENDING] -= 1.0
+
+
+@njit(cache=True)
+def shift_peak_window(t, y, h, seg_end, phi_c, F, n, cs, trk, wk):
+    """Keep this segment's Phi, dense output and contact state for the next bracket."""
+    trk[T_PHI_A] = trk[T_PHI_B]
+    trk[T_TA] = trk[T_TB]
+    trk[T_PHI_B] = phi_c
+    trk[T_TB] = seg_end
+    for r in range(7):
+        for i in range(n):
+            F[7 + r, i] = F[r, i]
+    for i in range(n):
+        wk[W_YPREV, i] = y[i]
+    for i in range(N_CS):
+        wk[W_CSPREV, i] = cs[i]
+    trk[T_TPREV] = t
+    trk[T_HPREV] = h
+    trk[T_PREV_OK] = 1.0
