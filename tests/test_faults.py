@@ -200,7 +200,7 @@ def injected_stop(scene: dict) -> dict:
 @pytest.fixture
 def faulty_kernel(monkeypatch):
     """Patch the numba kernel's caller (sweep.simulate.run_kernel) for the RAISES and NAN scenes."""
-    from sweep import integrator
+    from sweep.core import layout
 
     sim = importlib.import_module("sweep.simulate")
     real = sim.run_kernel
@@ -212,11 +212,11 @@ def faulty_kernel(monkeypatch):
         if key != NAN:
             return real(sc, sample_tau, traj_cap)
         cfg = dict(sc.config, stop=dict(sc.config["stop"], max_steps=30))
-        istats, fstats, lev, samp, traj, peaks, y_end = real(dataclasses.replace(sc, config=cfg), sample_tau, traj_cap)
-        istats[integrator.I_OUTCOME] = outcomes.NUMERICAL_ERROR   # what the kernel reports on a NaN state
-        y_end[:] = np.nan
-        fstats[integrator.F_EEND] = np.nan
-        return istats, fstats, lev, samp, traj, peaks, y_end
+        out = real(dataclasses.replace(sc, config=cfg), sample_tau, traj_cap)
+        out.istats[layout.I_OUTCOME] = outcomes.NUMERICAL_ERROR   # what the kernel reports on a NaN state
+        out.y_end[:] = np.nan
+        out.fstats[layout.F_EEND] = np.nan
+        return out
 
     monkeypatch.setattr(sim, "run_kernel", kernel)
     monkeypatch.setattr(batch, "_warmed_up", False)

@@ -33,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from reference import newton_euler as ne  # noqa: E402
 
 from sweep import model as M  # noqa: E402
+from sweep.core.impulse import project_velocity  # noqa: E402
 
 RTOL = 1e-12
 N_VALID = 1000          # valid (den > 0, Phi > 0) states per mode / stuck combination
@@ -337,7 +338,8 @@ def test_project_velocity():
                     ws_old = ne.from_reduced(disk, y0, side_old, mode_old == M.ROLL,
                                              y0[M.Y_THETA], y0[M.Y_PSI])
                     E_old = M.energy(y0, p, side_old, mode_old)
-                    loss = M.project_velocity(y, p, side_old, mode_old, side_new, mode_new)
+                    loss = project_velocity(y, p, side_old, mode_old == M.SLIDE, side_new, mode_new == M.SLIDE,
+                                            np.zeros((7, 12)))
                     E_new = M.energy(y, p, side_new, mode_new)
                     count += 1
 

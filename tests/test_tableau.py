@@ -1,12 +1,12 @@
 """The DOP853 tableau: order 8 for the step and order 7 for the continuous extension.
 
-A plain numpy DOP853 step built from sweep.tableau integrates the Kepler-like test problem
+A plain numpy DOP853 step built from sweep.core.tableau integrates the Kepler-like test problem
 y'' = -y / |y|^3 (exact: circular orbit) so that a wrong digit in any coefficient shows up as a
 lower observed order.
 """
 import numpy as np
 
-from sweep import tableau as T
+from sweep.core import tableau as T
 
 
 def f(t, y):

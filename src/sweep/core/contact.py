@@ -4,12 +4,16 @@ discrete updates at events. Every decision here reads the state and physical par
 Modes (docs/model.md, 'Contact modes'):
   ROLL    no slip; friction is what rolling needs, inside the static cone |F| <= mu_s Phi.
   SLIDE   slip speed |u| > slip_tol; friction -mu_d Phi u/|u| (eq. 4.7).
-  SLAVED  slip speed u <= slip_tol, stored as y[U1] = u >= 0 (y[U2] = 0); the slip direction nu is
-          the quasi-static one, where the slip acceleration is parallel to the slip (its direction
-          rate, ~ mu_d Phi / u, is the stiff mode of the sliding equations; slaving it is the
-          leading order of the singular perturbation in u). The slip ends where u reaches 0
-          (located event: no impulse, the velocity is continuous), and hands back to SLIDE where
-          u grows past slip_tol.
+  SLAVED  a slip starting from rest (or given slower than slip_tol), while u <= slip_tol; stored as
+          y[U1] = u >= 0 (y[U2] = 0). Its direction nu is the quasi-static one, where the slip
+          acceleration is parallel to the slip (the direction rate, ~ mu_d Phi / u, is the stiff
+          mode of the sliding equations at u -> 0; slaving it is the leading order of the singular
+          perturbation in u). It hands over to SLIDE where u grows past slip_tol, and ends where u
+          returns to 0 (located event; the velocity is continuous).
+A SLIDE ends where |u| falls to slip_tol, by a plastic contact impulse that removes the remaining
+slip (O(slip_tol), first-order convergence in slip_tol). A slaved hand-over is not used there: a
+decaying slip generally spirals into u = 0 (its direction turns at a rate ~ 1/u without a
+quasi-static direction to settle on), so there is no slow manifold to hand over to.
 """
 from __future__ import annotations
 
@@ -20,14 +24,14 @@ from numba import njit
 from .impulse import project_velocity
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_DYTMP, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
-from .model import (P_K1, P_K2, P_K3, P_MUS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_U1,
+from .model import (P_K1, P_K2, P_K3, P_MUS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
                     Y_U2, Y_W1, Y_W2, Y_W3, energy, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
 EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against its moment's sign
 EV_UNSTICK1, EV_UNSTICK2, EV_UNSTICK3 = 3, 4, 5  # a stuck component needs more than k_i |N|
 EV_CONE = 6        # ROLL: the friction needed leaves the static cone, mu_s Phi - |F| = 0
-EV_SLIP_SLOW = 7   # SLIDE: |u| falls to slip_tol -> SLAVED
+EV_SLIP_SLOW = 7   # SLIDE: |u| falls to slip_tol -> ROLL (plastic impulse)
 EV_SLIP_STOP = 8   # SLAVED: u reaches 0 -> ROLL
 EV_SLIP_FAST = 9   # SLAVED: u grows to slip_tol -> SLIDE
 EV_CONTACT = 10    # Phi = 0: contact lost
@@ -269,7 +273,12 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     elif k == EV_CONE:
         start_slip(t, y, p, cs, n, wk, istats)
     elif k == EV_SLIP_SLOW:
-        set_slip(t, y, p, cs, n, u_tol, wk, istats)
+        # the slip ends at slip_tol by a plastic contact impulse (its energy goes to sliding)
+        side = int(cs[CS_SIDE])
+        y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
+        cs[CS_MODE] = ROLL
+        istats[I_TRANS] += 1
+        check_cone = True
     elif k == EV_SLIP_STOP:
         y[Y_U1] = 0.0
         y[Y_U2] = 0.0
@@ -303,7 +312,7 @@ def side_change(t, y, p, cs, n, u_tol, wk, istats, fstats):
         u = y[Y_U1]
         y[Y_U1] = u * math.cos(cs[CS_NU])
         y[Y_U2] = u * math.sin(cs[CS_NU])
-    loss = project_velocity(y, p, int(side), int(-side), mode != ROLL, wk[W_SCRATCH:W_SCRATCH + 6])
+    loss = project_velocity(y, p, int(side), mode != ROLL, int(-side), mode != ROLL, wk[W_SCRATCH:W_SCRATCH + 7])
     fstats[F_DIMPACT] += loss
     cs[CS_SIDE] = -side
     istats[I_IMPACTS] += 1

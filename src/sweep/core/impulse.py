@@ -11,39 +11,23 @@ import math
 
 from numba import njit
 
-from .model import P_A, P_C, P_H, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
+from .model import P_A, P_C, P_H, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, physical_velocity
 
-# columns of the scratch rows: J (6 x 5) in 0..4, augmented normal matrix (5 x 6) in 5..10,
-# velocity V in 11, metric weights in 12
-_J0, _M0, _V, _WT = 0, 5, 11, 12
-
-
-@njit(cache=True)
-def _velocity(y, h, with_slip, out, col):
-    """Physical velocity: centre velocity and angular velocity on e1, e2, e3 (reduced state)."""
-    a = y[Y_ALPHA]
-    s = math.sin(a)
-    c = math.cos(a)
-    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
-    u1 = y[Y_U1] if with_slip else 0.0
-    u2 = y[Y_U2] if with_slip else 0.0
-    # v = v_P - omega x r, r = -h e2 - e3; v_P = u1 a1 + u2 a2, a2 = c e2 - s e3
-    out[0, col] = u1 + w2 - h * w3
-    out[1, col] = u2 * c - w1
-    out[2, col] = -u2 * s + h * w1
-    out[3, col] = w1
-    out[4, col] = w2
-    out[5, col] = w3
+# scratch layout: rows 0..5 hold J (6 x 5) in columns 0..4 and the augmented normal matrix
+# (5 x 6) in columns 5..10; row 6 holds the old velocity V (columns 0..5) and the metric (6..11)
+_M0, _VROW, _WT = 5, 6, 6
 
 
 @njit(cache=True)
-def project_velocity(y, p, side_old, side_new, with_slip, S):
+def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S):
     """Project y's velocity onto the contact on `side_new` in place; returns the energy lost.
 
-    with_slip: the contact slides (slip components u1, u2 are free), else it rolls (u = 0).
-    S: scratch array with at least 6 rows and 13 columns.
+    slip_old/slip_new: the old/new contact slides (slip components u1, u2 free), else it rolls.
+    S: scratch array with at least 7 rows and 12 columns.
     """
-    _velocity(y, side_old * p[P_H], with_slip, S, _V)
+    V = S[_VROW]
+    physical_velocity(y, p, side_old, 1 if slip_old else 0, V)
+    with_slip = slip_new
     h = side_new * p[P_H]
     a = y[Y_ALPHA]
     s = math.sin(a)
@@ -51,13 +35,14 @@ def project_velocity(y, p, side_old, side_new, with_slip, S):
     nq = 5 if with_slip else 3
     for k in range(6):
         for j in range(5):
-            S[k, _J0 + j] = 0.0
-    S[0, _WT] = 1.0
-    S[1, _WT] = 1.0
-    S[2, _WT] = 1.0
-    S[3, _WT] = p[P_A]
-    S[4, _WT] = p[P_C]
-    S[5, _WT] = p[P_A]
+            S[k, j] = 0.0
+    W = S[_VROW, _WT:_WT + 6]
+    W[0] = 1.0
+    W[1] = 1.0
+    W[2] = 1.0
+    W[3] = p[P_A]
+    W[4] = p[P_C]
+    W[5] = p[P_A]
     # columns: d V / d (w1, w2, w3, u1, u2) for the new contact
     S[0, 1] = 1.0
     S[0, 2] = -h
@@ -72,12 +57,12 @@ def project_velocity(y, p, side_old, side_new, with_slip, S):
     for i in range(nq):
         b = 0.0
         for k in range(6):
-            b += S[k, i] * S[k, _WT] * S[k, _V]
+            b += S[k, i] * W[k] * V[k]
         S[i, _M0 + nq] = b
         for j in range(nq):
             m = 0.0
             for k in range(6):
-                m += S[k, i] * S[k, _WT] * S[k, j]
+                m += S[k, i] * W[k] * S[k, j]
             S[i, _M0 + j] = m
     # Gaussian elimination with partial pivoting on the nq x (nq + 1) augmented system
     for col in range(nq):
@@ -104,7 +89,7 @@ def project_velocity(y, p, side_old, side_new, with_slip, S):
         vk = 0.0
         for j in range(nq):
             vk += S[k, j] * S[j, _M0 + nq]
-        loss += 0.5 * S[k, _WT] * (S[k, _V] - vk) ** 2
+        loss += 0.5 * W[k] * (V[k] - vk) ** 2
     y[Y_W1] = S[0, _M0 + nq]
     y[Y_W2] = S[1, _M0 + nq]
     y[Y_W3] = S[2, _M0 + nq]

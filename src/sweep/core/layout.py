@@ -45,8 +45,8 @@ W_GNEW = 14      # at the step end
 W_GBUF = 15      # at a dense-output point
 W_YPREV = 16     # state at the previous step's start (its dense output is F[7:14])
 W_CSPREV = 17    # contact state of the previous step
-W_SCRATCH = 18   # 6 rows: the 5x6 augmented system of the plastic impulse
-N_WORK = 24
+W_SCRATCH = 18   # 7 rows: the plastic impulse's normal equations (impulse.py)
+N_WORK = 25
 
 # --- settings vector ----------------------------------------------------------------------------
 S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS, S_EXTRA = 0, 1, 2, 3, 4, 5, 6, 7, 8

@@ -291,62 +291,6 @@ def physical_velocity(y, p, side, mode, out):
 
 
 @njit(cache=True)
-def project_velocity(y, p, side_old, mode_old, side_new, mode_new):
-    """Perfectly plastic contact impulse: the kinetic-energy-metric projection of the velocity.
-
-    The physical velocity (v, omega) of the old state is projected, in the metric of the kinetic
-    energy (diag(1,1,1,A,C,A) on e-frame components), onto the velocities allowed by the new
-    contact (new side: the other rim edge after alpha crossed 0; new mode: ROLL kills the slip).
-    This is Gauss' principle for an impulsive constraint: the energy lost is
-    1/2 |V - V_new|^2_M >= 0, returned as the first output. y is updated in place.
-    """
-    V = np.empty(6)
-    physical_velocity(y, p, side_old, mode_old, V)
-    h = side_new * p[P_H]
-    a = y[Y_ALPHA]
-    s = math.sin(a)
-    c = math.cos(a)
-    W = np.array([1.0, 1.0, 1.0, p[P_A], p[P_C], p[P_A]])
-    nq = 5 if mode_new == SLIDE else 3
-    # columns: d V / d (w1, w2, w3, u1, u2) for the new contact
-    J = np.zeros((6, 5))
-    J[0, 1] = 1.0
-    J[0, 2] = -h
-    J[1, 0] = -1.0
-    J[2, 0] = h
-    J[3, 0] = 1.0
-    J[4, 1] = 1.0
-    J[5, 2] = 1.0
-    J[0, 3] = 1.0
-    J[1, 4] = c
-    J[2, 4] = -s
-    M = np.zeros((nq, nq))
-    b = np.zeros(nq)
-    for i in range(nq):
-        for k in range(6):
-            b[i] += J[k, i] * W[k] * V[k]
-            for j in range(nq):
-                M[i, j] += J[k, i] * W[k] * J[k, j]
-    qn = np.linalg.solve(M, b)
-    loss = 0.0
-    for k in range(6):
-        vk = 0.0
-        for j in range(nq):
-            vk += J[k, j] * qn[j]
-        loss += 0.5 * W[k] * (V[k] - vk) ** 2
-    y[Y_W1] = qn[0]
-    y[Y_W2] = qn[1]
-    y[Y_W3] = qn[2]
-    if mode_new == SLIDE:
-        y[Y_U1] = qn[3]
-        y[Y_U2] = qn[4]
-    else:
-        y[Y_U1] = 0.0
-        y[Y_U2] = 0.0
-    return loss
-
-
-@njit(cache=True)
 def steady_rolling_w3sq(beta, p):
     """omega_3^2 of the steady centre-fixed rolling motion at inclination beta = pi/2 - |alpha|.
 
