@@ -4,8 +4,7 @@ discrete updates at events. Every decision here reads the state and physical par
 Modes (docs/model.md, 'Contact modes'):
   ROLL    no slip; friction is what rolling needs, inside the static cone |F| <= mu_s Phi.
   SLIDE   slip speed |u| > slip_tol; friction -mu_d Phi u/|u| (eq. 4.7).
-  SLAVED  a slip starting from rest (or given slower than slip_tol), while u <= slip_tol; stored as
-          y[U1] = u >= 0 (y[U2] = 0). Its direction nu is the quasi-static one, where the slip
+  SLAVED  a slip starting from rest (or given slower than slip_tol), while |u| <= slip_tol. Its direction nu is the quasi-static one, where the slip
           acceleration is parallel to the slip (the direction rate, ~ mu_d Phi / u, is the stiff
           mode of the sliding equations at u -> 0; slaving it is the leading order of the singular
           perturbation in u). It hands over to SLIDE where u grows past slip_tol, and ends where u
@@ -25,7 +24,7 @@ from .impulse import project_velocity
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_DYTMP, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
 from .model import (P_K1, P_K2, P_K3, P_MUS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
-                    Y_U2, Y_W1, Y_W2, Y_W3, energy, rhs)
+                    Y_U2, Y_W1, Y_W2, Y_W3, energy_with_slip, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
 EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against its moment's sign
@@ -49,6 +48,16 @@ ZENO_DTAU = 1e-6
 # Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
 DIR_TOL = 1e-14
 DIR_MAXIT = 30
+
+
+@njit(cache=True)
+def mode_energy(y, p, cs):
+    """Energy of the state in the contact state cs (eq. 6.1 corrected; the slip counts when sliding)."""
+    side = int(cs[CS_SIDE])
+    mode = cs[CS_MODE]
+    if mode == ROLL:
+        return energy_with_slip(y, p, side, 0.0, 0.0)
+    return energy_with_slip(y, p, side, y[Y_U1], y[Y_U2])
 
 
 @njit(cache=True)
@@ -104,10 +113,14 @@ def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
     """d y/d tau and contact quantities (aux) for the contact state cs; counts its model calls."""
     mode = cs[CS_MODE]
     if mode == SLAVED:
-        nu = slaved_direction(cs[CS_NU], y[Y_U1], t, y, p, cs, n, dy, aux, wk[W_YSLIP], istats)
-        # the slaved slip speed obeys du/dtau = s . du_vec/dtau (dy holds the root's evaluation)
-        dy[Y_U1] = dy[Y_U1] * math.cos(nu) + dy[Y_U2] * math.sin(nu)
-        dy[Y_U2] = 0.0
+        u = math.hypot(y[Y_U1], y[Y_U2])
+        nu = slaved_direction(cs[CS_NU], u, t, y, p, cs, n, dy, aux, wk[W_YSLIP], istats)
+        # on the slaved direction the slip acceleration is parallel to the slip: du/dtau = (s.a) s
+        c = math.cos(nu)
+        s = math.sin(nu)
+        dot = dy[Y_U1] * c + dy[Y_U2] * s
+        dy[Y_U1] = dot * c
+        dy[Y_U2] = dot * s
     elif mode == SLIDE:
         un = math.hypot(y[Y_U1], y[Y_U2])
         nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
@@ -184,8 +197,6 @@ def set_slip(t, y, p, cs, n, u_tol, wk, istats):
         cs[CS_NU] = nu
         return
     cs[CS_MODE] = SLAVED
-    y[Y_U1] = un
-    y[Y_U2] = 0.0
     cs[CS_NU] = slaved_direction(nu, un, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP], istats)
 
 
@@ -245,13 +256,14 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
     elif mode == SLIDE:
         g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - u_tol
     else:
-        g[EV_SLIP_STOP] = y[Y_U1]
-        g[EV_SLIP_FAST] = u_tol - y[Y_U1]
+        # the slip along the slaved direction: reaches 0 where the slip ends
+        g[EV_SLIP_STOP] = y[Y_U1] * math.cos(cs[CS_NU]) + y[Y_U2] * math.sin(cs[CS_NU])
+        g[EV_SLIP_FAST] = u_tol - math.hypot(y[Y_U1], y[Y_U2])
     g[EV_CONTACT] = aux[X_PHI]
     g[EV_SIDE] = cs[CS_SIDE] * y[Y_ALPHA]
     g[EV_FACE] = (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
     if not math.isnan(level_e):
-        g[EV_LEVEL] = energy(y, p, int(cs[CS_SIDE]), 0 if mode == ROLL else 1) - level_e
+        g[EV_LEVEL] = mode_energy(y, p, cs) - level_e
 
 
 @njit(cache=True)
@@ -286,9 +298,6 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         istats[I_TRANS] += 1
         check_cone = True
     elif k == EV_SLIP_FAST:
-        u = y[Y_U1]
-        y[Y_U1] = u * math.cos(cs[CS_NU])
-        y[Y_U2] = u * math.sin(cs[CS_NU])
         cs[CS_MODE] = SLIDE
     elif k == EV_CONTACT:
         return 1   # outcomes.CONTACT_LOST
@@ -308,10 +317,6 @@ def side_change(t, y, p, cs, n, u_tol, wk, istats, fstats):
     rocking between the edges has collapsed into a Zeno sequence of impacts)."""
     mode = cs[CS_MODE]
     side = cs[CS_SIDE]
-    if mode == SLAVED:     # the slaved slip as a Cartesian vector
-        u = y[Y_U1]
-        y[Y_U1] = u * math.cos(cs[CS_NU])
-        y[Y_U2] = u * math.sin(cs[CS_NU])
     loss = project_velocity(y, p, int(side), mode != ROLL, int(-side), mode != ROLL, wk[W_SCRATCH:W_SCRATCH + 7])
     fstats[F_DIMPACT] += loss
     cs[CS_SIDE] = -side

@@ -16,7 +16,7 @@ from numba import njit
 
 from .. import outcomes as oc
 from .contact import (EV_FACE, EV_LEVEL, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
-                      cone_violated, eval_rhs, event_values, set_slip, slaved_direction, start_slip)
+                      cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .dop853 import dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
@@ -24,7 +24,7 @@ from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_E0, F_EEND, F_HLAST, F_S
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GBUF, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSLIP)
-from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1, energy
+from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1
 from .roots import hermite_interior_root, locate
 from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
                        track_peaks)
@@ -36,11 +36,6 @@ ENERGY_GUARD = 10.0
 SIGN_SCAN = 17     # dense-output points that confirm a double sign crossing found by Hermite
 
 KernelOutput = namedtuple("KernelOutput", "istats fstats levels samples trajectory peaks y_end")
-
-
-@njit(cache=True)
-def _mode_energy(y, p, cs):
-    return energy(y, p, int(cs[CS_SIDE]), 0 if cs[CS_MODE] == ROLL else 1)
 
 
 @njit(cache=True)
@@ -133,7 +128,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     t = 0.0
     start(y, p, cs, n, u_tol, wk, istats)
     eval_rhs(t, y, p, cs, n, f, aux, wk, istats)
-    fstats[F_E0] = _mode_energy(y, p, cs)
+    fstats[F_E0] = mode_energy(y, p, cs)
     e_guard = ENERGY_GUARD * rtol * max(abs(fstats[F_E0]), 1e-300)
     lev = level_e[0] if nl > 0 else math.nan
     event_values(y, aux, p, cs, u_tol, lev, g_old)
@@ -147,7 +142,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         record_sample(y, aux, p, cs, n, samples[int(trk[T_NEXT_SAMPLE])])
         trk[T_NEXT_SAMPLE] += 1.0
     if want_traj:
-        record_traj(t, y, aux[X_PHI], cs[CS_MODE], n, traj, istats)
+        record_traj(t, y, aux[X_PHI], cs, n, traj, istats)
     trk[T_PHI_B] = aux[X_PHI]
     h = initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats)
     h = min(h, h_max)
@@ -167,13 +162,13 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if running:
                 outcome = oc.T_MAX if hit_tmax else oc.STEP_SIZE_UNDERFLOW
             break
-        e_cur = _mode_energy(y, p, cs)
+        e_cur = mode_energy(y, p, cs)
         rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats)
         finite = True
         for i in range(n):
             if not math.isfinite(y_new[i]):
                 finite = False
-        if finite and _mode_energy(y_new, p, cs) > e_cur + e_guard:
+        if finite and mode_energy(y_new, p, cs) > e_cur + e_guard:
             finite = False
         err = error_norm(K, h, y, y_new, n, rtol, atol) if finite else math.inf
         if not err <= 1.0:
@@ -232,7 +227,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             for i in range(n):
                 f[i] = f_new[i]
         if want_traj and outcome < 0:
-            record_traj(t, y, aux_new[X_PHI] if first_k < 0 else math.nan, cs[CS_MODE], n, traj, istats)
+            record_traj(t, y, aux_new[X_PHI] if first_k < 0 else math.nan, cs, n, traj, istats)
 
         if first_k >= 0:
             istats[I_EVENTS] += 1
@@ -261,11 +256,11 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         else:
             for k in range(N_DYN_EVENTS + 1):
                 g_old[k] = g_new[k]
-            g_old[EV_LEVEL] = _mode_energy(y, p, cs) - lev if int(trk[T_NEXT_LEVEL]) < nl else math.inf
+            g_old[EV_LEVEL] = mode_energy(y, p, cs) - lev if int(trk[T_NEXT_LEVEL]) < nl else math.inf
             if cs[CS_MODE] == SLAVED:
                 # continuation of the slaved direction from this step end
-                cs[CS_NU] = slaved_direction(cs[CS_NU], y[Y_U1], t, y, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF],
-                                             wk[W_YBUF], istats)
+                cs[CS_NU] = slaved_direction(cs[CS_NU], math.hypot(y[Y_U1], y[Y_U1 + 1]), t, y, p, cs, n,
+                                             wk[W_DYBUF], wk[W_AUXBUF], wk[W_YBUF], istats)
         if hit_tmax and outcome < 0 and first_k < 0:
             outcome = oc.T_MAX
             fstats[F_TEND] = t
@@ -278,7 +273,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         for i in range(n):
             y_end[i] = y[i]
     istats[I_OUTCOME] = outcome
-    fstats[F_EEND] = _mode_energy(y_end, p, cs)
+    fstats[F_EEND] = mode_energy(y_end, p, cs)
     fstats[F_HLAST] = h
 
 

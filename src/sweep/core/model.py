@@ -90,8 +90,16 @@ def energy(y, p, side, mode):
     """Total energy chi^2 E/(m R^2), zero for the disk lying flat at rest (eq. 6.1, corrected).
 
     1/2 (u1 + w2 - h w3)^2 + 1/2 (u2 - e w1)^2 + 1/2 f^2 w1^2 + 1/2 A (w1^2 + w3^2)
-    + 1/2 C w2^2 + G (e - |h|).
+    + 1/2 C w2^2 + G (e - |h|); the slip (u1, u2) counts only when sliding.
     """
+    if mode == SLIDE:
+        return energy_with_slip(y, p, side, y[Y_U1], y[Y_U2])
+    return energy_with_slip(y, p, side, 0.0, 0.0)
+
+
+@njit(cache=True)
+def energy_with_slip(y, p, side, u1, u2):
+    """energy() with the slip components on a1, a2 given explicitly."""
     h = side * p[P_H]
     a = y[Y_ALPHA]
     s = math.sin(a)
@@ -99,10 +107,6 @@ def energy(y, p, side, mode):
     e = c + h * s
     f = h * c - s
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
-    u1 = 0.0
-    u2 = 0.0
-    if mode == SLIDE:
-        u1, u2 = y[Y_U1], y[Y_U2]
     vx = u1 + w2 - h * w3
     vy = u2 - e * w1
     vz = f * w1

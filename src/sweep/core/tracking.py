@@ -9,23 +9,18 @@ import math
 
 from numba import njit
 
-from .contact import eval_rhs
+from .contact import eval_rhs, mode_energy
 from .dop853 import dense_eval
 from .layout import (CS_MODE, CS_SIDE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, N_CS, ROLL, T_NEXT_LEVEL,
                      T_NEXT_SAMPLE, T_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
                      T_NPK, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
-from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA, Y_W3, energy
+from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA, Y_W3
 from .roots import brent_max_phi, locate
 
 # Minimum prominence of a located maximum of Phi over its bracket ends, relative to Phi.
 PEAK_PROMINENCE = 1e-6
 # Minimum separation of two Phi maxima, as a fraction of the precession period 2 pi/|dtheta/dtau|.
 MIN_PEAK_SEPARATION = 0.01
-
-
-@njit(cache=True)
-def _energy(y, p, cs):
-    return energy(y, p, int(cs[CS_SIDE]), 0 if cs[CS_MODE] == ROLL else 1)
 
 
 @njit(cache=True)
@@ -37,10 +32,10 @@ def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk,
     nl = level_e.shape[0]
     while int(trk[T_NEXT_LEVEL]) < nl:
         L = int(trk[T_NEXT_LEVEL])
-        gl = _energy(y_seg, p, cs) - level_e[L]
+        gl = mode_energy(y_seg, p, cs) - level_e[L]
         if not gl <= 0.0:
             return -1.0
-        gl0 = _energy(y, p, cs) - level_e[L]
+        gl0 = mode_energy(y, p, cs) - level_e[L]
         if gl0 <= 0.0:
             ta = t
             tb = t
@@ -77,7 +72,7 @@ def record_sample(y, aux, p, cs, n, row):
     """One sample row: state, energy, Phi, mode."""
     for i in range(n):
         row[i] = y[i]
-    row[N_FULL] = _energy(y, p, cs)
+    row[N_FULL] = mode_energy(y, p, cs)
     row[N_FULL + 1] = aux[X_PHI]
     row[N_FULL + 2] = cs[CS_MODE]
 
@@ -98,7 +93,7 @@ def record_samples(t, y, h, seg_end, t_stop, F, n, p, cs, sample_tau, samples, t
 
 
 @njit(cache=True)
-def record_traj(t, y, phi, mode, n, traj, istats):
+def record_traj(t, y, phi, cs, n, traj, istats):
     """Append one trajectory row (flags an overflow instead of growing the buffer)."""
     i = istats[I_TRAJ]
     if i >= traj.shape[0]:
@@ -108,7 +103,7 @@ def record_traj(t, y, phi, mode, n, traj, istats):
     for j in range(n):
         traj[i, 1 + j] = y[j]
     traj[i, 1 + N_FULL] = phi
-    traj[i, 2 + N_FULL] = mode
+    traj[i, 2 + N_FULL] = cs[CS_MODE]
     istats[I_TRAJ] = i + 1
 
 
