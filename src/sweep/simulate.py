@@ -10,7 +10,8 @@ import numpy as np
 from . import diagnostics, outcomes
 from .core import model
 from .core.integrate import integrate
-from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_IMPACTS,
+from .core.roots import EVENT_TOL_TAU
+from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_FLAT, I_IMPACTS,
                           I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
                           I_TRANS, N_SETTINGS, S_ATOL, S_EXTRA, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL,
                           S_TMAX, S_UTOL)
@@ -129,8 +130,14 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
     level_t = lev[:, 0] * chi
     prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)   # a frequency: magnitude of dtheta/dt / 2 pi
     nf_hz = lev[:, 3] / chi
-    fit = diagnostics.halt_time(level_t, levels)
     code = int(istats[I_OUTCOME])
+    lay_flat = bool(istats[I_FLAT])
+    if lay_flat:
+        # the disk reached the table face-down: that is its halt, located as an event
+        fit = {"t_halt": float(fstats[F_TEND]) * chi, "t_halt_error": EVENT_TOL_TAU * chi, "halt_finite": True,
+               "approach_exponent": math.nan}
+    else:
+        fit = diagnostics.halt_time(level_t, levels)
     t_end = float(fstats[F_TEND]) * chi
     dis = y_end[model.Y_DSLIDE:model.Y_DK3 + 1] * escale
     summary = {
@@ -139,6 +146,7 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
         "t_end": t_end,
         "t_halt": _finite_or_nan(fit["t_halt"]),
         "t_halt_error": _finite_or_nan(fit["t_halt_error"]),
+        "lay_flat": lay_flat,
         "halt_finite": bool(fit["halt_finite"]),
         "approach_exponent": _finite_or_nan(fit["approach_exponent"]),
         "ramp_exponent": diagnostics.ramp_exponent(level_t, prec_hz, fit["t_halt"]),

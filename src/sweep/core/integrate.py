@@ -23,7 +23,7 @@ from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_E0, F_EEND, F_HLAST, F_S
                      N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
-                     W_FNEW, W_GBUF, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSLIP)
+                     W_FNEW, W_GBUF, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1
 from .roots import hermite_interior_root, locate
 from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
@@ -191,7 +191,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         seg_end = first_t if first_k >= 0 else t + h
         if not have_dense:
             dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
-        y_seg = wk[W_YSLIP]   # free here: the state at the segment end
+        y_seg = wk[W_YSEG]
         if first_k >= 0:
             dense_eval(F, 0, y, t, h, seg_end, n, y_seg)
         else:
@@ -235,6 +235,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if code == oc.FACE_CONTACT and running:
                 # the disk lies flat: it has halted (docs/model.md, 'Halt')
                 halt_flat(t, level_out, trk, level_e)
+                istats[I_FLAT] = 1
                 outcome = oc.HALTED
                 fstats[F_TEND] = t
                 for i in range(n):

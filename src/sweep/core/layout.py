@@ -46,7 +46,8 @@ W_GBUF = 15      # at a dense-output point
 W_YPREV = 16     # state at the previous step's start (its dense output is F[7:14])
 W_CSPREV = 17    # contact state of the previous step
 W_SCRATCH = 18   # 7 rows: the plastic impulse's normal equations (impulse.py)
-N_WORK = 25
+W_YSEG = 25      # state at the end of the current segment (step end or event)
+N_WORK = 26
 
 # --- settings vector ----------------------------------------------------------------------------
 S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS, S_EXTRA = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -55,7 +56,8 @@ N_SETTINGS = 9
 # --- integer statistics -------------------------------------------------------------------------
 I_OUTCOME, I_STEPS, I_REJECTED, I_RHS, I_EVENTS, I_TRANS, I_STICK, I_IMPACTS, I_LEVELS, I_TRAJ, I_PEAKS = range(11)
 I_SLIDE_STEPS, I_SLIDE_REJECTED, I_OVERFLOW = 11, 12, 13   # steps while sliding; buffers too small
-N_ISTATS = 14
+I_FLAT = 14      # 1: the scene halted by lying flat (face contact)
+N_ISTATS = 15
 
 # --- float statistics ---------------------------------------------------------------------------
 F_TEND, F_SLIDETIME, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_NFMAX, F_TIMPACT = range(8)
