@@ -79,12 +79,20 @@ def _level_times(rtol, levels, **mods):
     return np.array([lv["t"] for lv in s["levels"]]), s
 
 
+@pytest.mark.xfail(strict=True, reason="known defect (issue #8 open): at rtol >= 1e-7 explicit steps hover at the "
+                   "stability limit of the stiff slip end (|u| ~ 3 slip_tol) instead of reaching slip_tol")
+def test_loose_tolerance_slip_end_does_not_hover():
+    t, s = _level_times(1e-6, [0.3, 0.1], stop__max_steps=100_000)
+    assert s["outcome"] == "halted", s["outcome"]
+
+
 def test_level_times_converge_with_rtol_at_observed_order():
     levels = [0.3, 0.1]
     ref, _ = _level_times(1e-13, levels)
-    errs = [np.max(np.abs(_level_times(rt, levels)[0] - ref) / ref) for rt in (1e-6, 1e-8, 1e-10)]
+    rtols = (1e-8, 1e-9, 1e-10)
+    errs = [np.max(np.abs(_level_times(rt, levels)[0] - ref) / ref) for rt in rtols]
     # error ~ rtol^q; q is reported (DOP853 with tolerance proportionality gives q ~ 1)
-    q = np.polyfit(np.log10([1e-6, 1e-8, 1e-10]), np.log10(errs), 1)[0]
+    q = np.polyfit(np.log10(rtols), np.log10(errs), 1)[0]
     print("relative level-time errors", errs, "observed order in rtol", q)
     assert errs[0] > errs[1] > errs[2]
     assert q > 0.7
