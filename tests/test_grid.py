@@ -198,7 +198,9 @@ def test_core_fingerprint_covers_physics_not_pipeline(tmp_path, monkeypatch):
     assert base == grid.core_fingerprint()
     (pkg / "io.py").write_text((pkg / "io.py").read_text() + "\n# pipeline edit\n")
     assert grid.core_fingerprint() == base
-    (pkg / "model.py").write_text((pkg / "model.py").read_text() + "\n# physics edit\n")
+    (pkg / "plots.py").write_text((pkg / "plots.py").read_text() + "\n# figure edit\n")
+    assert grid.core_fingerprint() == base
+    (pkg / "core" / "contact.py").write_text((pkg / "core" / "contact.py").read_text() + "\n# physics edit\n")
     assert grid.core_fingerprint() != base
 
 

@@ -393,18 +393,20 @@ def split_inner(inner_points: list[tuple[float, ...]], chunk_size: int) -> list[
     return blocks
 
 
-# Modules of the package that do not change a scene's result: the pipeline's own (chunk files
-# carry CHUNK_FORMAT instead) and the front ends. Every other module is physics.
-NON_CORE_MODULES = frozenset({"__init__.py", "__main__.py", "cli.py", "grid.py", "io.py", "batch.py"})
+# What decides a scene's result: the physics core package and the modules that turn a scene file
+# into kernel inputs and a summary. Front ends, plots and the pipeline's own modules are not in it
+# (chunk files carry CHUNK_FORMAT for those), so editing them does not recompute chunks.
+CORE_MODULES = ("scene.py", "simulate.py", "diagnostics.py", "outcomes.py")
 
 
 def core_fingerprint() -> str:
-    """SHA-256 of the physics core's source files (every module of the package but
-    NON_CORE_MODULES), so that a change of the core gives every chunk a new identity."""
+    """SHA-256 of the physics core's source files (src/sweep/core/*.py and CORE_MODULES), so that
+    a change of the core gives every chunk a new identity."""
+    pkg = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
-        if path.name not in NON_CORE_MODULES:
-            h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    paths = sorted((pkg / "core").glob("*.py")) + [pkg / m for m in CORE_MODULES]
+    for path in paths:
+        h.update(path.relative_to(pkg).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 
 
