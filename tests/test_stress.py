@@ -38,8 +38,7 @@ GRID = {
     "huge spin, omega3 -1000 rad/s": (dict(initial__omega=[0.0, 0.0, -1000.0]), {"contact_lost"}, None),
     "frictionless sliding, mu_d 0": (dict(contact__mu_d=0.0), {"halted", "face_contact"}, None),
     "high friction, mu_s = mu_d = 1.5": (dict(contact__mu_s=1.5, contact__mu_d=1.5), {"halted", "face_contact"},
-                                         "XFAIL known defect (issue #8 open): a creeping slip above slip_tol costs explicit "
-                                         "steps at its stability limit: > 2e5 steps"),
+                                         "creeping slips: their direction is slaved below SLAVE_EPS mu_d Phi"),
     "no rolling resistance, k_i 0": (dict(contact__k1=0.0, contact__k2=0.0, contact__k3=0.0), {"t_max"}, None),
     "rolling resistance 10x": (dict(contact__k1=10 * K["k1"], contact__k2=10 * K["k2"], contact__k3=10 * K["k3"]),
                                {"halted"}, None),

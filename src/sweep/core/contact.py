@@ -21,9 +21,9 @@ import math
 from numba import njit
 
 from .impulse import project_velocity
-from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
+from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_DYTMP, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
-from .model import (P_K1, P_K2, P_K3, P_MUS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
+from .model import (P_K1, P_K2, P_K3, P_MUD, P_MUS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
                     Y_U2, Y_W1, Y_W2, Y_W3, energy_with_slip, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
@@ -31,14 +31,15 @@ EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against it
 EV_UNSTICK1, EV_UNSTICK2, EV_UNSTICK3 = 3, 4, 5  # a stuck component needs more than k_i |N|
 EV_CONE = 6        # ROLL: the friction needed leaves the static cone, mu_s Phi - |F| = 0
 EV_SLIP_SLOW = 7   # SLIDE: |u| falls to slip_tol -> ROLL (plastic impulse)
-EV_SLIP_STOP = 8   # SLAVED: u reaches 0 -> ROLL
-EV_SLIP_FAST = 9   # SLAVED: u grows to slip_tol -> SLIDE
-EV_CONTACT = 10    # Phi = 0: contact lost
-EV_SIDE = 11       # alpha = 0: the other rim edge takes the contact
-EV_FACE = 12       # pi/2 - |alpha| = BETA_FACE: the face reaches the table
-N_DYN_EVENTS = 13
-EV_LEVEL = 13      # energy reaches the next halt level (recorded, no restart)
-N_EVENTS = 14
+EV_SLIP_STOP = 8   # SLAVED: u.s reaches 0 -> ROLL
+EV_SLIP_FAST = 9   # SLAVED: |u| grows to the slaving speed -> SLIDE
+EV_SLAVE = 10      # SLIDE: |u| falls to the slaving speed -> SLAVED if the direction has relaxed
+EV_CONTACT = 11    # Phi = 0: contact lost
+EV_SIDE = 12       # alpha = 0: the other rim edge takes the contact
+EV_FACE = 13       # pi/2 - |alpha| = BETA_FACE: the face reaches the table
+N_DYN_EVENTS = 14
+EV_LEVEL = 14      # energy reaches the next halt level (recorded, no restart)
+N_EVENTS = 15
 
 # Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
 # is then 1e-6 R above the table (38 nm for the paper's disk), below any real table's flatness. A disk
@@ -47,9 +48,19 @@ N_EVENTS = 14
 BETA_FACE = 1e-6
 # Two rim-edge impacts closer than ZENO_DTAU (tau) end the scene as line contact.
 ZENO_DTAU = 1e-6
+# Slaving speed: the slip direction is slaved where its relaxation time |u|/(mu_d Phi) (in units of
+# chi) is below SLAVE_EPS, i.e. |u_hat| <= SLAVE_EPS mu_d Phi (and at least slip_tol). The slaved
+# direction then differs from the integrated one by O(SLAVE_EPS) (singular perturbation).
+SLAVE_EPS = 1e-7
 # Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
 DIR_TOL = 1e-14
 DIR_MAXIT = 30
+
+
+@njit(cache=True)
+def slave_speed(aux, p, u_tol):
+    """Slip speed (u_hat) below which the slip direction is slaved: max(slip_tol, SLAVE_EPS mu_d Phi)."""
+    return max(u_tol, SLAVE_EPS * p[P_MUD] * aux[X_PHI])
 
 
 @njit(cache=True)
@@ -190,16 +201,70 @@ def start_slip(t, y, p, cs, n, wk, istats):
 
 @njit(cache=True)
 def set_slip(t, y, p, cs, n, u_tol, wk, istats):
-    """Contact state for a Cartesian slip vector y[U1:U3]: SLIDE above slip_tol, else SLAVED with
-    the quasi-static direction nearest the slip's own."""
+    """Contact state for a Cartesian slip vector y[U1:U3]: SLIDE above the slaving speed (or where
+    no quasi-static direction is near), else SLAVED with the quasi-static direction nearest the
+    slip's own."""
     un = math.hypot(y[Y_U1], y[Y_U2])
     nu = math.atan2(y[Y_U2], y[Y_U1])
     if un > u_tol:
         cs[CS_MODE] = SLIDE
         cs[CS_NU] = nu
+        cs[CS_SLAVE_OFF] = 0.0
+        _model(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0, istats)
+        if un <= slave_speed(wk[W_AUXTMP], p, u_tol):
+            try_slave(t, y, p, cs, n, wk, istats)
         return
     cs[CS_MODE] = SLAVED
     cs[CS_NU] = slaved_direction(nu, un, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP], istats)
+
+
+@njit(cache=True)
+def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
+    """The quasi-static slip direction that the direction dynamics d nu/d tau = cross(nu)/u carry nu
+    to: followed from nu in the direction of sign(cross) to the first sign change (64 steps on the
+    circle), then bisected to 1e-13 rad. NaN if cross keeps its sign on the whole circle (the slip
+    spirals into u = 0)."""
+    dy = wk[W_DYTMP]
+    aux = wk[W_AUXTMP]
+    ys = wk[W_YSLIP]
+    ca, da = slip_rates(nu, u, t, y, p, cs, n, dy, aux, ys, istats)
+    if ca == 0.0:
+        return nu
+    step = (2.0 * math.pi / 64) * (1.0 if ca > 0.0 else -1.0)
+    xa = nu
+    for j in range(1, 65):
+        xb = nu + j * step
+        cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
+        if (cb > 0.0) != (ca > 0.0):
+            lo, hi = xa, xb
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                cm, dm = slip_rates(mid, u, t, y, p, cs, n, dy, aux, ys, istats)
+                if (cm > 0.0) == (ca > 0.0):
+                    lo = mid
+                else:
+                    hi = mid
+                if abs(hi - lo) < 1e-13:
+                    break
+            return 0.5 * (lo + hi)
+        xa = xb
+    return math.nan
+
+
+@njit(cache=True)
+def try_slave(t, y, p, cs, n, wk, istats):
+    """SLIDE -> SLAVED onto the attracting quasi-static direction of the slip; where there is none
+    (a spiralling slip) it stays in SLIDE, and this hand-over is off until the slip is fast again."""
+    u = math.hypot(y[Y_U1], y[Y_U2])
+    root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, p, cs, n, wk, istats)
+    if math.isnan(root):
+        cs[CS_SLAVE_OFF] = 1.0
+        return
+    cs[CS_MODE] = SLAVED
+    cs[CS_NU] = root
+    # the slip component across the slaved direction is removed by a plastic impulse (O(u^2) loss)
+    side = int(cs[CS_SIDE])
+    y[Y_DSLIDE] += project_velocity(y, p, side, True, side, True, wk[W_SCRATCH:W_SCRATCH + 7], root)
 
 
 @njit(cache=True)
@@ -256,11 +321,14 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
     if mode == ROLL:
         g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
     elif mode == SLIDE:
-        g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - u_tol
+        un = math.hypot(y[Y_U1], y[Y_U2])
+        g[EV_SLIP_SLOW] = un - u_tol
+        if cs[CS_SLAVE_OFF] == 0.0:
+            g[EV_SLAVE] = un - slave_speed(aux, p, u_tol)
     else:
         # the slip along the slaved direction: reaches 0 where the slip ends
         g[EV_SLIP_STOP] = y[Y_U1] * math.cos(cs[CS_NU]) + y[Y_U2] * math.sin(cs[CS_NU])
-        g[EV_SLIP_FAST] = u_tol - math.hypot(y[Y_U1], y[Y_U2])
+        g[EV_SLIP_FAST] = slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
     g[EV_CONTACT] = aux[X_PHI]
     g[EV_SIDE] = cs[CS_SIDE] * y[Y_ALPHA]
     g[EV_FACE] = (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
@@ -286,6 +354,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         cs[CS_STUCK + i] = 0.0
     elif k == EV_CONE:
         start_slip(t, y, p, cs, n, wk, istats)
+        cs[CS_SLAVE_OFF] = 0.0
     elif k == EV_SLIP_SLOW:
         # the slip ends at slip_tol by a plastic contact impulse (its energy goes to sliding)
         side = int(cs[CS_SIDE])
@@ -301,6 +370,9 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         check_cone = True
     elif k == EV_SLIP_FAST:
         cs[CS_MODE] = SLIDE
+        cs[CS_SLAVE_OFF] = 0.0
+    elif k == EV_SLAVE:
+        try_slave(t, y, p, cs, n, wk, istats)
     elif k == EV_CONTACT:
         return 1   # outcomes.CONTACT_LOST
     elif k == EV_FACE:

@@ -19,10 +19,11 @@ _M0, _VROW, _WT = 5, 6, 6
 
 
 @njit(cache=True)
-def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S):
+def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S, slip_dir=math.nan):
     """Project y's velocity onto the contact on `side_new` in place; returns the energy lost.
 
-    slip_old/slip_new: the old/new contact slides (slip components u1, u2 free), else it rolls.
+    slip_old/slip_new: the old/new contact slides, else it rolls. A new sliding contact has both
+    slip components free, or, with slip_dir (rad) given, only the slip along (cos, sin)(slip_dir).
     S: scratch array with at least 7 rows and 12 columns.
     """
     V = S[_VROW]
@@ -32,7 +33,8 @@ def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S):
     a = y[Y_ALPHA]
     s = math.sin(a)
     c = math.cos(a)
-    nq = 5 if with_slip else 3
+    along = with_slip and not math.isnan(slip_dir)
+    nq = (4 if along else 5) if with_slip else 3
     for k in range(6):
         for j in range(5):
             S[k, j] = 0.0
@@ -51,9 +53,16 @@ def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S):
     S[3, 0] = 1.0
     S[4, 1] = 1.0
     S[5, 2] = 1.0
-    S[0, 3] = 1.0
-    S[1, 4] = c
-    S[2, 4] = -s
+    if along:
+        cd = math.cos(slip_dir)
+        sd = math.sin(slip_dir)
+        S[0, 3] = cd
+        S[1, 3] = sd * c
+        S[2, 3] = -sd * s
+    else:
+        S[0, 3] = 1.0
+        S[1, 4] = c
+        S[2, 4] = -s
     for i in range(nq):
         b = 0.0
         for k in range(6):
@@ -93,7 +102,10 @@ def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S):
     y[Y_W1] = S[0, _M0 + nq]
     y[Y_W2] = S[1, _M0 + nq]
     y[Y_W3] = S[2, _M0 + nq]
-    if with_slip:
+    if along:
+        y[Y_U1] = S[3, _M0 + nq] * math.cos(slip_dir)
+        y[Y_U2] = S[3, _M0 + nq] * math.sin(slip_dir)
+    elif with_slip:
         y[Y_U1] = S[3, _M0 + nq]
         y[Y_U2] = S[4, _M0 + nq]
     else:

@@ -17,15 +17,16 @@ from numba import njit
 from .. import outcomes as oc
 from .contact import (EV_FACE, EV_LEVEL, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
-from .dop853 import dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
+from .dop853 import N_DENSE, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
-                     N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
+                     N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GBUF, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1
 from .roots import hermite_interior_root, locate
+from .tableau import N_STAGES_EXTENDED
 from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
                        track_peaks)
 
@@ -295,8 +296,8 @@ def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=256):
         y = np.zeros(N_FULL)
         y[:y0.shape[0]] = y0
         y_end = np.zeros(N_FULL)
-        run(y, p.copy(), settings, level_e, sample_tau, np.zeros(N_CS), np.zeros((N_WORK, N_FULL)),
-            np.zeros((16, N_FULL)), np.zeros((14, N_FULL)), np.zeros(N_TRACK), istats, fstats, levels, samples,
+        run(y, p.copy(), settings, level_e, sample_tau, np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
+            np.zeros((N_STAGES_EXTENDED, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK), istats, fstats, levels, samples,
             traj, peaks, y_end)
         over = istats[I_OVERFLOW]
         if over == 0:

@@ -6,7 +6,8 @@ Contact state `cs` (float64, N_CS): the discrete state of the hybrid system.
     CS_SIDE    +1/-1: which rim edge carries the contact (sign of alpha)
     CS_SIG     3 slots: sign of omega.a_i used in the moment M_f (eq. 3.3)
     CS_STUCK   3 slots: 1 where omega.a_i is held at 0 by the dry-friction moment (Filippov)
-    CS_NU      slip direction angle on (a1, a2) (rad): the frozen/slaved friction direction
+    CS_NU      slip direction angle on (a1, a2) (rad): the slaved friction direction
+    CS_SLAVE_OFF  1 while a slip that found no quasi-static direction stays in SLIDE
 Work buffer `wk` (float64, N_WORK x N_FULL): rows used as vectors; `K` (16 x N_FULL) holds the RK
 stages, `F` (14 x N_FULL) the dense-output coefficients of this step (rows 0..6) and of the
 previous step (rows 7..13, for Phi maxima that straddle a step end).
@@ -24,7 +25,8 @@ CS_SIDE = 1
 CS_SIG = 2       # 2, 3, 4
 CS_STUCK = 5     # 5, 6, 7
 CS_NU = 8
-N_CS = 9
+CS_SLAVE_OFF = 9  # 1 after a failed SLIDE -> SLAVED hand-over, until the slip is fast again
+N_CS = 10
 
 # --- work-buffer rows ---------------------------------------------------------------------------
 W_Y = 0          # state at the step start
@@ -48,6 +50,7 @@ W_CSPREV = 17    # contact state of the previous step
 W_SCRATCH = 18   # 7 rows: the plastic impulse's normal equations (impulse.py)
 W_YSEG = 25      # state at the end of the current segment (step end or event)
 N_WORK = 26
+N_WCOLS = 16     # columns of the work buffer: >= N_FULL and >= the number of events
 
 # --- settings vector ----------------------------------------------------------------------------
 S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS, S_EXTRA = 0, 1, 2, 3, 4, 5, 6, 7, 8

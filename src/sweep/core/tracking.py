@@ -9,7 +9,7 @@ import math
 
 from numba import njit
 
-from .contact import eval_rhs, mode_energy
+from .contact import EV_LEVEL, eval_rhs, mode_energy
 from .dop853 import dense_eval
 from .layout import (CS_MODE, CS_SIDE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, N_CS, ROLL, T_NEXT_LEVEL,
                      T_NEXT_SAMPLE, T_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
@@ -40,7 +40,7 @@ def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk,
             ta = t
             tb = t
         else:
-            ta, tb = locate(13, t, gl0, seg_end, gl, F, y, t, h, n, p, cs, u_tol, level_e[L], wk, istats)
+            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, gl, F, y, t, h, n, p, cs, u_tol, level_e[L], wk, istats)
         tl = 0.5 * (ta + tb)
         ybuf = wk[W_YBUF]
         dense_eval(F, 0, y, t, h, tl, n, ybuf)
