@@ -52,6 +52,9 @@ ZENO_DTAU = 1e-6
 # chi) is below SLAVE_EPS, i.e. |u_hat| <= SLAVE_EPS mu_d Phi (and at least slip_tol). The slaved
 # direction then differs from the integrated one by O(SLAVE_EPS) (singular perturbation).
 SLAVE_EPS = 1e-7
+# A slaved slip returns to SLIDE only where it has grown to SLAVE_EXIT times the slaving speed: the
+# two modes' boundaries differ, so a slip near the slaving speed cannot switch at every step.
+SLAVE_EXIT = 4.0
 # Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
 DIR_TOL = 1e-14
 DIR_MAXIT = 30
@@ -255,16 +258,31 @@ def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
 def try_slave(t, y, p, cs, n, wk, istats):
     """SLIDE -> SLAVED onto the attracting quasi-static direction of the slip; where there is none
     (a spiralling slip) it stays in SLIDE, and this hand-over is off until the slip is fast again."""
+    # (cone_violated and start_slip are defined below; numba resolves them at compile time)
     u = math.hypot(y[Y_U1], y[Y_U2])
     root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, p, cs, n, wk, istats)
     if math.isnan(root):
         cs[CS_SLAVE_OFF] = 1.0
         return
-    cs[CS_MODE] = SLAVED
-    cs[CS_NU] = root
-    # the slip component across the slaved direction is removed by a plastic impulse (O(u^2) loss)
+    # the slip component across the slaved direction is removed by a plastic impulse (O(u^2) loss);
+    # an impulse that would leave the slip pointing against that direction stops it instead
     side = int(cs[CS_SIDE])
-    y[Y_DSLIDE] += project_velocity(y, p, side, True, side, True, wk[W_SCRATCH:W_SCRATCH + 7], root)
+    saved = wk[W_YSLIP]
+    for i in range(n):
+        saved[i] = y[i]
+    loss = project_velocity(y, p, side, True, side, True, wk[W_SCRATCH:W_SCRATCH + 7], root)
+    if y[Y_U1] * math.cos(root) + y[Y_U2] * math.sin(root) > 0.0:
+        y[Y_DSLIDE] += loss
+        cs[CS_MODE] = SLAVED
+        cs[CS_NU] = root
+        return
+    for i in range(n):
+        y[i] = saved[i]
+    y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
+    cs[CS_MODE] = ROLL
+    istats[I_TRANS] += 1
+    if cone_violated(t, y, p, cs, n, wk, istats):
+        start_slip(t, y, p, cs, n, wk, istats)
 
 
 @njit(cache=True)
@@ -328,7 +346,7 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
     else:
         # the slip along the slaved direction: reaches 0 where the slip ends
         g[EV_SLIP_STOP] = y[Y_U1] * math.cos(cs[CS_NU]) + y[Y_U2] * math.sin(cs[CS_NU])
-        g[EV_SLIP_FAST] = slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
+        g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
     g[EV_CONTACT] = aux[X_PHI]
     g[EV_SIDE] = cs[CS_SIDE] * y[Y_ALPHA]
     g[EV_FACE] = (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
