@@ -361,8 +361,6 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     Returns the outcome code that ends the scene, or -1 to continue. The caller re-evaluates the
     right-hand side and the event functions afterwards.
     """
-    mode = cs[CS_MODE]
-    check_cone = False
     if k <= EV_SIGN3:
         stick_or_flip(k, t, y, p, cs, n, wk, istats)
     elif k <= EV_UNSTICK3:
@@ -379,13 +377,11 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
         cs[CS_MODE] = ROLL
         istats[I_TRANS] += 1
-        check_cone = True
     elif k == EV_SLIP_STOP:
         y[Y_U1] = 0.0
         y[Y_U2] = 0.0
         cs[CS_MODE] = ROLL
         istats[I_TRANS] += 1
-        check_cone = True
     elif k == EV_SLIP_FAST:
         cs[CS_MODE] = SLIDE
         cs[CS_SLAVE_OFF] = 0.0
@@ -397,7 +393,9 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         return 8   # outcomes.FACE_CONTACT (the caller records it as a halt)
     elif k == EV_SIDE:
         return side_change(t, y, p, cs, n, u_tol, wk, istats, fstats)
-    if check_cone and cone_violated(t, y, p, cs, n, wk, istats):
+    # a rolling state must be admissible after every discrete update: a moment sign that flips or
+    # sticks changes the friction that rolling needs, and it may jump outside the static cone
+    if cs[CS_MODE] == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
         start_slip(t, y, p, cs, n, wk, istats)
     return -1
 

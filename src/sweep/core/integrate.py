@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from .. import outcomes as oc
-from .contact import (EV_FACE, EV_LEVEL, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
+from .contact import (EV_CONE, EV_FACE, EV_LEVEL, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .dop853 import N_DENSE, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
@@ -25,7 +25,7 @@ from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_E0, F_EEND, F_HLAST, F_S
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GBUF, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1
-from .roots import hermite_interior_root, locate
+from .roots import event_rate, hermite_dip, hermite_interior_root, locate
 from .tableau import N_STAGES_EXTENDED
 from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
                        track_peaks)
@@ -56,10 +56,11 @@ def start(y, p, cs, n, u_tol, wk, istats):
 
 @njit(cache=True)
 def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats):
-    """Earliest event on the accepted step [t, t + h]: (k, bracket start, restart time, dense?).
+    """Earliest event on the accepted step [t, t + h]: (k, restart time, dense output made?).
 
-    A sign function that is positive at both ends can still cross zero twice inside the step: the
-    cubic Hermite interpolant (no RHS calls) flags it, the dense output confirms it.
+    A sign function or the cone margin that is positive at both ends can still cross zero twice
+    inside the step: the cubic Hermite interpolant of g (its end derivatives from the state for the
+    signs, by a difference along f for the cone) flags it, the dense output confirms it.
     """
     g_old = wk[W_GOLD]
     g_new = wk[W_GNEW]
@@ -73,8 +74,15 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats
         gb = 0.0
         if g_old[k] > 0.0 and g_new[k] <= 0.0:
             ta, ga, tb, gb = t, g_old[k], t + h, g_new[k]
-        elif k <= EV_SIGN3 and g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf:
-            if hermite_interior_root(k, cs[CS_SIG + k], y, f, y_new, f_new, g_old[k], g_new[k], h) > 0.0:
+        elif (k <= EV_SIGN3 or k == EV_CONE) and g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf:
+            if k == EV_CONE:
+                # the cone margin can dip below 0 and back within a step (a brief slip demand)
+                d0 = event_rate(k, g_old[k], t, y, f, p, cs, n, u_tol, lev, wk, istats) * h
+                d1 = event_rate(k, g_new[k], t + h, y_new, f_new, p, cs, n, u_tol, lev, wk, istats) * h
+                dip = hermite_dip(g_old[k], d0, g_new[k], d1)
+            else:
+                dip = hermite_interior_root(k, cs[CS_SIG + k], y, f, y_new, f_new, g_old[k], g_new[k], h)
+            if dip > 0.0:
                 if not have_dense:
                     dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
                     have_dense = True

@@ -22,6 +22,8 @@ EVENT_TOL_TAU = 1e-12
 # Interior points at which the cubic Hermite interpolant of a sign function is checked for a pair
 # of roots inside one step (a grazing double crossing leaves the end signs equal).
 HERMITE_CHECKS = 8
+# Step (tau) of the forward difference that gives the rate of an event function without a closed form.
+RATE_STEP = 1e-7
 
 
 @njit(cache=True)
@@ -39,14 +41,9 @@ def _sign_rate(k, y, dy):
 
 
 @njit(cache=True)
-def hermite_interior_root(k, sgn, y0, f0, y1, f1, g0, g1, h):
-    """First x in (0, 1) where the cubic Hermite interpolant of sgn * omega.a_k changes sign, else -1.
-
-    Uses values and tau-derivatives at both step ends (all already computed), so it costs no
-    right-hand-side evaluation; it catches double crossings that leave the end signs equal.
-    """
-    d0 = sgn * _sign_rate(k, y0, f0) * h
-    d1 = sgn * _sign_rate(k, y1, f1) * h
+def hermite_dip(g0, d0, g1, d1):
+    """First x in (0, 1) where the cubic Hermite interpolant of g (values g0, g1 and derivatives d0,
+    d1 per unit x at the step ends) reaches 0 at one of HERMITE_CHECKS interior points, else -1."""
     prev = g0
     for j in range(1, HERMITE_CHECKS + 1):
         x = j / (HERMITE_CHECKS + 1.0)
@@ -59,6 +56,25 @@ def hermite_interior_root(k, sgn, y0, f0, y1, f1, g0, g1, h):
             return x
         prev = v
     return -1.0
+
+
+@njit(cache=True)
+def hermite_interior_root(k, sgn, y0, f0, y1, f1, g0, g1, h):
+    """Interior dip of sgn * omega.a_k on a step whose end values are both positive (see hermite_dip);
+    its derivatives follow from the state and its derivative, so it costs no RHS evaluation."""
+    return hermite_dip(g0, sgn * _sign_rate(k, y0, f0) * h, g1, sgn * _sign_rate(k, y1, f1) * h)
+
+
+@njit(cache=True)
+def event_rate(k, g_here, t, y, f, p, cs, n, u_tol, level_e, wk, istats):
+    """d g_k/d tau along the solution at (t, y) (where g_k = g_here, derivative f), by a forward
+    difference of step RATE_STEP along f (one RHS evaluation)."""
+    ys = wk[W_YBUF]
+    for i in range(n):
+        ys[i] = y[i] + RATE_STEP * f[i]
+    eval_rhs(t + RATE_STEP, ys, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+    event_values(ys, wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
+    return (wk[W_GBUF, k] - g_here) / RATE_STEP
 
 
 @njit(cache=True)
