@@ -18,10 +18,10 @@ from .. import outcomes as oc
 from .contact import (EV_CONE, EV_FACE, EV_LEVEL, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .dop853 import N_DENSE, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
-from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
+from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
-                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT,
+                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GBUF, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1
@@ -213,6 +213,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 outcome = oc.HALTED
                 fstats[F_TEND] = t_halt
                 dense_eval(F, 0, y, t, h, t_halt, n, y_end)
+                fstats[F_EEND] = mode_energy(y_end, p, cs)
+                trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
             elif int(trk[T_NEXT_LEVEL]) < nl:
                 lev = level_e[int(trk[T_NEXT_LEVEL])]
         record_samples(t, y, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, F, n, p, cs, sample_tau,
@@ -249,6 +251,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 fstats[F_TEND] = t
                 for i in range(n):
                     y_end[i] = y[i]
+                fstats[F_EEND] = mode_energy(y_end, p, cs)
+                trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
             elif code >= 0:
                 if running:
                     outcome = code
@@ -278,12 +282,14 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
 
     if outcome < 0:
         outcome = oc.STEP_LIMIT
-    if outcome != oc.HALTED or fstats[F_TEND] == 0.0:
+    if outcome == oc.HALTED:
+        fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the halt
+    else:
         fstats[F_TEND] = t
         for i in range(n):
             y_end[i] = y[i]
+        fstats[F_EEND] = mode_energy(y_end, p, cs)
     istats[I_OUTCOME] = outcome
-    fstats[F_EEND] = mode_energy(y_end, p, cs)
     fstats[F_HLAST] = h
 
 

@@ -1,0 +1,127 @@
+"""Convergence over the parameter space (issue #8): a fixed-seed subset of the random-scene harness
+(benchmarks/convergence.py) and the reproducers that once switched branch with the tolerance.
+
+Numerical error is what changes with rtol; sensitivity is what a 1e-10 rad change of alpha0 does.
+Well-conditioned quantities (sensitivity < 1e-8 relative) must agree between rtol 1e-10 and 1e-12
+to 1e-6, with the same event sequence.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sweep
+from sweep.scene import DEFAULTS
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import convergence as harness  # noqa: E402
+
+N_SCENES = 30
+SEED = 7
+
+
+def _subset():
+    rng = np.random.default_rng(SEED)
+    scenes = [harness._valid_levels(harness.draw_scene(rng)) for _ in range(N_SCENES)]
+    for sc in scenes:
+        sc["stop"]["t_max"] = 60.0      # keeps the suite short; the harness runs to 300 s
+    return scenes
+
+
+@pytest.fixture(scope="module")
+def runs():
+    out = []
+    for cfg in _subset():
+        default = harness._one_run(cfg, 1e-10)
+        tight = harness._one_run(cfg, 1e-12)
+        pert = harness._one_run(cfg, 1e-12, 1e-10 * math.copysign(1.0, cfg["initial"]["alpha"]))
+        out.append((cfg, default, tight, pert))
+    return out
+
+
+def test_random_scenes_end_physically_without_failures(runs):
+    for cfg, *rs in runs:
+        for r in rs:
+            assert "exception" not in r, (cfg, r)
+            assert not r["nan_in_summary"], cfg
+            assert r["outcome"] != "step_size_underflow", cfg
+            assert r["outcome"] != "numerical_error", cfg
+            assert r["outcome"] != "step_limit", cfg
+            # what is left plus what was dissipated is what there was, to the global error of the
+            # quadratures (~rtol per step: 8e-8 E0 after 1e5 steps; issue #8 asks 1e-9, not met)
+            assert r["budget"] < 1e-6, (cfg, r["budget"])
+
+
+def test_well_conditioned_quantities_converge_with_the_same_events(runs):
+    n_wc = n_ok = 0
+    bad = []
+    for cfg, default, tight, pert in runs:
+        if pert["events"] == tight["events"]:   # a discrete sequence that the dynamics do not change
+            assert default["events"] == tight["events"], (cfg, default["events"], tight["events"])
+        for k, v in tight["q"].items():
+            if v is None or not math.isfinite(v):
+                continue
+            if not harness._rel(pert["q"][k], v) < harness.WELL_CONDITIONED:
+                continue
+            n_wc += 1
+            err = harness._rel(default["q"][k], v)
+            if err <= harness.AGREE:
+                n_ok += 1
+            else:
+                bad.append((k, err, cfg))
+    print(f"\nwell-conditioned quantities within {harness.AGREE:g}: {n_ok}/{n_wc}")
+    assert n_wc >= 60
+    assert not bad, bad[:3]
+
+
+def _reproducer_1(rtol):
+    cfg = {"disk": {"radius": 0.009949042587459808, "thickness": 0.00014859458124330668,
+                    "mass": 0.34225959698231734, "shape": "solid"},
+           "contact": {"mu_s": 1.111739276303773, "mu_d": 0.056486485412309155, "k1": 7.479156886316974e-08,
+                       "k2": 1.417391173403711e-05, "k3": 1.6787014706282867e-08},
+           "gravity": 9.81,
+           "initial": {"alpha": 0.27668410699108603, "omega": [0, 0, -4.732216567790502], "slip": [0, 0]},
+           "stop": {"levels": [1e-7], "t_max": 5.0}, "solver": {"rtol": rtol, "atol": rtol * 1e-2}}
+    chi = math.sqrt(1.25 * cfg["disk"]["radius"] / 9.81)
+    return float(sweep.simulate(cfg, sample_times=[50.0 * chi]).samples["alpha"][0])
+
+
+def _reproducer_2(rtol):
+    cfg = copy.deepcopy(DEFAULTS)
+    chi = math.sqrt(1.25 * 0.03755 / 9.81)
+    cfg["initial"]["omega"] = [0.0, 0.0, -0.5 / chi]
+    cfg["stop"] = {"levels": [1e-7], "t_max": 101.0 * chi}
+    cfg["solver"] = {"rtol": rtol, "atol": rtol * 1e-2}
+    return float(sweep.simulate(cfg, sample_times=[100.0 * chi]).samples["alpha"][0])
+
+
+@pytest.mark.parametrize("reproducer", [_reproducer_1, _reproducer_2])
+def test_issue_reproducers_converge(reproducer):
+    # alpha at tau = 50 (resp. 100) once moved by 0.18 (2.7e-2) rad between tolerances
+    a = [reproducer(rt) for rt in (1e-10, 1e-12, 1e-13)]
+    assert abs(a[0] - a[2]) < 1e-7, a
+    assert abs(a[1] - a[2]) < 1e-9, a
+
+
+def test_paper_case_with_its_exact_spin_keeps_its_branch():
+    # omega_hat(0) = -e3 exactly; at rtol 1e-10 it once took another branch (36 transitions, the
+    # 0.01 level at 18.47 s instead of 15.09 s)
+    cfg = copy.deepcopy(DEFAULTS)
+    cfg["initial"]["omega"] = [0.0, 0.0, -14.456878347621343]
+    cfg["outputs"]["normal_force_frequency"] = False
+    res = []
+    for rt in (1e-10, 1e-13):
+        c = copy.deepcopy(cfg)
+        c["solver"] = {"rtol": rt, "atol": rt * 1e-2}
+        res.append(sweep.simulate(c).summary)
+    assert res[0]["n_transitions"] == res[1]["n_transitions"]
+    t0 = [lv["t"] for lv in res[0]["levels"]]
+    t1 = [lv["t"] for lv in res[1]["levels"]]
+    assert abs(t0[0] - t1[0]) < 1e-9 * t1[0]          # 0.1 level: well conditioned
+    assert abs(t0[1] - t1[1]) < 1e-5 * t1[1]          # 0.01 level: sensitive (docs/model.md)
+    assert abs(res[0]["t_halt"] - res[1]["t_halt"]) < 1e-2
