@@ -25,7 +25,7 @@ from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GBUF, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1
-from .roots import event_rate, hermite_dip, hermite_interior_root, locate
+from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, locate
 from .tableau import N_STAGES_EXTENDED
 from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
                        track_peaks)
@@ -34,7 +34,6 @@ EPS = 2.220446049250313e-16
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
 # increases, so such a step is an instability the error estimate did not see; it is rejected.
 ENERGY_GUARD = 10.0
-SIGN_SCAN = 17     # dense-output points that confirm a double sign crossing found by Hermite
 
 KernelOutput = namedtuple("KernelOutput", "istats fstats levels samples trajectory peaks y_end")
 
@@ -83,21 +82,14 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats
             else:
                 dip = hermite_interior_root(k, cs[CS_SIG + k], y, f, y_new, f_new, g_old[k], g_new[k], h)
             if dip > 0.0:
+                # confirm on the dense output at the interpolant's minimum
                 if not have_dense:
                     dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
                     have_dense = True
-                prevt = t
-                prevg = g_old[k]
-                for j in range(1, SIGN_SCAN):
-                    tj = t + h * j / SIGN_SCAN
-                    dense_eval(F, 0, y, t, h, tj, n, wk[W_YBUF])
-                    eval_rhs(tj, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
-                    event_values(wk[W_YBUF], wk[W_AUXBUF], p, cs, u_tol, lev, wk[W_GBUF])
-                    if prevg > 0.0 and wk[W_GBUF, k] <= 0.0:
-                        ta, ga, tb, gb = prevt, prevg, tj, wk[W_GBUF, k]
-                        break
-                    prevt = tj
-                    prevg = wk[W_GBUF, k]
+                tm = t + dip * h
+                gm = event_value_at(k, tm, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+                if gm <= 0.0:
+                    ta, ga, tb, gb = t, g_old[k], tm, gm
         if ta >= 0.0 and ta < first_t:
             if not have_dense:
                 dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)

@@ -19,9 +19,6 @@ from .model import X_PHI, Y_ALPHA, Y_W1, Y_W2, Y_W3
 
 # Location tolerance on tau; below 4 ulp of tau the bracket cannot shrink further.
 EVENT_TOL_TAU = 1e-12
-# Interior points at which the cubic Hermite interpolant of a sign function is checked for a pair
-# of roots inside one step (a grazing double crossing leaves the end signs equal).
-HERMITE_CHECKS = 8
 # Step (tau) of the forward difference that gives the rate of an event function without a closed form.
 RATE_STEP = 1e-7
 
@@ -41,21 +38,42 @@ def _sign_rate(k, y, dy):
 
 
 @njit(cache=True)
+def _hermite(x, g0, d0, g1, d1):
+    h00 = (1.0 + 2.0 * x) * (1.0 - x) ** 2
+    h10 = x * (1.0 - x) ** 2
+    h01 = x * x * (3.0 - 2.0 * x)
+    h11 = x * x * (x - 1.0)
+    return h00 * g0 + h10 * d0 + h01 * g1 + h11 * d1
+
+
+@njit(cache=True)
 def hermite_dip(g0, d0, g1, d1):
-    """First x in (0, 1) where the cubic Hermite interpolant of g (values g0, g1 and derivatives d0,
-    d1 per unit x at the step ends) reaches 0 at one of HERMITE_CHECKS interior points, else -1."""
-    prev = g0
-    for j in range(1, HERMITE_CHECKS + 1):
-        x = j / (HERMITE_CHECKS + 1.0)
-        h00 = (1.0 + 2.0 * x) * (1.0 - x) ** 2
-        h10 = x * (1.0 - x) ** 2
-        h01 = x * x * (3.0 - 2.0 * x)
-        h11 = x * x * (x - 1.0)
-        v = h00 * g0 + h10 * d0 + h01 * g1 + h11 * d1
-        if prev > 0.0 and v <= 0.0:
-            return x
-        prev = v
-    return -1.0
+    """Where in (0, 1) the cubic Hermite interpolant of g (values g0, g1 > 0 and derivatives d0, d1
+    per unit x at the step ends) has an interior minimum <= 0: that x, else -1. The minimum is found
+    exactly (a root of the quadratic derivative)."""
+    # H'(x) = a x^2 + b x + c
+    a = 6.0 * (g0 - g1) + 3.0 * (d0 + d1)
+    b = -6.0 * (g0 - g1) - 4.0 * d0 - 2.0 * d1
+    c = d0
+    best = -1.0
+    vbest = 0.0
+    if a == 0.0:
+        if b != 0.0:
+            x = -c / b
+            if 0.0 < x < 1.0 and _hermite(x, g0, d0, g1, d1) <= 0.0:
+                best = x
+        return best
+    disc = b * b - 4.0 * a * c
+    if disc < 0.0:
+        return -1.0
+    sq = math.sqrt(disc)
+    for x in ((-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a)):
+        if 0.0 < x < 1.0:
+            v = _hermite(x, g0, d0, g1, d1)
+            if v <= 0.0 and (best < 0.0 or v < vbest):
+                best = x
+                vbest = v
+    return best
 
 
 @njit(cache=True)
