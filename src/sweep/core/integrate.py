@@ -102,6 +102,41 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats
 
 
 @njit(cache=True)
+def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard):
+    """One DOP853 step into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for
+    a non-finite step or one that raises the energy by more than e_guard) and counts it."""
+    y_new = wk[W_YNEW]
+    e_cur = mode_energy(y, p, cs)
+    rk_step(t, y, f, h, n, p, cs, K, y_new, wk[W_FNEW], wk[W_AUXNEW], wk, istats)
+    err = 0.0
+    for i in range(n):
+        if not math.isfinite(y_new[i]):
+            err = math.inf
+    if err == 0.0 and mode_energy(y_new, p, cs) > e_cur + e_guard:
+        err = math.inf
+    if err == 0.0:
+        err = error_norm(K, h, y, y_new, n, rtol, atol)
+    sliding = cs[CS_MODE] != ROLL
+    if err <= 1.0:
+        istats[I_STEPS] += 1
+        istats[I_SLIDE_STEPS] += sliding
+    else:
+        istats[I_REJECTED] += 1
+        istats[I_SLIDE_REJECTED] += sliding
+    return err
+
+
+@njit(cache=True)
+def mark_halt(t_halt, y_halt, n, p, cs, fstats, trk, y_end):
+    """The scene halted at t_halt in state y_halt: its end state, energy and impact losses."""
+    fstats[F_TEND] = t_halt
+    for i in range(n):
+        y_end[i] = y_halt[i]
+    fstats[F_EEND] = mode_energy(y_end, p, cs)
+    trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
+
+
+@njit(cache=True)
 def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, level_out, samples, traj,
         peaks, y_end):
     """Integrate one scene in place of the given buffers (see integrate for their shapes)."""
@@ -163,25 +198,11 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if running:
                 outcome = oc.T_MAX if hit_tmax else oc.STEP_SIZE_UNDERFLOW
             break
-        e_cur = mode_energy(y, p, cs)
-        rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats)
-        finite = True
-        for i in range(n):
-            if not math.isfinite(y_new[i]):
-                finite = False
-        if finite and mode_energy(y_new, p, cs) > e_cur + e_guard:
-            finite = False
-        err = error_norm(K, h, y, y_new, n, rtol, atol) if finite else math.inf
+        err = try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard)
         if not err <= 1.0:
-            istats[I_REJECTED] += 1
-            if cs[CS_MODE] != ROLL:
-                istats[I_SLIDE_REJECTED] += 1
             h *= step_factor(err)
             continue
         h_next = min(h * step_factor(err), h_max)
-        istats[I_STEPS] += 1
-        if cs[CS_MODE] != ROLL:
-            istats[I_SLIDE_STEPS] += 1
         if aux_new[X_OK] == 0.0 and running:
             outcome = oc.NUMERICAL_ERROR
             break
@@ -203,10 +224,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                                    u_tol, wk, istats)
             if t_halt >= 0.0:
                 outcome = oc.HALTED
-                fstats[F_TEND] = t_halt
-                dense_eval(F, 0, y, t, h, t_halt, n, y_end)
-                fstats[F_EEND] = mode_energy(y_end, p, cs)
-                trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
+                dense_eval(F, 0, y, t, h, t_halt, n, wk[W_YBUF])
+                mark_halt(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end)
             elif int(trk[T_NEXT_LEVEL]) < nl:
                 lev = level_e[int(trk[T_NEXT_LEVEL])]
         record_samples(t, y, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, F, n, p, cs, sample_tau,
@@ -240,11 +259,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 halt_flat(t, level_out, trk, level_e)
                 istats[I_FLAT] = 1
                 outcome = oc.HALTED
-                fstats[F_TEND] = t
-                for i in range(n):
-                    y_end[i] = y[i]
-                fstats[F_EEND] = mode_energy(y_end, p, cs)
-                trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
+                mark_halt(t, y, n, p, cs, fstats, trk, y_end)
             elif code >= 0:
                 if running:
                     outcome = code
