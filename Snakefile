@@ -1,16 +1,21 @@
-# Euler's disk parameter sweep: config -> chunk jobs -> results/cube.nc -> results/figures/*.png
+# Euler's disk parameter sweep: config -> chunk jobs -> results/<name>/cube.nc -> figures/*.png
 #
-#   snakemake -j2                                  # default sweep (config/config.yaml)
-#   snakemake -j2 --configfile config/tiny.yaml    # the CI-sized grid
+#   snakemake -j2                                  # default sweep (config/config.yaml) -> results/default/
+#   snakemake -j2 --configfile config/tiny.yaml    # the CI-sized grid -> results/tiny/
 #   snakemake --profile workflow/profiles/slurm    # on a SLURM cluster
 #
+# Each sweep writes to results/<name>/: `name:` of the config file given last (--configfile, else
+# config/config.yaml), or that file's stem; so runs of different configs never mix.
 # See docs/pipeline.md. All logic lives in the `sweep` package; the rules only wire files.
 from snakemake.utils import min_version
 
 min_version("9.0")
 
 
-configfile: "config/config.yaml"
+DEFAULT_CONFIGFILE = "config/config.yaml"
+
+
+configfile: DEFAULT_CONFIGFILE
 
 
 include: "workflow/rules/common.smk"
@@ -23,8 +28,8 @@ localrules:
 rule all:
     default_target: True
     input:
-        "results/cube.nc",
-        expand("results/figures/{notebook}.png", notebook=SETTINGS["outputs"]["notebooks"]),
+        f"{RESULTS}/cube.nc",
+        expand(f"{RESULTS}/figures/{{notebook}}.png", notebook=SETTINGS["outputs"]["notebooks"]),
 
 
 include: "workflow/rules/simulate.smk"

@@ -372,25 +372,25 @@ def reference(tmp_path_factory, src) -> Path:
     wd = sweep_dir(tmp_path_factory, "reference", fault_config(), src)
     out = run_sweep(wd)
     assert job_count(out, "simulate_chunk") == len(plan_of(fault_config(), src))
-    with xr.open_dataset(wd / "results" / "cube.nc") as cube:  # the grid's mix of outcomes
+    with xr.open_dataset(wd / "results" / "fault" / "cube.nc") as cube:  # the grid's mix of outcomes
         found = set(np.unique(cube.outcome.values).tolist())
         assert {outcomes.HALTED, outcomes.CONTACT_LOST} <= found, found
         assert np.isnan(cube.t_halt.values).any() and np.isfinite(cube.t_level.values).any()
-    return wd / "results" / "cube.nc"
+    return wd / "results" / "fault" / "cube.nc"
 
 
 @pytest.mark.slow
 def test_repeated_run_is_bit_identical(tmp_path_factory, src, reference):
     wd = sweep_dir(tmp_path_factory, "repeat", fault_config(), src)
     run_sweep(wd)
-    assert_same_cube(reference, wd / "results" / "cube.nc")
+    assert_same_cube(reference, wd / "results" / "fault" / "cube.nc")
 
 
 @pytest.mark.slow
 def test_one_job_at_a_time_is_bit_identical(tmp_path_factory, src, reference):
     wd = sweep_dir(tmp_path_factory, "serial", fault_config(), src)
     run_sweep(wd, "-j1")
-    assert_same_cube(reference, wd / "results" / "cube.nc")
+    assert_same_cube(reference, wd / "results" / "fault" / "cube.nc")
 
 
 @pytest.mark.slow
@@ -399,7 +399,7 @@ def test_other_chunk_size_is_bit_identical_but_for_the_config(tmp_path_factory, 
     assert len(plan_of(cfg, src)) != len(plan_of(fault_config(), src))
     wd = sweep_dir(tmp_path_factory, "chunk6", cfg, src)
     run_sweep(wd)
-    a, b = cube_content(reference), cube_content(wd / "results" / "cube.nc")
+    a, b = cube_content(reference), cube_content(wd / "results" / "fault" / "cube.nc")
     # the config (and so its hash) records the chunk size; every value is the same
     for k in ("config_json", "config_sha256"):
         assert a["attrs"].pop(k) != b["attrs"].pop(k)
@@ -410,11 +410,11 @@ def _chunk_state(wd: Path) -> tuple[set[str], set[str]]:
     """(chunk ids Snakemake reported finished, chunk ids whose job is running: log, no file)."""
     out = (wd / "snakemake.out").read_text(errors="replace")
     finished_jobs = set(re.findall(r"Finished jobid: (\d+) \(Rule: simulate_chunk\)", out))
-    # "rule simulate_chunk: ... output: results/chunks/<id>.nc ... jobid: N"
-    ids = dict(re.findall(r"output: results/chunks/([0-9a-f]{16})\.nc.*?jobid: (\d+)", out, flags=re.S))
+    # "rule simulate_chunk: ... output: results/fault/chunks/<id>.nc ... jobid: N"
+    ids = dict(re.findall(r"output: results/fault/chunks/([0-9a-f]{16})\.nc.*?jobid: (\d+)", out, flags=re.S))
     finished = {cid for cid, job in ids.items() if job in finished_jobs}
-    logs = {p.stem for p in (wd / "results" / "logs" / "chunks").glob("*.log")}
-    files = {p.stem for p in (wd / "results" / "chunks").glob("*.nc")}
+    logs = {p.stem for p in (wd / "results" / "fault" / "logs" / "chunks").glob("*.log")}
+    files = {p.stem for p in (wd / "results" / "fault" / "chunks").glob("*.nc")}
     return finished, logs - files
 
 
@@ -422,8 +422,8 @@ def _chunk_state(wd: Path) -> tuple[set[str], set[str]]:
 def test_kill_9_mid_run_then_documented_recovery(tmp_path_factory, src, reference):
     plan = plan_of(fault_config(), src)
     wd = sweep_dir(tmp_path_factory, "killed", fault_config(), src)
-    (wd / "results" / "chunks").mkdir(parents=True)
-    (wd / "results" / "logs" / "chunks").mkdir(parents=True)
+    (wd / "results" / "fault" / "chunks").mkdir(parents=True)
+    (wd / "results" / "fault" / "logs" / "chunks").mkdir(parents=True)
     with open(wd / "snakemake.out", "w") as log:
         proc = subprocess.Popen(smk_cmd(wd, "-j2", "--configfile", "config/fault.yaml"), cwd=wd, env=smk_env(src),
                                 stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
@@ -451,12 +451,12 @@ def test_kill_9_mid_run_then_documented_recovery(tmp_path_factory, src, referenc
         pytest.fail("processes of the killed group survive")
 
     # Right after the kill: every chunk file under its final name is complete and intact.
-    chunk_dir = wd / "results" / "chunks"
+    chunk_dir = wd / "results" / "fault" / "chunks"
     present = sorted(chunk_dir.glob("*.nc"))
     assert present and len(present) < len(plan)
     for p in present:
         assert io.verify_chunk(p, plan[p.stem]) is None, p
-    assert not (wd / "results" / "cube.nc").exists()
+    assert not (wd / "results" / "fault" / "cube.nc").exists()
     leftovers = [p.name for p in chunk_dir.iterdir() if p.is_file() and p.suffix != ".nc"
                  and p.name != io.VERIFIED_CACHE]
     assert all(re.fullmatch(r"\.[0-9a-f]{16}\.nc\.tmp-\d+-[0-9a-f]{8}", n) for n in leftovers), leftovers
@@ -475,7 +475,7 @@ def test_kill_9_mid_run_then_documented_recovery(tmp_path_factory, src, referenc
     code, out = smk(wd, "-j2", "--rerun-incomplete", "--configfile", "config/fault.yaml")
     assert not victim.exists() or io.verify_chunk(victim, plan[victim.stem]) is None
     assert list((chunk_dir / "quarantine").glob(victim.name + ".*")), "truncated chunk not quarantined"
-    assert_same_cube(reference, wd / "results" / "cube.nc")
+    assert_same_cube(reference, wd / "results" / "fault" / "cube.nc")
     for p in chunk_dir.glob("*.nc"):
         assert io.verify_chunk(p, plan[p.stem]) is None, p
     # Chunks Snakemake had recorded as finished (and left intact) were reused, not recomputed;

@@ -1,11 +1,15 @@
 """End to end: the tiny sweep through Snakemake in a temporary copy of the workflow.
 
 Runs `snakemake` (this interpreter's) with --snakefile/--directory pointing at a copy of
-Snakefile, workflow/ and config/ under pytest's tmp dir, so the real results/ is never touched.
+Snakefile, workflow/ and config/ under pytest's tmp dir, so the real results/ is never touched,
+and with a snapshot of the `sweep` package (SNAPSHOT, taken once per session) on PYTHONPATH, so
+that edits of the live source during the tests neither change chunk ids mid-module nor make a
+job recompile the numba kernels.
 The tests of this module share that copy and run in file order (each builds on the last run).
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -35,9 +39,50 @@ TIMEOUT_S = 600
 
 
 
+SNAPSHOT: Path | None = None
+
+
+@pytest.fixture(scope="module", autouse=True)
+def snapshot(tmp_path_factory) -> Path:
+    """The `sweep` package copied with its numba cache; every run of this module imports it."""
+    global SNAPSHOT
+    dest = tmp_path_factory.mktemp("src")
+    shutil.copytree(Path(sweep.__file__).parent, dest / "sweep", copy_function=shutil.copy2,
+                    ignore=shutil.ignore_patterns("*.pyc"))
+    SNAPSHOT = dest
+    yield dest
+    SNAPSHOT = None
+
+
+def plan_of(settings: dict) -> dict[str, grid.Chunk]:
+    """The chunk plan as the snapshot's Snakemake sees it (ids include its core fingerprint)."""
+    saved = grid.__file__
+    grid.__file__ = str(SNAPSHOT / "sweep" / "grid.py")
+    try:
+        return grid.plan_chunks(settings)
+    finally:
+        grid.__file__ = saved
+
+
+def simulate_in_snapshot(settings: dict, points) -> list[dict]:
+    """`sweep.simulate(...).summary` of each point, computed by the snapshot (JSON: NaN -> None)."""
+    script = ("import json, math, sys, sweep; from sweep import grid; s = json.loads(sys.argv[1]); "
+              "clean = lambda x: {k: clean(v) for k, v in x.items()} if isinstance(x, dict) else "
+              "[clean(v) for v in x] if isinstance(x, list) else (None if isinstance(x, float) and "
+              "not math.isfinite(x) else x); "
+              "print(json.dumps([clean(dict(sweep.simulate(grid.scene(s, tuple(p))).summary)) "
+              "for p in json.loads(sys.argv[2])]))")
+    out = subprocess.run([sys.executable, "-c", script, grid.canonical_json(settings),
+                          grid.canonical_json([list(p) for p in points])],
+                         env=dict(os.environ, PYTHONPATH=str(SNAPSHOT)), capture_output=True, text=True,
+                         timeout=TIMEOUT_S)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return json.loads(out.stdout)
+
+
 def smk(wd: Path, *args: str, check: bool = True) -> str:
     """Run snakemake in `wd`; return its merged stdout/stderr."""
-    env = dict(os.environ)
+    env = dict(os.environ, PYTHONPATH=str(SNAPSHOT))
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
     cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(wd / "Snakefile"), "--directory", str(wd),
            *args]
@@ -77,14 +122,14 @@ def first_run(wd):
     # Fill the numba cache (cache=True) first, as any earlier use of the package does, so the
     # jobs below load the kernels rather than each compile them (~40 s) on a fresh checkout.
     settings = settings_of(tiny_config())
-    sweep.simulate(grid.scene(settings, tuple(settings["grid"][a][0] for a in grid.AXES)))
+    simulate_in_snapshot(settings, [tuple(settings["grid"][a][0] for a in grid.AXES)])
     t0 = time.perf_counter()
     out = smk(wd, "-j2", "--configfile", "config/tiny.yaml")
     return out, time.perf_counter() - t0
 
 
 def chunk_mtimes(wd: Path) -> dict[str, int]:
-    return {p.stem: p.stat().st_mtime_ns for p in (wd / "results" / "chunks").glob("*.nc")}
+    return {p.stem: p.stat().st_mtime_ns for p in (wd / "results" / "tiny" / "chunks").glob("*.nc")}
 
 
 # ------------------------------------------------------------------------------- static checks
@@ -128,14 +173,14 @@ def test_invalid_config_fails_before_any_job(tmp_path, mutate, fragment):
 def test_tiny_run_produces_cube_figures_and_progress_logs(wd, first_run):
     out, seconds = first_run
     settings = settings_of(tiny_config())
-    plan = grid.plan_chunks(settings)
+    plan = plan_of(settings)
     assert job_count(out, "simulate_chunk") == len(plan)
-    assert (wd / "results" / "cube.nc").exists()
+    assert (wd / "results" / "tiny" / "cube.nc").exists()
     for nb in settings["outputs"]["notebooks"]:
-        png = wd / "results" / "figures" / f"{nb}.png"
+        png = wd / "results" / "tiny" / "figures" / f"{nb}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     for cid in plan:
-        log = (wd / "results" / "logs" / "chunks" / f"{cid}.log").read_text()
+        log = (wd / "results" / "tiny" / "logs" / "chunks" / f"{cid}.log").read_text()
         assert re.search(r"done: \d+ scenes in [\d.]+ s \([\d.]+ scenes/s\)", log)
         # Each job loads the numba kernels from the cache once (the fixture filled it): ~1 s,
         # against ~40 s for a compilation measured on this 2-core machine; 15 s separates them
@@ -147,7 +192,7 @@ def test_tiny_run_produces_cube_figures_and_progress_logs(wd, first_run):
 
 def test_cube_contents(wd, first_run):
     settings = settings_of(tiny_config())
-    with xr.open_dataset(wd / "results" / "cube.nc") as cube:
+    with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as cube:
         assert tuple(cube.outcome.dims) == grid.AXES
         assert dict(cube.sizes) == {**{a: len(settings["grid"][a]) for a in grid.AXES},
                                     "level": len(settings["levels"])}
@@ -173,18 +218,17 @@ def test_cube_contents(wd, first_run):
 
 def test_cube_equals_scenes_run_one_by_one(wd, first_run):
     settings = settings_of(tiny_config())
-    with xr.open_dataset(wd / "results" / "cube.nc") as cube:
-        for chunk in grid.plan_chunks(settings).values():
-            for point in chunk.points:
-                s = sweep.simulate(grid.scene(settings, point)).summary
-                at = cube.sel(dict(zip(grid.AXES, point)))
-                for var in io.VARIABLES:
-                    if var.name == "wall_time":  # a measurement, not a result
-                        continue
-                    want = [var.get(lv) for lv in s["levels"]] if var.per_level else var.get(s)
-                    # same code, same machine, same inputs: the integration is deterministic
-                    np.testing.assert_array_equal(np.asarray(at[var.name].values, dtype=float),
-                                                  np.asarray(want, dtype=float), err_msg=f"{var.name} at {point}")
+    with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as cube:
+        points = [p for chunk in plan_of(settings).values() for p in chunk.points]
+        for point, s in zip(points, simulate_in_snapshot(settings, points)):
+            at = cube.sel(dict(zip(grid.AXES, point)))
+            for var in io.VARIABLES:
+                if var.name == "wall_time":  # a measurement, not a result
+                    continue
+                want = [var.get(lv) for lv in s["levels"]] if var.per_level else var.get(s)
+                # same code, same machine, same inputs: the integration is deterministic
+                np.testing.assert_array_equal(np.asarray(at[var.name].values, dtype=float),
+                                              np.asarray(want, dtype=float), err_msg=f"{var.name} at {point}")
 
 
 def test_rerun_does_nothing(wd, first_run):
@@ -196,7 +240,7 @@ def test_executed_notebooks_have_no_errors(wd, first_run):
     import nbformat
 
     for nb in grid.NOTEBOOKS:
-        executed = nbformat.read(wd / "results" / "notebooks" / f"{nb}.ipynb", as_version=4)
+        executed = nbformat.read(wd / "results" / "tiny" / "notebooks" / f"{nb}.ipynb", as_version=4)
         outputs = [o for c in executed.cells if c.cell_type == "code" for o in c.outputs]
         assert not [o for o in outputs if o.output_type == "error"], nb
         assert any("saved" in o.get("text", "") for o in outputs), nb
@@ -207,23 +251,23 @@ def test_executed_notebooks_have_no_errors(wd, first_run):
 def _extend_and_run(wd, base: dict, name: str, axis: str, value: float) -> dict:
     """Add `value` to `axis` of config `base`, run, and check that exactly the chunks whose
     content changed were computed and every other chunk file was left alone."""
-    old_plan = grid.plan_chunks(settings_of(base))
+    old_plan = plan_of(settings_of(base))
     cfg = yaml.safe_load(yaml.safe_dump(base))
     cfg["grid"][axis] = cfg["grid"][axis] + [value]
     cfg["outputs"]["notebooks"] = []  # the figures were checked after the first run
-    new_plan = grid.plan_chunks(settings_of(cfg))
+    new_plan = plan_of(settings_of(cfg))
     new_ids = set(new_plan) - set(old_plan)
     # precondition, from the plan alone: some chunks are new and some are kept
     assert new_ids and len(new_ids) < len(new_plan)
     before = chunk_mtimes(wd)
-    with xr.open_dataset(wd / "results" / "cube.nc") as c:
+    with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as c:
         old_cube = c.load()
     out = smk(wd, "-j2", "--configfile", write_config(wd, name, cfg))
     assert job_count(out, "simulate_chunk") == len(new_ids), out
     after = chunk_mtimes(wd)
     for cid in set(new_plan) & set(old_plan):
         assert after[cid] == before[cid], cid  # kept chunk files were not rewritten
-    with xr.open_dataset(wd / "results" / "cube.nc") as cube:
+    with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as cube:
         assert cube.sizes[axis] == len(cfg["grid"][axis])
         common = cube.sel({axis: old_cube[axis].values})
         for var in ("t_halt", "t_level", "n_steps", "outcome"):
@@ -247,20 +291,20 @@ def test_damaged_chunk_is_recomputed_not_gathered(wd, first_run):
     # first run's alone when this test runs by itself (e.g. selected with -k, or on another worker)
     cfg = "config/outer.yaml" if (wd / "config" / "outer.yaml").exists() else "config/tiny.yaml"
     settings = settings_of(yaml.safe_load((wd / cfg).read_text()))
-    plan = grid.plan_chunks(settings)
-    victim = wd / "results" / "chunks" / f"{next(iter(plan))}.nc"
-    with xr.open_dataset(wd / "results" / "cube.nc") as c:
+    plan = plan_of(settings)
+    victim = wd / "results" / "tiny" / "chunks" / f"{next(iter(plan))}.nc"
+    with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as c:
         before = c.load()
     victim.write_bytes(victim.read_bytes()[:200])  # a truncated copy
     out = smk(wd, "-j2", "--configfile", cfg, "--dry-run")
     assert f"chunk {victim.stem} is damaged" in out and victim.exists()  # dry run: report only
-    (wd / "results" / "cube.nc").unlink()
-    out = smk(wd, "results/cube.nc", "-j2", "--configfile", cfg)
-    assert "moved to results/chunks/quarantine/" in out
+    (wd / "results" / "tiny" / "cube.nc").unlink()
+    out = smk(wd, "results/tiny/cube.nc", "-j2", "--configfile", cfg)
+    assert "moved to results/tiny/chunks/quarantine/" in out
     assert job_count(out, "simulate_chunk") == 1
     assert io.verify_chunk(victim, plan[victim.stem]) is None
-    assert list((wd / "results" / "chunks" / "quarantine").glob(victim.name + ".*"))
-    with xr.open_dataset(wd / "results" / "cube.nc") as after:
+    assert list((wd / "results" / "tiny" / "chunks" / "quarantine").glob(victim.name + ".*"))
+    with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as after:
         for var in io.VARIABLE_NAMES:
             if var != "wall_time":
                 np.testing.assert_array_equal(after[var].values, before[var].values, err_msg=var)
@@ -277,7 +321,7 @@ def test_slurm_profile_dry_run_batches_chunk_jobs(tmp_path):
     cfg = tiny_config()
     cfg["grid"]["omega0"] = [10.0, 12.0, 14.457, 17.0, 20.0, 25.0]
     cfg["chunk_size"] = 1  # one scene per chunk: many tiny jobs, the case grouping is for
-    n_chunks = len(grid.plan_chunks(settings_of(cfg)))
+    n_chunks = len(plan_of(settings_of(cfg)))
     assert n_chunks > per_group
     out = smk(d, "--profile", str(d / "workflow" / "profiles" / "slurm"),
               "--configfile", write_config(d, "many.yaml", cfg), "--dry-run")

@@ -27,6 +27,7 @@ import hashlib
 import itertools
 import json
 import math
+import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -181,8 +182,7 @@ def schema_errors(config: Mapping, schema: dict) -> list[str]:
         if isinstance(value, str) and err.validator == "type":
             try:
                 float(value)
-                msg += (" (YAML 1.1 reads a number like 1e-10 without a '.' as a string: "
-                        "write 1.0e-10)")
+                msg += " (a number in quotes is a string: remove the quotes)"
             except ValueError:
                 pass
         if desc:
@@ -191,13 +191,22 @@ def schema_errors(config: Mapping, schema: dict) -> list[str]:
     return messages
 
 
-def cross_field_errors(config: Mapping) -> list[str]:
-    """Rules JSON schema cannot express; `config` must have its defaults filled."""
+def _valid_number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def cross_field_errors(config: Mapping, invalid: set[str] = frozenset()) -> list[str]:
+    """Rules JSON schema cannot express; `config` must have its defaults filled.
+
+    `invalid`: keys (as `_key` writes them) that already failed the schema; a rule that reads
+    one of them is skipped, so one bad value is reported once, not again as its consequences
+    (a negative radius is not also "k1 exceeds the radius").
+    """
     messages = []
     disk = config.get("disk", {})
     radius = disk.get("radius")
-    if isinstance(radius, (int, float)):
-        if disk.get("thickness", 0) > 4 * radius:
+    if _valid_number(radius) and radius > 0 and "disk.radius" not in invalid:
+        if _valid_number(disk.get("thickness", 0)) and disk.get("thickness", 0) > 4 * radius:
             messages.append(f"config key `disk.thickness`: {disk['thickness']!r} exceeds 4*radius = "
                             f"{4 * radius!r} m; allowed (0, 4*radius]")
         for k in ("k1", "k2", "k3"):
@@ -207,7 +216,7 @@ def cross_field_errors(config: Mapping) -> list[str]:
                                     f"{radius!r} m; allowed [0, radius]")
     mu_s = config.get("mu_s")
     grid = config.get("grid", {})
-    if isinstance(mu_s, (int, float)):
+    if _valid_number(mu_s) and mu_s > 0 and "mu_s" not in invalid:
         for i, mu_d in enumerate(grid.get("mu_d", [])):
             if isinstance(mu_d, (int, float)) and mu_d > mu_s:
                 messages.append(f"config key `grid.mu_d[{i}]`: {mu_d!r} exceeds mu_s = {mu_s!r}; "
@@ -229,14 +238,65 @@ def check_config(config: Mapping, schema: dict | None = None) -> dict:
     Raises SweepConfigError listing every problem (key, value, allowed range) before any work.
     """
     schema = schema if schema is not None else load_schema()
+    config = copy.deepcopy(dict(config))
+    coerce_numbers(config, schema)
     messages = schema_errors(config, schema)
+    # keys named by the schema's messages: cross-field rules reading them are skipped
+    invalid = set(re.findall(r"^config key `([^`]+)`", "\n".join(messages), flags=re.M))
     try:  # report cross-field problems together with the schema's, where the types allow it
-        messages += [m for m in cross_field_errors(fill_defaults(config, schema)) if m not in messages]
+        messages += [m for m in cross_field_errors(fill_defaults(config, schema), invalid)
+                     if m not in messages and not any(f"`{k}`" in m for k in invalid)]
     except (TypeError, AttributeError):
         pass  # a mistyped section: the schema errors above already say which
     if messages:
         raise SweepConfigError("invalid sweep configuration:\n  " + "\n  ".join(messages))
     return fill_defaults(config, schema)
+
+
+def coerce_numbers(config: Any, schema: dict) -> list[str]:
+    """In place: numbers written like `1e-10` (a string to YAML 1.1, which Snakemake's config
+    loader follows) become floats wherever the schema expects a number. Returns the keys."""
+    from .yamlio import coerce_numbers as _coerce
+
+    def wants_number(path: list) -> bool:
+        return _subschema(schema, path).get("type") in ("number", "integer")
+
+    return [_key(p) for p in _coerce(config, wants_number)]
+
+
+# --------------------------------------------------------------------------------------------
+# results per sweep
+# --------------------------------------------------------------------------------------------
+
+DEFAULT_CONFIG = "config/config.yaml"
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+
+
+def sweep_name(configfile: str | Path) -> str:
+    """The name of a sweep, hence its results folder `results/<name>/`: the `name:` set in its
+    config file, else the file's stem (`config/my_sweep.yaml` -> `my_sweep`).
+
+    Only the file itself counts, not config/config.yaml merged under it, so that a config file
+    without `name:` never writes into the default sweep's folder.
+    """
+    from .yamlio import load
+
+    path = Path(configfile)
+    try:
+        data = load(path.read_text(encoding="utf-8")) or {}
+    except (OSError, yaml_error()) as exc:
+        raise SweepConfigError(f"config file {str(path)!r} cannot be read: {exc}") from None
+    name = data.get("name", path.stem) if isinstance(data, Mapping) else path.stem
+    if not isinstance(name, str) or not re.match(NAME_PATTERN, name):
+        raise SweepConfigError(f"config key `name` in {str(path)!r}: {name!r} is invalid; allowed 1-64 "
+                               "characters of letters, digits, '.', '_', '-', not starting with '.', '_' or '-'")
+    return name
+
+
+def yaml_error() -> type[Exception]:
+    import yaml
+
+    return yaml.YAMLError
 
 
 # --------------------------------------------------------------------------------------------

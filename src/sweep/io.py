@@ -1,9 +1,9 @@
 """netCDF input/output of the sweep: chunk files, their verification, the gathered cube.
 
-Chunk files (`results/chunks/<id>.nc`) hold one row per scene along the dimension `point`
+Chunk files (`results/<name>/chunks/<id>.nc`) hold one row per scene along the dimension `point`
 (coordinates mu_d, k1, k2, k3, alpha0, omega0 per point) and the dimension `level`. Their global
 attribute `sweep_checksum` is a SHA-256 over every variable's values, so a truncated or damaged
-file is detected before it is gathered. The cube (`results/cube.nc`) has the dimensions
+file is detected before it is gathered. The cube (`results/<name>/cube.nc`) has the dimensions
 (mu_d, k1, k2, k3, alpha0, omega0[, level]) and CF-1.10 metadata.
 
 Every file is written atomically: to a temporary name in the target directory, fsync'ed, then
@@ -510,8 +510,11 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
     os.environ.update(env_keys)  # the kernel inherits this process's environment
     try:
         nb = nbformat.read(str(notebook), as_version=4)
+        # log level ERROR: no start-up warnings from the kernel (e.g. "running over TCP without
+        # encryption": the kernel is local and talks only to this process)
         client = nbclient.NotebookClient(nb, timeout=NOTEBOOK_CELL_TIMEOUT_S, kernel_name="python3",
-                                         resources={"metadata": {"path": str(Path.cwd())}})
+                                         resources={"metadata": {"path": str(Path.cwd())}},
+                                         extra_arguments=["--log-level=ERROR"])
         client.execute()
     finally:
         for k, v in saved.items():
@@ -531,6 +534,23 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
         Path(log_path).parent.mkdir(parents=True, exist_ok=True)
         Path(log_path).write_text(f"executed {notebook} -> {figure}\n", encoding="utf-8")
     return figure
+
+
+def write_plan(path: str | Path, name: str, chunks: Mapping[str, _grid.Chunk]) -> Path:
+    """Write the chunk plan of a run ({name, scenes, chunks: {id: number of scenes}}) as JSON,
+    atomically; `sweep.frontdoor` reads it to show scenes done / total."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps({"name": name, "scenes": sum(len(c.points) for c in chunks.values()),
+                       "chunks": {cid: len(c.points) for cid, c in chunks.items()}})
+    tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
 
 
 def plot_map(ax, da, label: str, log: bool = False, annotate_max_cells: int = 64):

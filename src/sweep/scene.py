@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from . import model
+from . import model, yamlio
 from .errors import ConfigError
 
 DEFAULTS: dict[str, Any] = {
@@ -120,7 +120,7 @@ def load_scene(src) -> Scene:
         if not path.is_file():
             raise ConfigError("scene", str(src), "a path to an existing YAML scene file")
         try:
-            raw = yaml.safe_load(path.read_text())
+            raw = yamlio.load(path.read_text())   # YAML 1.2 numbers: 1e-10 is a float
         except yaml.YAMLError as exc:
             raise ConfigError("scene", str(src), f"valid YAML ({exc})") from None
     elif isinstance(src, dict):

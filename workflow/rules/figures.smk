@@ -3,13 +3,13 @@
 
 rule notebook:
     input:
-        cube="results/cube.nc",
+        cube=f"{RESULTS}/cube.nc",
         notebook=os.path.join(workflow.basedir, "workflow", "notebooks", "{notebook}.ipynb"),
     output:
-        figure="results/figures/{notebook}.png",
-        executed="results/notebooks/{notebook}.ipynb",
+        figure=f"{RESULTS}/figures/{{notebook}}.png",
+        executed=f"{RESULTS}/notebooks/{{notebook}}.ipynb",
     log:
-        "results/logs/notebooks/{notebook}.log",
+        f"{RESULTS}/logs/notebooks/{{notebook}}.log",
     wildcard_constraints:
         notebook="|".join(sweep_grid.NOTEBOOKS),
     threads: 1

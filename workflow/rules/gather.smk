@@ -1,15 +1,15 @@
-# All chunk files -> results/cube.nc (CF-1.10 netCDF-4, zlib), lazily with dask.
+# All chunk files -> results/<name>/cube.nc (CF-1.10 netCDF-4, zlib), lazily with dask.
 
 
 rule gather:
     input:
-        chunks=expand("results/chunks/{chunk}.nc", chunk=PLAN),
+        chunks=expand(f"{RESULTS}/chunks/{{chunk}}.nc", chunk=PLAN),
     output:
-        "results/cube.nc",
+        f"{RESULTS}/cube.nc",
     params:
         settings=SETTINGS_JSON,
     log:
-        "results/logs/gather.log",
+        f"{RESULTS}/logs/gather.log",
     threads: 1
     resources:
         mem_mb=4000,

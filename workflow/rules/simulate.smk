@@ -3,13 +3,13 @@
 
 rule simulate_chunk:
     output:
-        "results/chunks/{chunk}.nc",
+        f"{RESULTS}/chunks/{{chunk}}.nc",
     params:
         # the chunk's canonical JSON; its SHA-256 is the chunk id, so a change of any value
         # or setting gives a new id (and a new job) rather than a silent overwrite
         spec=lambda wildcards: PLAN[wildcards.chunk].spec_json,
     log:
-        "results/logs/chunks/{chunk}.log",
+        f"{RESULTS}/logs/chunks/{{chunk}}.log",
     wildcard_constraints:
         chunk="[0-9a-f]{16}",
     threads: 1

@@ -1,0 +1,57 @@
+"""YAML numbers as people write them: `1e-10` is a float, not the string YAML 1.1 makes of it.
+
+PyYAML implements YAML 1.1, whose float pattern needs a '.' and a signed exponent, so `1e-10`,
+`1e6` and `2E+3` load as strings. YAML 1.2 (and every other tool a user is likely to compare
+with: JSON, Python, numpy) reads them as numbers. `load` reads scene files with the YAML 1.2
+float pattern added; `coerce_numbers` applies the same rule after the fact to a mapping that
+someone else loaded (Snakemake loads the sweep config), but only where a number is expected.
+"""
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, MutableMapping
+from typing import Any
+
+import yaml
+
+# YAML 1.2 (core schema) floats that YAML 1.1 leaves as strings: an exponent without a '.'
+# or without a sign. (Forms YAML 1.1 already reads as floats are matched by its own resolver.)
+EXP_FLOAT = re.compile(r"^[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)[eE][-+]?[0-9]+$")
+
+
+class Loader(yaml.SafeLoader):
+    """yaml.SafeLoader that also reads `1e-10`, `1e6`, `2.5E3` as floats."""
+
+
+Loader.add_implicit_resolver("tag:yaml.org,2002:float", EXP_FLOAT, list("-+0123456789."))
+
+
+def load(text: str) -> Any:
+    """yaml.safe_load with YAML 1.2 exponent floats."""
+    return yaml.load(text, Loader=Loader)  # noqa: S506 (a SafeLoader subclass)
+
+
+def number_of(text: str) -> float | None:
+    """The float a YAML 1.2 reader sees in `text`, if it is an exponent float YAML 1.1 missed."""
+    return float(text) if isinstance(text, str) and EXP_FLOAT.match(text.strip()) else None
+
+
+def coerce_numbers(obj: Any, wants_number: Callable[[list], bool], path: list | None = None) -> list[list]:
+    """Replace, in place, strings like '1e-10' by floats where `wants_number(path)` is true.
+
+    `obj` is a nested mapping/list (e.g. a config Snakemake loaded with YAML 1.1 rules);
+    returns the paths that were changed. Strings elsewhere (names, enums) are left alone.
+    """
+    path = path or []
+    changed: list[list] = []
+    items = obj.items() if isinstance(obj, MutableMapping) else enumerate(obj) if isinstance(obj, list) else ()
+    for key, value in list(items):
+        sub = path + [key]
+        if isinstance(value, (MutableMapping, list)):
+            changed += coerce_numbers(value, wants_number, sub)
+        elif isinstance(value, str) and wants_number(sub):
+            x = number_of(value)
+            if x is not None:
+                obj[key] = x
+                changed.append(sub)
+    return changed

@@ -1,0 +1,295 @@
+"""The front door as a user meets it: `python3 run.py sweep` (sweep.frontdoor).
+
+Results per config (results/<name>/), one progress line, Ctrl-C/SIGTERM ending the run with one
+line naming what was kept and the resume command, first-run messages, YAML numbers like 1e-10,
+one message per invalid value, and `-j2` never overriding a profile's `jobs`.
+"""
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import re
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+import yaml
+
+import sweep
+from sweep import frontdoor, grid
+from sweep.scene import load_scene
+from conftest import copy_workflow
+
+ROOT = Path(__file__).resolve().parents[1]
+SCHEMA = grid.load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml")
+TIMEOUT_S = 600
+
+
+def load_run_py():
+    spec = importlib.util.spec_from_file_location("run_py", ROOT / "run.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+# ------------------------------------------------------------------------------- arguments
+
+def test_sweep_keeps_the_profiles_job_limit():
+    slurm = str(ROOT / "workflow" / "profiles" / "slurm")
+    profile_jobs = yaml.safe_load((Path(slurm) / "config.yaml").read_text())["jobs"]
+    argv = frontdoor.snakemake_argv(["--profile", slurm], progress=True)
+    assert "-j" not in argv and "-j2" not in argv
+    # Snakemake's own parse of the command `run.py sweep --profile ...` runs
+    assert frontdoor.parsed_args(argv).jobs == profile_jobs == 100
+    # without a profile: two local jobs; an explicit -j wins over both
+    assert frontdoor.parsed_args(frontdoor.snakemake_argv([], progress=True)).jobs == 2
+    assert frontdoor.parsed_args(frontdoor.snakemake_argv(["--profile", slurm, "-j", "7"], True)).jobs == 7
+    assert frontdoor.parsed_args(frontdoor.snakemake_argv(["--cores", "3"], True)).cores == 3
+    # a run resumes what an interrupted run left: --rerun-incomplete is always there
+    assert "--rerun-incomplete" in frontdoor.snakemake_argv([], progress=True)
+
+
+def test_informational_options_show_snakemake_itself():
+    assert frontdoor.is_raw(["-n"]) and frontdoor.is_raw(["--unlock", "--configfile", "x.yaml"])
+    assert frontdoor.is_raw(["--dry-run"]) and not frontdoor.is_raw(["--configfile", "config/tiny.yaml"])
+
+
+# ------------------------------------------------------------------------------- results per config
+
+def test_results_folder_is_named_by_the_config(tmp_path):
+    assert grid.sweep_name(ROOT / "config" / "config.yaml") == "default"
+    assert grid.sweep_name(ROOT / "config" / "tiny.yaml") == "tiny"
+    (tmp_path / "my_sweep.yaml").write_text("grid: {mu_d: [0.2]}\n")
+    assert grid.sweep_name(tmp_path / "my_sweep.yaml") == "my_sweep"   # no name: the file's stem
+    (tmp_path / "bad.yaml").write_text("name: ../elsewhere\n")
+    with pytest.raises(grid.SweepConfigError, match=r"`name`.*'\.\./elsewhere'.*allowed"):
+        grid.sweep_name(tmp_path / "bad.yaml")
+    wd, cfg = frontdoor.locations(["--configfile", str(tmp_path / "my_sweep.yaml"), "--directory", str(tmp_path)])
+    assert (wd, cfg) == (tmp_path.resolve(), tmp_path / "my_sweep.yaml")
+
+
+EXPONENTS = """\
+# written as people write numbers: YAML 1.1 reads 1e-8 as a string, the sweep reads a number
+grid:
+  mu_d: [0.2]
+  k1: [3.755e-6]
+  k2: [3e-5]
+  k3: [6e-4]
+  alpha0: [1.0]
+  omega0: [14.457]
+levels: [3e-1, 1e-1, 3e-2, 1e-2]
+solver: {method: adaptive, rtol: 1e-8, atol: 1e-10}
+stop: {t_max: 30.0, max_steps: 2e5}
+chunk_size: 1
+outputs: {notebooks: []}
+"""
+
+
+def test_dry_run_of_a_config_without_name_plans_its_own_folder_and_reads_1e_minus_8(tmp_path):
+    wd = copy_workflow(tmp_path / "wf")
+    (wd / "config" / "exponents.yaml").write_text(EXPONENTS)
+    p = subprocess.run([sys.executable, "-m", "snakemake", "-n", "-j1", "--snakefile", str(wd / "Snakefile"),
+                        "--directory", str(wd), "--configfile", "config/exponents.yaml"],
+                       cwd=wd, capture_output=True, text=True, timeout=TIMEOUT_S)
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out[-3000:]
+    assert "results/exponents/chunks/" in out and "results/exponents/cube.nc" in out
+    assert "results/default/" not in out and not re.search(r"results/(chunks|cube)", out)
+
+
+def test_exponent_numbers_are_numbers(tmp_path):
+    cfg = yaml.safe_load(EXPONENTS)          # what Snakemake hands the workflow
+    assert cfg["solver"]["rtol"] == "1e-8"    # (YAML 1.1)
+    s = grid.normalize(cfg, SCHEMA)
+    assert s["solver"]["rtol"] == 1e-8 and s["levels"] == [0.3, 0.1, 0.03, 0.01]
+    assert s["grid"]["k2"] == [3e-5] and s["stop"]["max_steps"] == 200000
+    # a string where the schema wants a string stays a string (and fails as one)
+    bad = dict(cfg, solver={"method": "1e-8"})
+    with pytest.raises(grid.SweepConfigError, match="solver.method"):
+        grid.normalize(bad, SCHEMA)
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("solver: {rtol: 1e-8, atol: 1E-10}\nstop: {levels: [1e-1, 1e-2], max_steps: 2e5}\n")
+    sc = load_scene(scene).config
+    assert sc["solver"]["rtol"] == 1e-8 and sc["solver"]["atol"] == 1e-10
+    assert sc["stop"]["levels"] == [0.1, 0.01] and sc["stop"]["max_steps"] == 200000
+
+
+@pytest.mark.parametrize("section, key, value", [("disk", "radius", -0.03), ("disk", "radius", "big"),
+                                                  (None, "mu_s", -1.0)])
+def test_one_invalid_value_gives_one_message(section, key, value):
+    cfg = yaml.safe_load((ROOT / "config" / "tiny.yaml").read_text())
+    (cfg[section] if section else cfg)[key] = value
+    with pytest.raises(grid.SweepConfigError) as err:
+        grid.normalize(cfg, SCHEMA)
+    lines = str(err.value).splitlines()[1:]
+    assert len(lines) == 1, str(err.value)
+    assert f"`{section + '.' if section else ''}{key}`" in lines[0] and "allowed" in lines[0]
+
+
+# ------------------------------------------------------------------------------- first-run messages
+
+def test_first_run_says_what_it_installs():
+    run_py = load_run_py()
+    lock = (ROOT / "requirements.lock").read_text()
+    msg = run_py.install_message(lock, fresh=True)
+    n = len(re.findall(r"^[A-Za-z0-9_.-]+==", lock, flags=re.M))
+    assert f"the {n} pinned packages" in msg and "1-2 min" in msg
+    for name in ("numpy", "numba", "snakemake", "xarray"):
+        assert re.search(rf"{name} \d", msg), (name, msg)
+
+
+def test_stale_numba_cache_is_detected(tmp_path):
+    pkg = tmp_path / "pkg"
+    (pkg / "__pycache__").mkdir(parents=True)
+    (pkg / "kern.py").write_text("from numba import njit\n\n@njit(cache=True)\ndef f(x):\n    return x\n")
+    (pkg / "plain.py").write_text('"""mentions cache=True only in text"""\n')
+    assert frontdoor.stale_numba_modules(pkg) == ["pkg/kern.py"]       # never compiled
+    index = pkg / "__pycache__" / "kern.f-3.py311.nbi"
+    index.write_bytes(b"")
+    os.utime(pkg / "kern.py", (time.time() - 100, time.time() - 100))
+    assert frontdoor.stale_numba_modules(pkg) == []                   # cached
+    os.utime(index, (time.time() - 200, time.time() - 200))
+    assert frontdoor.stale_numba_modules(pkg) == ["pkg/kern.py"]       # source newer than cache
+
+
+# ------------------------------------------------------------------------------- a real run, interrupted
+
+@pytest.fixture(scope="module")
+def src(tmp_path_factory) -> Path:
+    """A snapshot of the `sweep` package with its numba cache (as in test_faults), so that edits
+    of the live source during the test do not change chunk ids mid-run."""
+    dest = tmp_path_factory.mktemp("src")
+    shutil.copytree(Path(sweep.__file__).parent, dest / "sweep", copy_function=shutil.copy2,
+                    ignore=shutil.ignore_patterns("*.pyc"))
+    return dest
+
+
+class Run:
+    """`python3 run.py sweep ARGS` started as a terminal starts it: in its own process group
+    (the terminal's foreground group, which a Ctrl-C signals as a whole)."""
+
+    def __init__(self, argv: list[str], src: Path):
+        env = dict(os.environ, PYTHONPATH=str(src))
+        self.proc = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "sweep", *argv], env=env,
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, start_new_session=True)
+        self.chunks: list[bytes] = []
+        self.eof = threading.Event()
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+
+    def _read(self):
+        for data in iter(lambda: self.proc.stdout.read1(65536), b""):
+            self.chunks.append(data)
+        self.eof.set()
+
+    def finish(self, timeout: float = TIMEOUT_S) -> tuple[int, str]:
+        """Exit status and console text; asserts that nothing can print after the exit: the
+        console (the pipe) is closed by every process, and the process group is empty."""
+        code = self.proc.wait(timeout=timeout)
+        assert self.eof.wait(10), "a process still holds the console after run.py exited"
+        with pytest.raises(ProcessLookupError):
+            os.killpg(self.proc.pid, 0)
+        return code, b"".join(self.chunks).decode(errors="replace")
+
+
+def wait_for(condition, timeout: float = TIMEOUT_S, proc=None) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert proc is None or proc.poll() is None, "the run ended before the interruption"
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.05)
+
+
+def assert_clean_console(out: str) -> None:
+    assert "Traceback" not in out and "Error" not in out and "KeyboardInterrupt" not in out, out
+    assert "outcome=" not in out, out               # per-scene lines stay in the chunk logs
+    assert "localrule" not in out and "without encryption" not in out, out
+
+
+@pytest.mark.slow
+def test_ctrl_c_and_sigterm_then_resume(tmp_path, src):
+    wd = copy_workflow(tmp_path / "wf")
+    cfg = yaml.safe_load((ROOT / "config" / "tiny.yaml").read_text())
+    cfg["chunk_size"] = 1            # 8 one-scene jobs: room to interrupt between them
+    (wd / "config" / "tiny.yaml").write_text(yaml.safe_dump(cfg))
+    argv = ["--snakefile", str(wd / "Snakefile"), "--directory", str(wd), "--configfile", str(wd / "config" / "tiny.yaml")]
+    results = wd / "results" / "tiny"
+    plan = grid.plan_chunks(grid.normalize(cfg, SCHEMA))
+    n_chunks = len(plan)
+    present = lambda: sorted(p.stem for p in (results / "chunks").glob("*.nc"))  # noqa: E731
+    # chunk files not marked incomplete (a job stopped after writing its file but before
+    # Snakemake recorded it is computed again on resume)
+    recorded = lambda: [c for c in present() if (results / "chunks" / f"{c}.nc").resolve()  # noqa: E731
+                        not in frontdoor.incomplete_outputs(wd)]
+
+    # 1. Ctrl-C (SIGINT to the terminal's foreground group) once some, not all, chunks exist
+    run = Run(argv, src)
+    wait_for(lambda: len(present()) < n_chunks - 2 and recorded(), proc=run.proc)
+    os.killpg(run.proc.pid, signal.SIGINT)
+    code, out = run.finish()
+    assert code == 130, out
+    assert_clean_console(out)
+    last = out.rstrip("\n").splitlines()[-1]
+    m = re.fullmatch(r"sweep tiny: interrupted \(SIGINT\) after \d+:\d\d; kept (\d+) of (\d+) scenes "
+                     r"\((\d+) of (\d+) chunk files\) in (\S+)/chunks/; resume with: (.+)", last)
+    assert m, out
+    kept = recorded()
+    assert kept and int(m.group(1)) == len(kept) and int(m.group(3)) == len(kept) and int(m.group(4)) == n_chunks
+    assert m.group(5) == str(results)
+    resume = shlex.split(m.group(6))
+    assert resume[:3] == ["python3", "run.py", "sweep"] and resume[3:] == argv
+    mtimes = {c: (results / "chunks" / f"{c}.nc").stat().st_mtime_ns for c in kept}
+
+    # 2. the resume command, stopped by SIGTERM (to run.py alone, as `kill` or a scheduler
+    #    would) once the cube exists, i.e. during the figures
+    run = Run(resume[3:], src)
+    wait_for(lambda: (results / "cube.nc").exists(), proc=run.proc)
+    os.kill(run.proc.pid, signal.SIGTERM)
+    code, out = run.finish()
+    assert code == 143, out
+    assert_clean_console(out)
+    last = out.rstrip("\n").splitlines()[-1]
+    assert re.match(rf"sweep tiny: interrupted \(SIGTERM\) .*; kept 8 of 8 scenes \({n_chunks} of {n_chunks} "
+                    r"chunk files\) .*; resume with: python3 run.py sweep ", last), out
+
+    # 3. the same command again finishes: figures made, nothing kept recomputed
+    run = Run(resume[3:], src)
+    code, out = run.finish()
+    assert code == 0, out
+    assert_clean_console(out)
+    assert re.search(r"^sweep tiny: done in \d+:\d\d: 8 scenes \(0 computed now\)", out, flags=re.M), out
+    for c, t in mtimes.items():
+        assert (results / "chunks" / f"{c}.nc").stat().st_mtime_ns == t, c
+    for nb in cfg["outputs"]["notebooks"]:
+        assert (results / "figures" / f"{nb}.png").read_bytes()[:4] == b"\x89PNG"
+    assert "sweep.log" in out and (results / "logs" / "sweep.log").stat().st_size > 0
+    assert not (wd / "results" / "cube.nc").exists() and not (wd / "results" / "chunks").exists()
+    # the resumed cube holds what the scenes give when run one by one (by the same snapshot)
+    settings = grid.normalize(cfg, SCHEMA)
+    points = [p for chunk in plan.values() for p in chunk.points]
+    script = ("import json, sys, sweep; from sweep import grid; s = json.loads(sys.argv[1]); "
+              "print(json.dumps([(r['t_end'], r['n_steps'], [lv['t'] for lv in r['levels']]) for r in "
+              "(sweep.simulate(grid.scene(s, tuple(p))).summary for p in json.loads(sys.argv[2]))]))")
+    one_by_one = subprocess.run([sys.executable, "-c", script, grid.canonical_json(settings),
+                                 grid.canonical_json([list(p) for p in points])],
+                                env=dict(os.environ, PYTHONPATH=str(src)), capture_output=True, text=True,
+                                check=True, timeout=TIMEOUT_S).stdout
+    with xr.open_dataset(results / "cube.nc") as cube:
+        for point, (t_end, n_steps, t_levels) in zip(points, json.loads(one_by_one)):
+            at = cube.sel(dict(zip(grid.AXES, point)))
+            assert float(at.t_end) == t_end and int(at.n_steps) == n_steps, point
+            np.testing.assert_array_equal(at.t_level.values, np.array(t_levels, dtype=float))
+
+    # 4. and once more: nothing to do
+    code, out = Run(resume[3:], src).finish()
+    assert code == 0 and "nothing to do" in out, out
