@@ -122,7 +122,7 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
     chi = sc.chi
     escale = sc.energy_scale
     t0 = time.perf_counter()
-    out = run_kernel(sc, sample_tau, 4096 if trajectory else 0)
+    out = run_kernel(sc, sample_tau, 65536 if trajectory else 0)   # grows (rerun) if too small
     istats, fstats, lev, samp, traj, peaks, y_end = out
     wall = time.perf_counter() - t0
 

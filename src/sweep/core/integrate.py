@@ -300,9 +300,10 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     fstats[F_HLAST] = h
 
 
-def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=256):
-    """Run one scene (CPU). Allocates the buffers, grows the trajectory/peak buffers and reruns
-    (the run is deterministic) if they overflowed. Returns a KernelOutput of arrays:
+def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
+    """Run one scene (CPU). Allocates the buffers; if the trajectory or peak buffer overflowed, it
+    grows it 4x and reruns (the run is deterministic). peak_cap covers ~1.6e4 nutation periods, far
+    more than a scene to its halt has, so the rerun is for pathological scenes only. Returns a KernelOutput of arrays:
     istats, fstats (layout.I_*, F_*), levels (n_levels x 5: tau, alpha, dtheta/dtau, f_hat,
     pending), samples (layout.SAMPLE_COLS), trajectory (layout.TRAJ_COLS), peaks (tau, Phi, theta),
     y_end (N_FULL)."""
