@@ -1,0 +1,184 @@
+"""The core's kernels called one by one (src/sweep/core): step, error norm, dense output, event
+location, interior dips, Phi maxima, slaved slip directions. Each against an independent evaluation.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sweep.core import contact as C
+from sweep.core import dop853 as D
+from sweep.core import layout as L
+from sweep.core import model as M
+from sweep.core import roots as R
+from sweep.core import tableau as T
+from sweep.scene import load_scene
+
+
+@pytest.fixture(scope="module")
+def setup():
+    sc = load_scene("config/scenes/kessler2002.yaml")
+    p = sc.params.copy()
+    p[M.P_UFREEZE] = 1e-9 * sc.chi / 0.03755
+    y = np.zeros(M.N_FULL)
+    y[M.Y_ALPHA] = 1.0
+    y[M.Y_W1] = 0.05
+    y[M.Y_W2] = -0.1
+    y[M.Y_W3] = -1.0
+    cs = np.zeros(L.N_CS)
+    cs[L.CS_SIDE] = 1.0
+    cs[L.CS_SIG:L.CS_SIG + 3] = [1.0, -1.0, 1.0]
+    return p, y, cs
+
+
+def _work():
+    return np.zeros((L.N_WORK, L.N_WCOLS)), np.zeros(L.N_ISTATS, np.int64)
+
+
+def _f(t, y, p, cs, n=M.N_CORE):
+    dy = np.zeros(M.N_FULL)
+    aux = np.zeros(M.N_AUX)
+    M.rhs(t, y, p, M.ROLL, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3],
+          1.0, 0.0, n, dy, aux)
+    return dy[:n].copy(), aux
+
+
+def test_rk_step_is_the_tableau_applied_to_the_model(setup):
+    p, y, cs = setup
+    n, h = M.N_CORE, 0.05
+    wk, ist = _work()
+    K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
+    f = np.zeros(M.N_FULL)
+    f[:n] = _f(0.0, y, p, cs)[0]
+    y_new = np.zeros(M.N_FULL)
+    D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, np.zeros(M.N_FULL), np.zeros(M.N_AUX), wk, ist)
+    # plain numpy DOP853 with the published tableau
+    k = np.zeros((T.N_STAGES, n))
+    for s in range(T.N_STAGES):
+        ys = y.copy()
+        ys[:n] = y[:n] + h * (T.A[s, :s] @ k[:s])
+        k[s] = _f(T.C[s] * h, ys, p, cs)[0]
+    ref = y[:n] + h * (T.B[:T.N_STAGES] @ k)
+    assert np.max(np.abs(y_new[:n] - ref)) < 1e-15
+    assert ist[L.I_RHS] == T.N_STAGES      # 11 stages + f(t + h, y_new); stage 0 is the given f
+
+
+def test_error_norm_is_hairers_dop853_norm():
+    rng = np.random.default_rng(3)
+    n = M.N_CORE
+    K = rng.normal(size=(T.N_STAGES_EXTENDED, M.N_FULL))
+    y = rng.normal(size=M.N_FULL)
+    y_new = y + 1e-3 * rng.normal(size=M.N_FULL)
+    h, rtol, atol = 0.01, 1e-8, 1e-10
+    sc = atol + rtol * np.maximum(np.abs(y[:n]), np.abs(y_new[:n]))
+    e5 = np.sum(((T.E5 @ K[:13, :n]) / sc) ** 2)
+    e3 = np.sum(((T.E3 @ K[:13, :n]) / sc) ** 2)
+    ref = h * e5 / math.sqrt((e5 + 0.01 * e3) * n)
+    assert D.error_norm(K, h, y, y_new, M.N_FULL, rtol, atol) == pytest.approx(ref, rel=1e-13)
+
+
+def test_dense_output_interpolates_the_step_at_seventh_order(setup):
+    p, y, cs = setup
+    n = M.N_CORE
+    errs = []
+    for h in (0.2, 0.1):
+        wk, ist = _work()
+        K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
+        F = np.zeros((14, M.N_FULL))
+        f = np.zeros(M.N_FULL)
+        f[:n] = _f(0.0, y, p, cs)[0]
+        y_new = np.zeros(M.N_FULL)
+        f_new = np.zeros(M.N_FULL)
+        D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, f_new, np.zeros(M.N_AUX), wk, ist)
+        D.dense_coeffs(0.0, y, h, y_new, f_new, n, p, cs, K, F, wk, ist)
+        out = np.zeros(M.N_FULL)
+        D.dense_eval(F, 0, y, 0.0, h, 0.0, n, out)
+        assert np.max(np.abs(out[:n] - y[:n])) < 1e-15
+        D.dense_eval(F, 0, y, 0.0, h, h, n, out)
+        assert np.max(np.abs(out[:n] - y_new[:n])) < 1e-14
+        # midpoint against two half steps
+        yh = np.zeros(M.N_FULL)
+        D.rk_step(0.0, y, f, 0.5 * h, n, p, cs, K, yh, np.zeros(M.N_FULL), np.zeros(M.N_AUX), wk, ist)
+        D.dense_eval(F, 0, y, 0.0, h, 0.5 * h, n, out)
+        errs.append(np.max(np.abs(out[:n] - yh[:n])))
+    assert errs[0] / errs[1] > 2 ** 6.5      # local error of the interpolant ~ h^8
+
+
+def test_hermite_dip_finds_the_minimum_exactly():
+    # g(x) = (x - 0.5)^2 - c is its own Hermite cubic: dips below 0 exactly when c > 0
+    for c, want in ((0.01, 0.5), (1e-12, 0.5), (-1e-12, -1.0)):
+        g0 = g1 = 0.25 - c
+        assert R.hermite_dip(g0, -1.0, g1, 1.0) == pytest.approx(want, abs=1e-12)
+    assert R.hermite_dip(1.0, 1.0, 2.0, 1.0) == -1.0          # monotone: no dip
+
+
+def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
+    p, y, cs = setup
+    n, h = M.N_CORE, 0.3
+    wk, ist = _work()
+    K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
+    F = np.zeros((14, M.N_FULL))
+    f = np.zeros(M.N_FULL)
+    f[:n] = _f(0.0, y, p, cs)[0]
+    y_new, f_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
+    D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, f_new, np.zeros(M.N_AUX), wk, ist)
+    D.dense_coeffs(0.0, y, h, y_new, f_new, n, p, cs, K, F, wk, ist)
+    k = C.EV_SIGN1        # g = sigma_1 w1 = 0.05 > 0; w1 rises through 0 within the step
+    y = y.copy()
+    y[M.Y_W1] = -0.05
+    cs = cs.copy()
+    cs[L.CS_SIG] = -1.0
+    g0 = R.event_value_at(k, 0.0, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
+    g1 = R.event_value_at(k, h, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
+    assert g0 > 0.0 >= g1, (g0, g1)
+    ta, tb = R.locate(k, 0.0, g0, h, g1, F, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
+    assert tb - ta <= max(R.EVENT_TOL_TAU, 4 * 2.2e-16 * tb)
+    assert R.event_value_at(k, ta, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist) > 0.0
+    assert R.event_value_at(k, tb, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist) <= 0.0
+
+
+def test_brent_finds_the_maximum_of_the_normal_force(setup):
+    p, y, cs = setup
+    n, h = M.N_CORE, 1.5
+    wk, ist = _work()
+    K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
+    F = np.zeros((14, M.N_FULL))
+    f = np.zeros(M.N_FULL)
+    f[:n] = _f(0.0, y, p, cs)[0]
+    y_new, f_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
+    D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, f_new, np.zeros(M.N_AUX), wk, ist)
+    D.dense_coeffs(0.0, y, h, y_new, f_new, n, p, cs, K, F, wk, ist)
+    grid = np.linspace(0.0, h, 2001)
+    phi = []
+    for t in grid:
+        D.dense_eval(F, 0, y, 0.0, h, t, n, wk[L.W_YBUF])
+        phi.append(_f(t, wk[L.W_YBUF], p, cs)[1][M.X_PHI])
+    i = int(np.argmax(phi))
+    assert 0 < i < len(grid) - 1, "the test step must contain an interior maximum of Phi"
+    tmax, pmax = R.brent_max_phi(0.0, h, F, 0, y, 0.0, h, n, p, cs, wk, ist)
+    assert abs(tmax - grid[i]) < 2 * (grid[1] - grid[0])
+    assert pmax >= max(phi) - 1e-12
+
+
+def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
+    p, y, cs = setup
+    n = M.N_CORE
+    wk, ist = _work()
+    sl = cs.copy()
+    sl[L.CS_MODE] = L.SLAVED
+    u = 1e-9
+    dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
+    for nu0 in np.linspace(-3.0, 3.0, 7):
+        nu = C.attracting_direction(nu0, u, 0.0, y, p, sl, n, wk, ist)
+        if math.isnan(nu):
+            continue
+        c, _ = C.slip_rates(nu, u, 0.0, y, p, sl, n, dy, aux, ys, ist)
+        assert abs(c) < 1e-10
+        # attracting: the direction rate cross/u points back to the root from both sides
+        cm, _ = C.slip_rates(nu - 1e-3, u, 0.0, y, p, sl, n, dy, aux, ys, ist)
+        cp, _ = C.slip_rates(nu + 1e-3, u, 0.0, y, p, sl, n, dy, aux, ys, ist)
+        assert cm > 0.0 > cp
+        nu2 = C.slaved_direction(nu + 1e-4, u, 0.0, y, p, sl, n, dy, aux, ys, ist)
+        assert abs(math.remainder(nu2 - nu, 2 * math.pi)) < 1e-12
