@@ -9,6 +9,7 @@ A scene is one simulation: one disk, one set of contact parameters, one initial 
     stop:    {levels: [1.0e-1, 1.0e-2, 1.0e-3, 1.0e-4], t_max: 120.0, max_steps: 2000000}
     solver:  {method: adaptive, rtol: 1.0e-10, atol: 1.0e-12}
     outputs: {normal_force_frequency: true, kinematics: false}
+    material: {E: 1.95e11, density: 7737.27, poisson: 0.28, damping: 1.0e-3}  # Pa, kg/m^3, -, -
 
 alpha (rad) is the tilt of the disk plane from the vertical; omega (rad/s) on e1, e2, e3; slip (m/s)
 is the contact-point velocity on a1, a2 (non-zero: the scene starts sliding); theta, psi (rad).
@@ -40,6 +41,11 @@ DEFAULTS: dict[str, Any] = {
     # few ms per scene; slip_tol: slip speed (m/s) at which sliding ends, see docs/model.md.
     "solver": {"method": "adaptive", "rtol": 1.0e-10, "atol": 1.0e-12, "dt": 1.0e-3, "slip_tol": 1.0e-9},
     "outputs": {"normal_force_frequency": True, "kinematics": False},
+    # The disk's elastic material, used only by the sound synthesis (sweep.audio, sweep.plate), never by
+    # the integrator or the summary: E (Pa), density (kg/m^3), poisson (-), damping (modal damping
+    # ratio, fraction of critical). Default: the paper's steel (its footnote); damping 1e-3 is a
+    # choice for a disk in contact with a table (free steel rings longer, ~1e-4).
+    "material": {"E": 1.95e11, "density": 7737.27, "poisson": 0.28, "damping": 1.0e-3},
 }
 
 SHAPES = {"solid": 1.0, "shell": 2.0}   # k^2 of eq. (2.4)
@@ -181,6 +187,14 @@ def load_scene(src) -> Scene:
     for k in out:
         if not isinstance(out[k], bool):
             raise ConfigError(f"outputs.{k}", out[k], "true or false")
+    mat = cfg["material"]   # sound synthesis only: not passed to the kernel
+    mat["E"] = _num("material.E", mat["E"], 0.0, 1e13, lo_open=True, allowed="a Young's modulus in (0, 1e13] Pa")
+    mat["density"] = _num("material.density", mat["density"], 0.0, 1e5, lo_open=True,
+                          allowed="a density in (0, 1e5] kg/m^3")
+    mat["poisson"] = _num("material.poisson", mat["poisson"], -1.0, 0.5, lo_open=True, hi_open=True,
+                          allowed="a Poisson ratio in (-1, 0.5)")
+    mat["damping"] = _num("material.damping", mat["damping"], 0.0, 1.0, lo_open=True, hi_open=True,
+                          allowed="a modal damping ratio in (0, 1)")
 
     params, chi = model.make_params(SHAPES[d["shape"]], d["radius"], d["thickness"], cfg["gravity"],
                                     c["mu_s"], c["mu_d"], c["k1"], c["k2"], c["k3"])
