@@ -186,6 +186,7 @@ class _Physics:
             dot = dy[Y_U1] * c + dy[Y_U2] * s
             dy[Y_U1] = dot * c
             dy[Y_U2] = dot * s
+            self.last_nu = nu
             if update_nu and aux[X_OK] != 0.0:
                 st.nu = nu
             return dy, aux
@@ -413,26 +414,38 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
         cache_t = [None]
         cache_y = np.empty(n)
         cache_aux = [None]
+        cache_nu = [sst.nu]
 
         def aux_at(tt, yy):
+            # event functions must be functions of (t, y) alone: a slaved direction is solved here
+            # from the seed, not read from the seed (which the right-hand side moves)
             if cache_t[0] != tt or not np.array_equal(cache_y, yy):
                 cache_aux[0] = ph.eval(tt, yy, sst)[1]
+                cache_nu[0] = ph.last_nu if sst.mode == SLAVED else sst.nu
                 cache_t[0] = tt
                 cache_y[:] = yy
             return cache_aux[0]
+
+        def nu_at(tt, yy):
+            aux_at(tt, yy)
+            return cache_nu[0]
 
         events, kinds = [], []
         t0 = t
 
         def add(fn, kind, terminal=True):
+            g0 = fn(t0, y)
             # An event function exactly 0 at the restart point (omega.a_i after a sign flip,
             # alpha after a side change, u.s at a slip onset) would be 'detected' again at the first
             # step end by solve_ivp (it counts g(t0) = 0 -> g(t1) <= 0 as a crossing) and located
             # at t0: a restart loop that never advances. Treat an exact zero at t0 as 'just after'
             # (the kernel likewise needs g > 0 at a step's start).
+            # The value at t0 is the one of the restart state (the dense output there may differ by
+            # rounding, enough to flip the sign of an exact zero).
             def g(tt, yy):
-                v = fn(tt, yy)
-                return v if (v != 0.0 or tt != t0) else 1e-300
+                if tt == t0:
+                    return g0 if g0 != 0.0 else 1e-300
+                return fn(tt, yy)
             g.terminal = terminal
             g.direction = -1
             events.append(g)
@@ -453,7 +466,8 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
         elif sst.mode == SLIDE:
             add(lambda tt, yy: math.hypot(yy[Y_U1], yy[Y_U2]) - u_tol, ("slipslow",))
         else:
-            add(lambda tt, yy: yy[Y_U1] * math.cos(sst.nu) + yy[Y_U2] * math.sin(sst.nu), ("slipstop",))
+            add(lambda tt, yy: yy[Y_U1] * math.cos(nu_at(tt, yy)) + yy[Y_U2] * math.sin(nu_at(tt, yy)),
+                ("slipstop",))
             add(lambda tt, yy: SLAVE_EXIT * ph.slave_speed(aux_at(tt, yy)) - math.hypot(yy[Y_U1], yy[Y_U2]),
                 ("slipfast",))
         if sst.mode == SLIDE and SLAVE_EPS > 0.0 and not sst.slave_off:
