@@ -107,6 +107,17 @@ def check_options(fps, duration_s) -> tuple[float, float]:
     return float(fps), float(duration_s)
 
 
+def check_path(path) -> Path:
+    """The animation file name: .gif, or .mp4 where ffmpeg is on PATH."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in (".gif", ".mp4"):
+        raise ConfigError("--animate", str(path), "a file name ending in .gif or .mp4")
+    if ext == ".mp4" and shutil.which("ffmpeg") is None:
+        raise ConfigError("--animate", str(path), "a .gif file (ffmpeg, needed for .mp4, is not on PATH)")
+    return path
+
+
 @dataclass
 class Frames:
     """Frame times (s) and the states drawn: from `frame_samples`."""
@@ -247,13 +258,9 @@ def write_animation(scene, path, fps: float = FPS, duration_s: float = DURATION_
     """Render a scene to path (.gif with Pillow, .mp4 with ffmpeg). Returns facts about it:
     frames, fps, duration_s, bytes, t_end_s."""
     fps, duration_s = check_options(fps, duration_s)
-    path = Path(path)
+    path = check_path(path)
     ext = path.suffix.lower()
-    if ext not in (".gif", ".mp4"):
-        raise ConfigError("--animate", str(path), "a file name ending in .gif or .mp4")
     ffmpeg = shutil.which("ffmpeg")
-    if ext == ".mp4" and ffmpeg is None:
-        raise ConfigError("--animate", str(path), "a .gif file (ffmpeg, needed for .mp4, is not on PATH)")
     n = int(round(fps * duration_s))
     res, fr = frame_samples(scene, n)
     rnd = Renderer(fr, res.scene.config["disk"]["radius"], fps)

@@ -1,5 +1,6 @@
 """Command line: `python -m sweep scene FILE.yaml [--json] [--plot DIR] [--trajectory FILE.nc]
-[--sample-times t1,t2,...]`. Invalid input exits with status 2 and a message naming the field."""
+[--sample-times t1,t2,...] [--animate FILE.gif|.mp4 [--fps F] [--animation-seconds S]] [--audio FILE.wav]
+[--spectrogram FILE.png]`. Invalid input exits with status 2 and a message naming the field."""
 from __future__ import annotations
 
 import argparse
@@ -87,6 +88,31 @@ def _print_human(s: dict) -> None:
     print(f"cost             {s['n_steps']} steps ({s['n_rejected']} rejected), {s['n_rhs']} RHS, {s['n_events']} events, {s['wall_time'] * 1e3:.2f} ms")
 
 
+def _media(args, res) -> None:
+    """--animate, --audio, --spectrogram: each reruns the scene with the samples it needs."""
+    import time
+
+    if args.animate:
+        from .animate import write_animation
+        t0 = time.perf_counter()
+        info = write_animation(res.scene, args.animate, fps=args.fps, duration_s=args.animation_seconds)
+        print(f"wrote {args.animate} ({info['frames']} frames, {info['duration_s']:g} s at {info['fps']:g} fps, "
+              f"{info['bytes'] / 1e6:.2f} MB, {time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+    if args.audio or args.spectrogram:
+        from . import audio
+        t0 = time.perf_counter()
+        res_a, ring = audio.ringing(res.scene)
+        modes = ", ".join(f"({m.n},{m.s}) {m.frequency_hz:.0f} Hz" for m in ring.modes)
+        if args.audio:
+            p = audio.write_wav(args.audio, ring)
+            print(f"wrote {p} ({len(ring.signal)} samples, {len(ring.signal) / ring.rate_hz:.3f} s at "
+                  f"{ring.rate_hz} Hz, {p.stat().st_size / 1e6:.2f} MB; plate modes {modes}; "
+                  f"{time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+        if args.spectrogram:
+            p = audio.spectrogram_png(res_a, ring, args.spectrogram)
+            print(f"wrote {p} ({p.stat().st_size / 1e3:.0f} kB)", file=sys.stderr)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sweep", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -96,6 +122,12 @@ def main(argv=None) -> int:
     sp.add_argument("--plot", metavar="DIR", help="write the analogues of the paper's Figs 3-6 to DIR")
     sp.add_argument("--trajectory", metavar="FILE.nc", help="write the state at every step to netCDF")
     sp.add_argument("--sample-times", metavar="T1,T2,...", help="report alpha, omega, energy at these times (s)")
+    sp.add_argument("--animate", metavar="FILE.gif|.mp4", help="write an animation of the disk (.mp4 needs ffmpeg)")
+    sp.add_argument("--fps", type=float, default=20.0, help="animation frames per second (default 20)")
+    sp.add_argument("--animation-seconds", type=float, default=12.0,
+                    help="animation length in s, at most 20 (default 12)")
+    sp.add_argument("--audio", metavar="FILE.wav", help="write the synthesised ringing (44.1 kHz, 16-bit PCM)")
+    sp.add_argument("--spectrogram", metavar="FILE.png", help="write the spectrogram of the ringing")
     args = ap.parse_args(argv)
 
     from .simulate import simulate
@@ -103,7 +135,15 @@ def main(argv=None) -> int:
     try:
         times = _times(args.sample_times) if args.sample_times else None
         want_traj = bool(args.plot or args.trajectory)
+        if args.animate:   # options checked before any work
+            from .animate import check_options, check_path
+            check_options(args.fps, args.animation_seconds)
+            check_path(args.animate)
+        for opt, name, ext in (("--audio", args.audio, ".wav"), ("--spectrogram", args.spectrogram, ".png")):
+            if name and not name.lower().endswith(ext):
+                raise ConfigError(opt, name, f"a file name ending in {ext}")
         res = simulate(args.file, sample_times=times, trajectory=want_traj)
+        _media(args, res)
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
