@@ -78,27 +78,26 @@ def _kirchhoff_det(n: int, lam: float, nu: float) -> float:
     return float(np.linalg.det(m / scale))
 
 
-def _roots(fun, lo: float, hi: float, step: float) -> list[float]:
-    """Sign changes of fun on a grid, refined by Brent; points where |fun| jumps (poles) are dropped."""
-    from scipy.optimize import brentq
-
-    xs = np.arange(lo, hi + step, step)
-    fs = np.array([fun(x) for x in xs])
-    out = []
-    for i in range(len(xs) - 1):
-        if np.isfinite(fs[i]) and np.isfinite(fs[i + 1]) and fs[i] * fs[i + 1] < 0.0:
-            x = brentq(fun, xs[i], xs[i + 1], xtol=1e-13, rtol=1e-13)
-            mid = abs(fun(x))
-            if mid < 1e-6 * max(abs(fs[i]), abs(fs[i + 1]), 1e-300) or mid < 1e-8:
-                out.append(x)
-    return out
+def _kirchhoff_det_grid(n: int, lam: np.ndarray, nu: float) -> np.ndarray:
+    """The free-edge determinant on a grid of lam (same sign as _kirchhoff_det: positive column scales)."""
+    m = _kirchhoff_columns(n, lam, nu)   # (lam, 2 rows, 2 columns)
+    return m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
 
 
 def kirchhoff_lambda2(n: int, nu: float, count: int = 3) -> list[float]:
     """Eigenvalues lam^2 = omega a^2 sqrt(rho h / D) of the free Kirchhoff plate with n nodal
-    diameters, in increasing order of nodal circles s (s = 0 for n >= 2, s = 1 first for n <= 1)."""
-    lams = _roots(lambda x: _kirchhoff_det(n, x, nu), 0.5, 4.0 + 4.0 * count + n, 0.01)
-    return [lam * lam for lam in lams[:count]]
+    diameters, in increasing order of nodal circles s (s = 0 for n >= 2, s = 1 first for n <= 1):
+    sign changes of the free-edge determinant on a grid of lam (step 0.01), refined by Brent."""
+    from scipy.optimize import brentq
+
+    lam = np.arange(0.5, 4.0 + 4.0 * count + n, 0.01)
+    d = _kirchhoff_det_grid(n, lam, nu)
+    out = []
+    for i in np.nonzero(np.sign(d[:-1]) * np.sign(d[1:]) < 0)[0]:
+        out.append(brentq(lambda x: _kirchhoff_det(n, x, nu), lam[i], lam[i + 1], xtol=1e-14, rtol=1e-14))
+        if len(out) == count:
+            break
+    return [x * x for x in out]
 
 
 def first_nodal_circles(n: int) -> int:
