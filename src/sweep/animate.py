@@ -292,4 +292,5 @@ def write_animation(scene, path, fps: float = FPS, duration_s: float = DURATION_
         raise ConfigError("--animate", str(path), f"an animation of at most {max_bytes} bytes: this one is {size} "
                           "bytes; lower --fps or --animation-seconds")
     os.replace(tmp, path)
-    return {"frames": n, "fps": fps, "duration_s": n / fps, "bytes": size, "t_end_s": float(fr.t[-1])}
+    return {"frames": n, "fps": fps, "duration_s": n / fps, "bytes": size, "t_end_s": float(fr.t[-1]),
+            "scale_px_per_m": rnd.scale_px_per_m}
