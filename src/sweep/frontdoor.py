@@ -336,6 +336,7 @@ def run(argv: list[str]) -> int:
     def read() -> None:
         for text in proc.stdout:
             log.write(text)
+            log.flush()   # `tail -f results/<name>/logs/sweep.log` follows the run
             m = STEPS.search(text)
             if m:
                 progress.steps = (int(m.group(1)), int(m.group(2)))
