@@ -7,12 +7,12 @@ Model (docs/model.md, "Sound: the disk's flexural modes"):
   axis e2, F(t) = N(t) E3.e2 = N(t) sin(alpha), bends the disk; the in-plane part excites in-plane
   modes (far above the audio band) and is left out.
 * The disk is a free circular plate of the scene's radius and thickness and `material:` (sweep.plate,
-  Mindlin theory). Each flexural mode (n, s) with frequency f_m <= 0.9 x Nyquist is one damped
-  oscillator Q'' + 2 zeta w_m Q' + w_m^2 Q = rim_m F(t) / m_plate, rim_m the mode's rim deflection at
-  unit modal mass (= plate mass). For n >= 1 the excited shape is the orientation cos(n(phi - phi_P))
-  pinned at the contact point: P moves through the body at the spin rate |dpsi/dt|, orders of
-  magnitude below f_m, so one oscillator per mode pair suffices.
-* Heard signal: the rim's normal velocity at the contact point, sum_m rim_m Q'_m (a disk with
+  Mindlin theory). Each flexural mode shape (n, s, orientation cos n phi or sin n phi, body-fixed)
+  with frequency f_m <= 0.9 x Nyquist is one damped oscillator
+  Q'' + 2 zeta w_m Q' + w_m^2 Q = rim_m g(phi_P) F(t) / m_plate, rim_m the mode's rim deflection at
+  unit modal mass (= plate mass), g = cos(n phi) or sin(n phi), phi_P = psi - pi/2 the body angle of
+  the contact point (it runs round the rim at the spin rate dpsi/dt, about the precession rate).
+* Heard signal: the rim's normal velocity at the contact point, sum rim_m g(phi_P) Q'_m (a disk with
   ka = 2 pi f a / c ~ 7 at 10 kHz radiates a pressure ~ rho c v). Each oscillator starts at rest in
   its static deflection under F(0) and is discretised exactly for a force linear between samples
   (first-order hold), so a mode near Nyquist keeps its frequency.
@@ -85,9 +85,18 @@ def synthesize(result, rate_hz: int = RATE_HZ) -> Ringing:
     d, mat = sc.config["disk"], sc.config["material"]
     m_plate = mat["density"] * math.pi * d["radius"] ** 2 * d["thickness"]
     modes = disk_modes(sc, rate_hz)
+    psi = s["psi"][:n]   # P sits at body angle psi - pi/2 on the rim (e3 = -sin(psi) b1 + cos(psi) b3)
     v = np.zeros(n)
     for md in modes:
-        v += md.rim * mode_response(force, rate_hz, md.frequency_hz, mat["damping"], md.rim / m_plate)
+        gain = md.rim / m_plate
+        if md.n == 0:
+            v += md.rim * mode_response(force, rate_hz, md.frequency_hz, mat["damping"], gain)
+            continue
+        # the pair cos(n phi), sin(n phi): body-fixed shapes, loaded at P and heard at P
+        c, si = np.cos(md.n * psi), np.sin(md.n * psi)
+        qc = mode_response(force * c, rate_hz, md.frequency_hz, mat["damping"], gain)
+        qs = mode_response(force * si, rate_hz, md.frequency_hz, mat["damping"], gain)
+        v += md.rim * (qc * c + qs * si)
     peak = float(np.max(np.abs(v))) if n else 0.0
     sig = v * (PEAK / peak) if peak > 0.0 else v
     return Ringing(rate_hz=rate_hz, t=t, force_n=force, signal=sig, velocity_peak_m_s=peak, modes=modes,
