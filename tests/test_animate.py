@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ from sweep import animate
 from sweep.cli import main
 from sweep.errors import ConfigError
 
-PAPER = "config/scenes/kessler2002.yaml"
+PAPER = str(Path(__file__).resolve().parents[1] / "config" / "scenes" / "kessler2002.yaml")
 R, L = 0.03755, 0.0128
 
 

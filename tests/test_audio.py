@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 import wave
 
 import numpy as np
@@ -12,7 +13,7 @@ from sweep.cli import main
 from sweep.errors import ConfigError
 from sweep.scene import load_scene
 
-PAPER = "config/scenes/kessler2002.yaml"
+PAPER = str(Path(__file__).resolve().parents[1] / "config" / "scenes" / "kessler2002.yaml")
 STEEL = dict(E_pa=195e9, density_kg_m3=7737.27, poisson=0.28)
 
 
