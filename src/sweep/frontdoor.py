@@ -122,7 +122,8 @@ def warm_numba(say) -> None:
 
     stale = stale_numba_modules()
     if stale:
-        say(f"numba: compiling the integrator's kernels ({len(stale)} modules changed or never compiled); "
+        say(f"numba: compiling the integrator's kernels ({len(stale)} module{'s' if len(stale) != 1 else ''} "
+            "changed or never compiled); "
             f"this happens once after a change of src/sweep/core and takes {EXPECTED_COMPILE_S} ...")
     t0 = time.monotonic()
     batch.warm_up(copy.deepcopy(DEFAULTS))
