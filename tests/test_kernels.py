@@ -114,9 +114,8 @@ def test_hermite_dip_finds_the_minimum_exactly():
     assert R.hermite_dip(1.0, 1.0, 2.0, 1.0) == -1.0          # monotone: no dip
 
 
-def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
-    p, y, cs = setup
-    n, h = M.N_CORE, 0.3
+def _dense_step(p, y, cs, h, n=M.N_CORE):
+    """One DOP853 step from (0, y) with its dense output: (F, wk, istats)."""
     wk, ist = _work()
     K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
     F = np.zeros((14, M.N_FULL))
@@ -125,11 +124,18 @@ def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
     y_new, f_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
     D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, f_new, np.zeros(M.N_AUX), wk, ist)
     D.dense_coeffs(0.0, y, h, y_new, f_new, n, p, cs, K, F, wk, ist)
+    return F, wk, ist
+
+
+def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
+    p, y, cs = setup
+    n, h = M.N_CORE, 0.3
     k = C.EV_SIGN1        # g = sigma_1 w1 = 0.05 > 0; w1 rises through 0 within the step
     y = y.copy()
     y[M.Y_W1] = -0.05
     cs = cs.copy()
     cs[L.CS_SIG] = -1.0
+    F, wk, ist = _dense_step(p, y, cs, h)
     g0 = R.event_value_at(k, 0.0, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
     g1 = R.event_value_at(k, h, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
     assert g0 > 0.0 >= g1, (g0, g1)
@@ -142,14 +148,7 @@ def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
 def test_brent_finds_the_maximum_of_the_normal_force(setup):
     p, y, cs = setup
     n, h = M.N_CORE, 1.5
-    wk, ist = _work()
-    K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
-    F = np.zeros((14, M.N_FULL))
-    f = np.zeros(M.N_FULL)
-    f[:n] = _f(0.0, y, p, cs)[0]
-    y_new, f_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
-    D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, f_new, np.zeros(M.N_AUX), wk, ist)
-    D.dense_coeffs(0.0, y, h, y_new, f_new, n, p, cs, K, F, wk, ist)
+    F, wk, ist = _dense_step(p, y, cs, h)
     grid = np.linspace(0.0, h, 2001)
     phi = []
     for t in grid:
