@@ -2,7 +2,7 @@
 
 Values are the published constants of Hairer, Norsett & Wanner, *Solving Ordinary Differential
 Equations I*, 2nd ed. (Springer 1993), section II.10, as distributed with their code dop853.f.
-They are data, not code: `tests/test_integrator.py` checks the order (8 for the step, 7 for the
+They are data, not code: `tests/test_tableau.py` checks the order (8 for the step, 7 for the
 dense output) on problems with known solutions, so a mistyped digit cannot go unnoticed.
 
 Layout: stages 0..11 are the RK stages; stage 12 is f(t+h, y_new) (reused as stage 0 of the next
