@@ -24,7 +24,7 @@ from .impulse import project_velocity
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_DYTMP, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
 from .model import (P_K1, P_K2, P_K3, P_MUD, P_MUS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
-                    Y_U2, Y_W1, Y_W2, Y_W3, energy_with_slip, rhs)
+                    Y_U2, Y_W1, energy_with_slip, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
 EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against its moment's sign
@@ -164,7 +164,7 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
     bestd = 1e300
     m = 64
     xa = guess - math.pi
-    ca, da = slip_rates(xa, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+    ca, _ = slip_rates(xa, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
     for j in range(1, m + 1):
         xb = guess - math.pi + 2.0 * math.pi * j / m
         cb, db = slip_rates(xb, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
@@ -185,7 +185,7 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
             if dr > 0.0 and dist < bestd:
                 best = root
                 bestd = dist
-        xa, ca, da = xb, cb, db
+        xa, ca = xb, cb
     return best
 
 

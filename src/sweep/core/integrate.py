@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from .. import outcomes as oc
-from .contact import (EV_CONE, EV_FACE, EV_LEVEL, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
+from .contact import (EV_CONE, EV_LEVEL, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .dop853 import N_DENSE, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
@@ -23,7 +23,7 @@ from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F
                      N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
-                     W_FNEW, W_GBUF, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
+                     W_FNEW, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1
 from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, locate
 from .tableau import N_STAGES_EXTENDED

@@ -11,7 +11,7 @@ from numba import njit
 
 from .contact import EV_LEVEL, eval_rhs, mode_energy
 from .dop853 import dense_eval
-from .layout import (CS_MODE, CS_SIDE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, N_CS, ROLL, T_NEXT_LEVEL,
+from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, N_CS, T_NEXT_LEVEL,
                      T_NEXT_SAMPLE, T_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
                      T_NPK, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
 from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA, Y_W3
