@@ -181,3 +181,10 @@ def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
         assert cm > 0.0 > cp
         nu2 = C.slaved_direction(nu + 1e-4, u, 0.0, y, p, sl, n, dy, aux, ys, ist)
         assert abs(math.remainder(nu2 - nu, 2 * math.pi)) < 1e-12
+
+
+def test_hermite_peak_is_the_interpolants_maximum():
+    # g(x) = x (1 - x) - 0.1 x: H(0) = 0, H'(0) = 0.9, H(1) = -0.1, H'(1) = -1.1; maximum at x = 0.45
+    x = R.hermite_peak(0.0, 0.9, -0.1, -1.1)
+    assert x == pytest.approx(0.45, abs=1e-12)
+    assert R.hermite_peak(0.0, 1.0, 1.0, 1.0) == -1.0   # a straight line has no interior extremum

@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from .. import outcomes as oc
-from .contact import (EV_CONE, EV_LEVEL, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
+from .contact import (EV_CONE, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .dop853 import N_DENSE, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
@@ -24,8 +24,8 @@ from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
-from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1
-from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, locate
+from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1, Y_W1
+from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, hermite_peak, locate
 from .tableau import N_STAGES_EXTENDED
 from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
                        track_peaks)
@@ -54,6 +54,26 @@ def start(y, p, cs, n, u_tol, wk, istats):
 
 
 @njit(cache=True)
+def side_lift_off(t, y, h, y_new, g_end, F, n, p, cs, u_tol, lev, wk, istats):
+    """On a step that starts at alpha = 0 (side change) and ends with side alpha <= 0: a time where
+    side alpha > 0 and its value, to bracket the return to 0; (-1, 0) if there is none.
+
+    Starts at the peak of the Hermite interpolant of side alpha (exact end derivatives side omega_1)
+    and halves towards t, where side alpha ~ side omega_1 (tau - t) > 0.
+    """
+    side = cs[CS_SIDE]
+    x = hermite_peak(0.0, side * y[Y_W1] * h, g_end, side * y_new[Y_W1] * h)
+    if x <= 0.0:
+        x = 0.5
+    for _ in range(60):
+        gm = event_value_at(EV_SIDE, t + x * h, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+        if gm > 0.0:
+            return t + x * h, gm
+        x *= 0.5
+    return -1.0, 0.0
+
+
+@njit(cache=True)
 def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats):
     """Earliest event on the accepted step [t, t + h]: (k, restart time, dense output made?).
 
@@ -73,8 +93,22 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats
         gb = 0.0
         if g_old[k] > 0.0 and g_new[k] <= 0.0:
             ta, ga, tb, gb = t, g_old[k], t + h, g_new[k]
-        elif (k <= EV_SIGN3 or k == EV_CONE) and g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf:
-            if k == EV_CONE:
+        elif k == EV_SIDE and g_old[k] == 0.0 and g_new[k] <= 0.0:
+            # the step starts on alpha = 0 just after a side change, alpha moving into the new side;
+            # ending on or past 0 again means it came back within the step (a rocking bounce)
+            if not have_dense:
+                dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
+                have_dense = True
+            ta, ga = side_lift_off(t, y, h, y_new, g_new[k], F, n, p, cs, u_tol, lev, wk, istats)
+            tb, gb = t + h, g_new[k]
+            if ta < 0.0:
+                ta, tb = t, t   # no point of the step lies on the new side: it returns at once
+        elif (k <= EV_SIGN3 or k == EV_CONE or k == EV_SIDE) and g_old[k] > 0.0 and g_new[k] > 0.0 \
+                and g_old[k] != math.inf:
+            if k == EV_SIDE:
+                # g = side alpha, dg/dtau = side omega_1 (eq. 2.3): a bounce off alpha = 0 and back
+                dip = hermite_dip(g_old[k], cs[CS_SIDE] * y[Y_W1] * h, g_new[k], cs[CS_SIDE] * y_new[Y_W1] * h)
+            elif k == EV_CONE:
                 # the cone margin can dip below 0 and back within a step (a brief slip demand)
                 d0 = event_rate(k, g_old[k], t, y, f, p, cs, n, u_tol, lev, wk, istats) * h
                 d1 = event_rate(k, g_new[k], t + h, y_new, f_new, p, cs, n, u_tol, lev, wk, istats) * h

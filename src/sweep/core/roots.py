@@ -47,10 +47,10 @@ def _hermite(x, g0, d0, g1, d1):
 
 
 @njit(cache=True)
-def hermite_dip(g0, d0, g1, d1):
-    """Where in (0, 1) the cubic Hermite interpolant of g (values g0, g1 > 0 and derivatives d0, d1
-    per unit x at the step ends) has an interior minimum <= 0: that x, else -1. The minimum is found
-    exactly (a root of the quadratic derivative)."""
+def _hermite_extremum(g0, d0, g1, d1, sgn):
+    """x in (0, 1) of the interior extremum of the cubic Hermite interpolant (values g0, g1 and
+    derivatives d0, d1 per unit x at the step ends) with the smallest sgn * H (sgn = 1: lowest
+    minimum, -1: highest maximum), found exactly from the quadratic H'; -1 if there is none."""
     # H'(x) = a x^2 + b x + c
     a = 6.0 * (g0 - g1) + 3.0 * (d0 + d1)
     b = -6.0 * (g0 - g1) - 4.0 * d0 - 2.0 * d1
@@ -60,20 +60,40 @@ def hermite_dip(g0, d0, g1, d1):
     if a == 0.0:
         if b != 0.0:
             x = -c / b
-            if 0.0 < x < 1.0 and _hermite(x, g0, d0, g1, d1) <= 0.0:
+            if 0.0 < x < 1.0:
                 best = x
         return best
     disc = b * b - 4.0 * a * c
     if disc < 0.0:
         return -1.0
-    sq = math.sqrt(disc)
-    for x in ((-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a)):
+    # the cancellation-free pair of roots: q / a and c / q (a may be tiny against b)
+    q = -0.5 * (b + math.copysign(math.sqrt(disc), b))
+    for i in range(2):
+        if q == 0.0:
+            break
+        x = q / a if i == 0 else c / q
         if 0.0 < x < 1.0:
-            v = _hermite(x, g0, d0, g1, d1)
-            if v <= 0.0 and (best < 0.0 or v < vbest):
+            v = sgn * _hermite(x, g0, d0, g1, d1)
+            if best < 0.0 or v < vbest:
                 best = x
                 vbest = v
     return best
+
+
+@njit(cache=True)
+def hermite_dip(g0, d0, g1, d1):
+    """Where in (0, 1) the cubic Hermite interpolant of g (values g0, g1 > 0 and derivatives d0, d1
+    per unit x at the step ends) has an interior minimum <= 0: that x, else -1."""
+    x = _hermite_extremum(g0, d0, g1, d1, 1.0)
+    if x > 0.0 and _hermite(x, g0, d0, g1, d1) <= 0.0:
+        return x
+    return -1.0
+
+
+@njit(cache=True)
+def hermite_peak(g0, d0, g1, d1):
+    """x in (0, 1) of the interpolant's highest interior maximum, else -1 (see _hermite_extremum)."""
+    return _hermite_extremum(g0, d0, g1, d1, -1.0)
 
 
 @njit(cache=True)
