@@ -22,8 +22,8 @@ from numba import njit
 
 from .impulse import project_velocity
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
-                     W_DYTMP, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
-from .model import (P_K1, P_K2, P_K3, P_MUD, P_MUS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
+                     W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
+from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
                     Y_U2, Y_W1, energy_with_slip, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
@@ -131,12 +131,14 @@ def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
     if mode == SLAVED:
         u = math.hypot(y[Y_U1], y[Y_U2])
         nu = slaved_direction(cs[CS_NU], u, t, y, p, cs, n, dy, aux, wk[W_YSLIP], istats)
-        # on the slaved direction the slip acceleration is parallel to the slip: du/dtau = (s.a) s
-        c = math.cos(nu)
-        s = math.sin(nu)
-        dot = dy[Y_U1] * c + dy[Y_U2] * s
-        dy[Y_U1] = dot * c
-        dy[Y_U2] = dot * s
+        # the sliding equations at the slip vector itself with the friction along s(nu): the slip
+        # acceleration, the friction power (mu_d Phi s.u) and the energy stay those of one
+        # Newton-Euler motion, so the energy books close however far u turns from s
+        pf = wk[W_PFRICTION]
+        for i in range(N_PARAMS):
+            pf[i] = p[i]
+        pf[P_UFREEZE] = math.inf
+        _model(t, y, pf, cs, n, dy, aux, math.cos(nu), math.sin(nu), istats)
     elif mode == SLIDE:
         un = math.hypot(y[Y_U1], y[Y_U2])
         nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
@@ -378,8 +380,10 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         cs[CS_MODE] = ROLL
         istats[I_TRANS] += 1
     elif k == EV_SLIP_STOP:
-        y[Y_U1] = 0.0
-        y[Y_U2] = 0.0
+        # the slip speed along the slaved direction is 0; what the integration left of the slip
+        # (its error) is removed by the plastic impulse, so the energy books stay exact
+        side = int(cs[CS_SIDE])
+        y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
         cs[CS_MODE] = ROLL
         istats[I_TRANS] += 1
     elif k == EV_SLIP_FAST:

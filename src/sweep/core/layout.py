@@ -49,7 +49,8 @@ W_YPREV = 16     # state at the previous step's start (its dense output is F[7:1
 W_CSPREV = 17    # contact state of the previous step
 W_SCRATCH = 18   # 7 rows: the plastic impulse's normal equations (impulse.py)
 W_YSEG = 25      # state at the end of the current segment (step end or event)
-N_WORK = 26
+W_PFRICTION = 26  # SLAVED: the parameters with the friction direction held at the slaved one
+N_WORK = 27
 N_WCOLS = 16     # columns of the work buffer: >= N_FULL and >= the number of events
 
 # --- settings vector ----------------------------------------------------------------------------
