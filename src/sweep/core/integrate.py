@@ -17,7 +17,7 @@ from numba import njit
 from .. import outcomes as oc
 from .contact import (EV_CONE, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
-from .dop853 import N_DENSE, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
+from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
@@ -215,6 +215,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         record_traj(t, y, aux[X_PHI], cs, n, traj, istats)
     trk[T_PHI_B] = aux[X_PHI]
     h = initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats)
+    after_reject = False
     h = min(h, h_max)
 
     while outcome < 0 or (trk[T_PENDING] > 0.0 and trk[T_AFTER_HALT] < extra_steps):
@@ -235,8 +236,10 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         err = try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard)
         if not err <= 1.0:
             h *= step_factor(err)
+            after_reject = True
             continue
-        h_next = min(h * step_factor(err), h_max)
+        h_next = min(h * accepted_step_factor(err, after_reject), h_max)
+        after_reject = False
         if aux_new[X_OK] == 0.0 and running:
             outcome = oc.NUMERICAL_ERROR
             break
