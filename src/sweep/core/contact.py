@@ -310,6 +310,25 @@ def stick_or_flip(i, t, y, p, cs, n, wk, istats):
 
 
 @njit(cache=True)
+def settle_signs(t, y, p, cs, n, wk, istats):
+    """After a discrete update: a free moment component whose sign function sigma_i (omega.a_i) is
+    <= 0 has reached its switching surface at this same event (two components of a spin-free
+    rocking disk pass omega.a_i = 0 together); it gets the stick test now, since its own event,
+    g going from > 0 to <= 0, can no longer happen."""
+    k = (p[P_K1], p[P_K2], p[P_K3])
+    for _ in range(3):
+        eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+        found = -1
+        for i in range(3):
+            if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 0.0 \
+                    and cs[CS_SIG + i] * wk[W_AUXTMP, X_G1 + i] <= 0.0:
+                found = i
+        if found < 0:
+            return
+        stick_or_flip(found, t, y, p, cs, n, wk, istats)
+
+
+@njit(cache=True)
 def consistent_signs(t, y, p, cs, n, wk, istats):
     """Every free moment sign agrees with omega.a_i; an exact zero gets the stick test."""
     eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
@@ -397,6 +416,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         return 8   # outcomes.FACE_CONTACT (the caller records it as a halt)
     elif k == EV_SIDE:
         return side_change(t, y, p, cs, n, u_tol, wk, istats, fstats)
+    settle_signs(t, y, p, cs, n, wk, istats)
     # a rolling state must be admissible after every discrete update: a moment sign that flips or
     # sticks changes the friction that rolling needs, and it may jump outside the static cone
     if cs[CS_MODE] == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
