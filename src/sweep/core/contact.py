@@ -376,6 +376,16 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
 
 
 @njit(cache=True)
+def end_slip(y, p, cs, wk, istats):
+    """SLIDE -> ROLL at slip_tol: a plastic contact impulse removes the slip (its energy goes to
+    sliding)."""
+    side = int(cs[CS_SIDE])
+    y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
+    cs[CS_MODE] = ROLL
+    istats[I_TRANS] += 1
+
+
+@njit(cache=True)
 def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     """Discrete update at a located event k (state y at the event, changed in place).
 
@@ -393,11 +403,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         start_slip(t, y, p, cs, n, wk, istats)
         cs[CS_SLAVE_OFF] = 0.0
     elif k == EV_SLIP_SLOW:
-        # the slip ends at slip_tol by a plastic contact impulse (its energy goes to sliding)
-        side = int(cs[CS_SIDE])
-        y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
-        cs[CS_MODE] = ROLL
-        istats[I_TRANS] += 1
+        end_slip(y, p, cs, wk, istats)
     elif k == EV_SLIP_STOP:
         # the slip speed along the slaved direction is 0; what the integration left of the slip
         # (its error) is removed by the plastic impulse, so the energy books stay exact
@@ -417,6 +423,10 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     elif k == EV_SIDE:
         return side_change(t, y, p, cs, n, u_tol, wk, istats, fstats)
     settle_signs(t, y, p, cs, n, wk, istats)
+    if cs[CS_MODE] == SLIDE and math.hypot(y[Y_U1], y[Y_U2]) <= u_tol:
+        # the slip reached slip_tol within the located event's bracket (a stiff slip decays by
+        # orders of magnitude in 1e-11 tau): its own event can no longer happen
+        end_slip(y, p, cs, wk, istats)
     # a rolling state must be admissible after every discrete update: a moment sign that flips or
     # sticks changes the friction that rolling needs, and it may jump outside the static cone
     if cs[CS_MODE] == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
