@@ -170,7 +170,7 @@ def rhs_errors(rolling, stuckset, seed, n_valid=N_VALID):
         ok_ref = N2 > sol["N"]
         if ok_ref != (aux[M.X_OK] == 1.0):
             stats["ok_flag_mismatch"] += 1
-        if aux[M.X_OK] == 0.0:
+        if aux[M.X_OK] != 1.0:
             stats["skip_den"] += 1
             continue
         if aux[M.X_PHI] <= 0.0:

@@ -120,7 +120,8 @@ def slaved_direction(nu0, u, t, y, p, cs, n, dy, aux, ys, istats):
         xa, ca = xb, cb
         xb = xc
         cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
-    aux[X_OK] = 0.0
+    if aux[X_OK] > 0.0:
+        aux[X_OK] = 0.0   # (a Painleve flag, -1, from the model stays)
     return xb
 
 

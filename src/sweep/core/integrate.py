@@ -39,6 +39,13 @@ KernelOutput = namedtuple("KernelOutput", "istats fstats levels samples trajecto
 
 
 @njit(cache=True)
+def failure_outcome(ok):
+    """Outcome for a right-hand side that failed: the model's Painleve flag (-1) or a slaved
+    direction that did not converge (0)."""
+    return oc.PAINLEVE if ok < 0.0 else oc.NUMERICAL_ERROR
+
+
+@njit(cache=True)
 def start(y, p, cs, n, u_tol, wk, istats):
     """Initial discrete state: moment signs, slip mode, and slip onset if rolling cannot hold."""
     cs[CS_SIDE] = 1.0 if y[Y_ALPHA] > 0.0 else -1.0
@@ -205,8 +212,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     outcome = -1
     if aux[X_PHI] <= 0.0:
         outcome = oc.CONTACT_LOST
-    if aux[X_OK] == 0.0:
-        outcome = oc.NUMERICAL_ERROR
+    if aux[X_OK] != 1.0:
+        outcome = failure_outcome(aux[X_OK])
     ns = sample_tau.shape[0]
     while int(trk[T_NEXT_SAMPLE]) < ns and sample_tau[int(trk[T_NEXT_SAMPLE])] <= 0.0:
         record_sample(y, aux, p, cs, n, samples[int(trk[T_NEXT_SAMPLE])])
@@ -240,8 +247,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             continue
         h_next = min(h * accepted_step_factor(err, after_reject), h_max)
         after_reject = False
-        if aux_new[X_OK] == 0.0 and running:
-            outcome = oc.NUMERICAL_ERROR
+        if aux_new[X_OK] != 1.0 and running:
+            outcome = failure_outcome(aux_new[X_OK])
             break
 
         # --- events, levels, samples, peaks on [t, seg_end] -------------------------------------
@@ -305,9 +312,9 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if code >= 0:
                 break
             eval_rhs(t, y, p, cs, n, f, aux_new, wk, istats)
-            if aux_new[X_OK] == 0.0:
+            if aux_new[X_OK] != 1.0:
                 if running:
-                    outcome = oc.NUMERICAL_ERROR
+                    outcome = failure_outcome(aux_new[X_OK])
                     fstats[F_TEND] = t
                 break
             event_values(y, aux_new, p, cs, u_tol, lev, g_old)

@@ -130,7 +130,8 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     effective sign sigma_i in [-1, 1] is solved from d/dtau(omega.a_i) = 0.
     (n0x, n0y): slip direction used while the slip speed is <= p[P_UFREEZE] (0: only at u = 0).
     nstate: number of state components to fill (N_CORE, N_THETA, or N_FULL with kinematics).
-    aux: Phi, F1, F2 (friction on a1, a2), effective sigma_1..3, omega.a_1..3, ok-flag.
+    aux: Phi, F1, F2 (friction on a1, a2), effective sigma_1..3, omega.a_1..3, ok-flag (1; -1 where the
+    e1 balance's coefficient of Phi is not positive: a Painleve inconsistency).
     """
     G = p[P_G]
     h = side * p[P_H]
@@ -184,7 +185,7 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
         qq = q1 - k1 * sig1
         den = a1 - qq * f
         if den <= 0.0:
-            ok = 0.0   # Painleve-type inconsistency: no acceleration satisfies the contact law
+            ok = -1.0   # Painleve-type inconsistency: no acceleration satisfies the contact law
         dw1 = (r1 + qq * phi0) / den
         phi = phi0 + f * dw1
 
