@@ -317,6 +317,13 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                     outcome = failure_outcome(aux_new[X_OK])
                     fstats[F_TEND] = t
                 break
+            if aux_new[X_PHI] <= 0.0:
+                # the discrete update (an impact) leaves the disk with no compressive normal force:
+                # it leaves the table here (its own event, Phi falling through 0, cannot happen)
+                if running:
+                    outcome = oc.CONTACT_LOST
+                    fstats[F_TEND] = t
+                break
             event_values(y, aux_new, p, cs, u_tol, lev, g_old)
         else:
             for k in range(N_DYN_EVENTS + 1):
