@@ -24,7 +24,7 @@ from .impulse import project_velocity
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
 from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
-                    Y_U2, Y_W1, energy_with_slip, rhs)
+                    Y_U2, Y_W1, energy_with_slip, moment_axes_rates, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
 EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against its moment's sign
@@ -40,6 +40,9 @@ EV_FACE = 13       # pi/2 - |alpha| = BETA_FACE: the face reaches the table
 N_DYN_EVENTS = 14
 EV_LEVEL = 14      # energy reaches the next halt level (recorded, no restart)
 N_EVENTS = 15
+# not event functions: EV_AGAINST1 + i is the sign event of component i found at the restart itself
+# (omega.a_i moves against its new moment sign at once: the un-stick only grazed |sigma| = 1)
+EV_AGAINST1 = 15
 
 # Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
 # is then 1e-6 R above the table (38 nm for the paper's disk), below any real table's flatness. A disk
@@ -311,6 +314,19 @@ def stick_or_flip(i, t, y, p, cs, n, wk, istats):
 
 
 @njit(cache=True)
+def release_moved(y, cs, g_before):
+    """A stuck moment component whose omega.a_i an impulse has moved off its held value is free:
+    the dry-friction moment is finite and cannot hold it through an impulse (sign of the new
+    omega.a_i; an exact 0 is left to settle_signs' stick test)."""
+    g = moment_axes_rates(y)
+    for i in range(3):
+        if cs[CS_STUCK + i] == 1.0 and g[i] != g_before[i]:
+            cs[CS_STUCK + i] = 0.0
+            if g[i] != 0.0:
+                cs[CS_SIG + i] = 1.0 if g[i] > 0.0 else -1.0
+
+
+@njit(cache=True)
 def settle_signs(t, y, p, cs, n, wk, istats):
     """After a discrete update: a free moment component whose sign function sigma_i (omega.a_i) is
     <= 0 has reached its switching surface at this same event (two components of a spin-free
@@ -393,8 +409,18 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     Returns the outcome code that ends the scene, or -1 to continue. The caller re-evaluates the
     right-hand side and the event functions afterwards.
     """
+    g_before = moment_axes_rates(y)
     if k <= EV_SIGN3:
         stick_or_flip(k, t, y, p, cs, n, wk, istats)
+    elif k >= EV_AGAINST1:
+        # neither sign holds (the one just set fails at once, the other opposes the motion):
+        # the Filippov solution stays on omega.a_i = 0
+        i = k - EV_AGAINST1
+        sig_failed = cs[CS_SIG + i]
+        stick_or_flip(i, t, y, p, cs, n, wk, istats)
+        if cs[CS_STUCK + i] == 0.0 and cs[CS_SIG + i] == sig_failed:
+            cs[CS_STUCK + i] = 1.0
+            istats[I_STICK] += 1
     elif k <= EV_UNSTICK3:
         i = k - EV_UNSTICK1
         eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
@@ -423,11 +449,12 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         return 8   # outcomes.FACE_CONTACT (the caller records it as a halt)
     elif k == EV_SIDE:
         return side_change(t, y, p, cs, n, u_tol, wk, istats, fstats)
-    settle_signs(t, y, p, cs, n, wk, istats)
     if cs[CS_MODE] == SLIDE and math.hypot(y[Y_U1], y[Y_U2]) <= u_tol:
         # the slip reached slip_tol within the located event's bracket (a stiff slip decays by
         # orders of magnitude in 1e-11 tau): its own event can no longer happen
         end_slip(y, p, cs, wk, istats)
+    release_moved(y, cs, g_before)
+    settle_signs(t, y, p, cs, n, wk, istats)
     # a rolling state must be admissible after every discrete update: a moment sign that flips or
     # sticks changes the friction that rolling needs, and it may jump outside the static cone
     if cs[CS_MODE] == ROLL and cone_violated(t, y, p, cs, n, wk, istats):

@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from .. import outcomes as oc
-from .contact import (EV_CONE, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
+from .contact import (EV_AGAINST1, EV_CONE, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
@@ -25,7 +25,7 @@ from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1, Y_W1
-from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, hermite_peak, locate
+from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, hermite_peak, locate, sign_rate
 from .tableau import N_STAGES_EXTENDED
 from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
                        track_peaks)
@@ -61,19 +61,21 @@ def start(y, p, cs, n, u_tol, wk, istats):
 
 
 @njit(cache=True)
-def side_lift_off(t, y, h, y_new, g_end, F, n, p, cs, u_tol, lev, wk, istats):
-    """On a step that starts at alpha = 0 (side change) and ends with side alpha <= 0: a time where
-    side alpha > 0 and its value, to bracket the return to 0; (-1, 0) if there is none.
-
-    Starts at the peak of the Hermite interpolant of side alpha (exact end derivatives side omega_1)
-    and halves towards t, where side alpha ~ side omega_1 (tau - t) > 0.
+def lift_off(k, t, y, h, g0, d0, g1, d1, F, n, p, cs, u_tol, lev, wk, istats):
+    """On a step that starts on event k's surface (g0 <= 0, just after a discrete update put the
+    state there) and ends with g1 <= 0: a time where g_k > 0 and its value, to bracket a return to
+    the surface within the step; (-1, 0) if there is none. d0, d1: exact end derivatives of g_k
+    per unit of the step. Starts at the peak of the cubic Hermite interpolant of g_k; where g_k
+    leaves the surface upwards (d0 > 0) it halves towards t, where g_k ~ g0 + d0 x > 0.
     """
-    side = cs[CS_SIDE]
-    x = hermite_peak(0.0, side * y[Y_W1] * h, g_end, side * y_new[Y_W1] * h)
+    x = hermite_peak(g0, d0, g1, d1)
+    tries = 60 if d0 > 0.0 else 1
     if x <= 0.0:
+        if d0 <= 0.0:
+            return -1.0, 0.0
         x = 0.5
-    for _ in range(60):
-        gm = event_value_at(EV_SIDE, t + x * h, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+    for _ in range(tries):
+        gm = event_value_at(k, t + x * h, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
         if gm > 0.0:
             return t + x * h, gm
         x *= 0.5
@@ -94,22 +96,34 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats
     first_k = -1
     first_t = t + h
     for k in range(N_DYN_EVENTS):
+        k_event = k
         ta = -1.0
         ga = 0.0
         tb = 0.0
         gb = 0.0
         if g_old[k] > 0.0 and g_new[k] <= 0.0:
             ta, ga, tb, gb = t, g_old[k], t + h, g_new[k]
-        elif k == EV_SIDE and g_old[k] == 0.0 and g_new[k] <= 0.0:
-            # the step starts on alpha = 0 just after a side change, alpha moving into the new side;
-            # ending on or past 0 again means it came back within the step (a rocking bounce)
+        elif (k == EV_SIDE or k <= EV_SIGN3) and g_old[k] <= 0.0 and g_new[k] <= 0.0:
+            # the step starts on the surface (alpha = 0 after a side change; a moment component
+            # released at an un-stick, omega.a_i = 0 up to its drift while held) and ends on or
+            # past it: it left and came back within the step (a rocking bounce), or it never left
             if not have_dense:
                 dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
                 have_dense = True
-            ta, ga = side_lift_off(t, y, h, y_new, g_new[k], F, n, p, cs, u_tol, lev, wk, istats)
+            if k == EV_SIDE:
+                d0 = cs[CS_SIDE] * y[Y_W1] * h
+                d1 = cs[CS_SIDE] * y_new[Y_W1] * h
+            else:
+                d0 = cs[CS_SIG + k] * sign_rate(k, y, f) * h
+                d1 = cs[CS_SIG + k] * sign_rate(k, y_new, f_new) * h
+            ta, ga = lift_off(k, t, y, h, g_old[k], d0, g_new[k], d1, F, n, p, cs, u_tol, lev, wk, istats)
             tb, gb = t + h, g_new[k]
             if ta < 0.0:
-                ta, tb = t, t   # no point of the step lies on the new side: it returns at once
+                # it never leaves: at once (a moment component moving against its new sign
+                # means the un-stick only grazed |sigma| = 1: contact.apply_event sticks it)
+                ta, tb = t, t
+                if k <= EV_SIGN3:
+                    k_event = EV_AGAINST1 + k
         elif (k <= EV_SIGN3 or k == EV_CONE or k == EV_SIDE) and g_old[k] > 0.0 and g_new[k] > 0.0 \
                 and g_old[k] != math.inf:
             if k == EV_SIDE:
@@ -137,7 +151,7 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats
                 have_dense = True
             ra, rb = locate(k, ta, ga, tb, gb, F, y, t, h, n, p, cs, u_tol, lev, wk, istats)
             if rb < first_t or first_k < 0:
-                first_k = k
+                first_k = k_event
                 first_t = rb
     return first_k, first_t, have_dense
 

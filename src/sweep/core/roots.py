@@ -24,7 +24,7 @@ RATE_STEP = 1e-7
 
 
 @njit(cache=True)
-def _sign_rate(k, y, dy):
+def sign_rate(k, y, dy):
     """d/dtau of omega.a_k (k = 0, 1, 2) from the state and its derivative."""
     a = y[Y_ALPHA]
     s = math.sin(a)
@@ -100,7 +100,7 @@ def hermite_peak(g0, d0, g1, d1):
 def hermite_interior_root(k, sgn, y0, f0, y1, f1, g0, g1, h):
     """Interior dip of sgn * omega.a_k on a step whose end values are both positive (see hermite_dip);
     its derivatives follow from the state and its derivative, so it costs no RHS evaluation."""
-    return hermite_dip(g0, sgn * _sign_rate(k, y0, f0) * h, g1, sgn * _sign_rate(k, y1, f1) * h)
+    return hermite_dip(g0, sgn * sign_rate(k, y0, f0) * h, g1, sgn * sign_rate(k, y1, f1) * h)
 
 
 @njit(cache=True)
