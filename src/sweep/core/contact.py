@@ -22,8 +22,8 @@ from numba import njit
 
 from .impulse import project_velocity
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
-                     W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
-from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
+                     W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
+from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
                     Y_U2, Y_W1, energy_with_slip, moment_axes_rates, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
@@ -37,12 +37,13 @@ EV_SLAVE = 10      # SLIDE: |u| falls to the slaving speed -> SLAVED if the dire
 EV_CONTACT = 11    # Phi = 0: contact lost
 EV_SIDE = 12       # alpha = 0: the other rim edge takes the contact
 EV_FACE = 13       # pi/2 - |alpha| = BETA_FACE: the face reaches the table
-N_DYN_EVENTS = 14
-EV_LEVEL = 14      # energy reaches the next halt level (recorded, no restart)
-N_EVENTS = 15
+EV_SLAVE_LOST = 14  # SLAVED: the slaved direction stops attracting (d cross/d nu -> 0, a fold) -> SLIDE
+N_DYN_EVENTS = 15
+EV_LEVEL = 15      # energy reaches the next halt level (recorded, no restart)
+N_EVENTS = 16
 # not event functions: EV_AGAINST1 + i is the sign event of component i found at the restart itself
 # (omega.a_i moves against its new moment sign at once: the un-stick only grazed |sigma| = 1)
-EV_AGAINST1 = 15
+EV_AGAINST1 = 16
 
 # Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
 # is then 1e-6 R above the table (38 nm for the paper's disk), below any real table's flatness. A disk
@@ -60,6 +61,8 @@ SLAVE_EPS = 1e-7
 SLAVE_EXIT = 4.0
 # Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
 DIR_TOL = 1e-14
+DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
+DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
 DIR_MAXIT = 30
 
 
@@ -119,7 +122,10 @@ def slaved_direction(nu0, u, t, y, p, cs, n, dy, aux, ys, istats):
             return xb
         if cb == ca:
             break
-        xc = xb - cb * (xb - xa) / (cb - ca)
+        # a damped secant: the root moves little between calls, and a flat stretch of cross (a
+        # near-fold) must not throw the iterate onto another root
+        dx = -cb * (xb - xa) / (cb - ca)
+        xc = xb + max(-DIR_MAXSTEP, min(DIR_MAXSTEP, dx))
         xa, ca = xb, cb
         xb = xc
         cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
@@ -138,11 +144,24 @@ def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
         # the sliding equations at the slip vector itself with the friction along s(nu): the slip
         # acceleration, the friction power (mu_d Phi s.u) and the energy stay those of one
         # Newton-Euler motion, so the energy books close however far u turns from s
+        # how strongly the direction is attracted: d cross/d nu by a forward difference
+        cross0 = dy[Y_U2] * math.cos(nu) - dy[Y_U1] * math.sin(nu)
+        ok = aux[X_OK]
+        cross1, _ = slip_rates(nu + DCROSS_DNU, u, t, y, p, cs, n, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP],
+                               istats)
         pf = wk[W_PFRICTION]
         for i in range(N_PARAMS):
             pf[i] = p[i]
         pf[P_UFREEZE] = math.inf
         _model(t, y, pf, cs, n, dy, aux, math.cos(nu), math.sin(nu), istats)
+        aux[X_DCROSS] = (cross1 - cross0) / DCROSS_DNU
+        if ok < 0.0:
+            aux[X_OK] = ok
+        elif ok == 0.0:
+            # no slaved direction near the last one (it folded away inside this step): a NaN
+            # derivative makes the step fail, so steps shrink until EV_SLAVE_LOST is located
+            for i in range(n):
+                dy[i] = math.nan
     elif mode == SLIDE:
         un = math.hypot(y[Y_U1], y[Y_U2])
         nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
@@ -385,6 +404,7 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
         # the slip along the slaved direction: reaches 0 where the slip ends
         g[EV_SLIP_STOP] = y[Y_U1] * math.cos(cs[CS_NU]) + y[Y_U2] * math.sin(cs[CS_NU])
         g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
+        g[EV_SLAVE_LOST] = -aux[X_DCROSS]
     g[EV_CONTACT] = aux[X_PHI]
     g[EV_SIDE] = cs[CS_SIDE] * y[Y_ALPHA]
     g[EV_FACE] = (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
@@ -443,6 +463,10 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         cs[CS_SLAVE_OFF] = 0.0
     elif k == EV_SLAVE:
         try_slave(t, y, p, cs, n, wk, istats)
+    elif k == EV_SLAVE_LOST:
+        # the quasi-static direction folds away: the slip direction follows its own dynamics
+        cs[CS_MODE] = SLIDE
+        cs[CS_SLAVE_OFF] = 1.0
     elif k == EV_CONTACT:
         return 1   # outcomes.CONTACT_LOST
     elif k == EV_FACE:

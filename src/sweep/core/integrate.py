@@ -325,6 +325,11 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 break
             if code >= 0:
                 break
+            if cs[CS_MODE] == SLAVED:
+                # continuation of the slaved direction across the event (steps that end in events
+                # would otherwise leave it behind the moving root)
+                cs[CS_NU] = slaved_direction(cs[CS_NU], math.hypot(y[Y_U1], y[Y_U1 + 1]), t, y, p, cs, n,
+                                             wk[W_DYBUF], wk[W_AUXBUF], wk[W_YBUF], istats)
             eval_rhs(t, y, p, cs, n, f, aux_new, wk, istats)
             if aux_new[X_OK] != 1.0:
                 if running:

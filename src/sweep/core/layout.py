@@ -50,7 +50,9 @@ W_CSPREV = 17    # contact state of the previous step
 W_SCRATCH = 18   # 7 rows: the plastic impulse's normal equations (impulse.py)
 W_YSEG = 25      # state at the end of the current segment (step end or event)
 W_PFRICTION = 26  # SLAVED: the parameters with the friction direction held at the slaved one
-N_WORK = 27
+W_DYSLOPE = 27    # SLAVED: right-hand side beside the slaved direction (d cross/d nu)
+W_AUXSLOPE = 28
+N_WORK = 29
 N_WCOLS = 16     # columns of the work buffer: >= N_FULL and >= the number of events
 
 # --- settings vector ----------------------------------------------------------------------------

@@ -37,7 +37,8 @@ N_PARAMS = 10
 
 # --- auxiliary outputs of the right-hand side ----------------------------------------------
 X_PHI, X_F1, X_F2, X_SIG1, X_SIG2, X_SIG3, X_G1, X_G2, X_G3, X_OK = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
-N_AUX = 10
+X_DCROSS = 10   # SLAVED only (contact.eval_rhs): d cross/d nu at the slaved direction (< 0: attracting)
+N_AUX = 11
 
 ROLL, SLIDE = 0, 1
 
