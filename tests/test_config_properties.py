@@ -26,7 +26,7 @@ from sweep.yamlio import number_of
 from conftest import copy_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA_PATH = ROOT / "workflow" / "schemas" / "config.schema.yaml"
+SCHEMA_PATH = grid.SCHEMA_PATH
 SCHEMA = grid.load_schema(SCHEMA_PATH)
 HALF_PI = math.pi / 2
 FINITE = dict(allow_nan=False, allow_infinity=False)

@@ -40,7 +40,7 @@ from sweep import batch, grid, io, outcomes
 from conftest import copy_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA_PATH = ROOT / "workflow" / "schemas" / "config.schema.yaml"
+SCHEMA_PATH = grid.SCHEMA_PATH
 SCHEMA = grid.load_schema(SCHEMA_PATH)
 TIMEOUT_S = 600  # a hang, not slowness (a run here takes ~15 s)
 

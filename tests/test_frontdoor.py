@@ -30,7 +30,7 @@ from sweep.scene import load_scene
 from conftest import copy_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml")
+SCHEMA = grid.load_schema()
 TIMEOUT_S = 600
 
 

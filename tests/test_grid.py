@@ -13,7 +13,7 @@ from hypothesis import given, settings as hsettings, strategies as st
 from sweep import grid
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml")
+SCHEMA = grid.load_schema()
 
 
 def load(name: str) -> dict:
@@ -48,7 +48,7 @@ def test_defaults_match_snakemake_validate():
     cfg = {"grid": load("tiny.yaml")["grid"]}
     ours = grid.fill_defaults(cfg, SCHEMA)
     theirs = copy.deepcopy(cfg)
-    validate(theirs, str(ROOT / "workflow" / "schemas" / "config.schema.yaml"))
+    validate(theirs, str(grid.SCHEMA_PATH))
     assert ours == theirs
     # every default the schema declares is filled in (`name` has none: it defaults to the
     # config file's stem, see sweep.grid.sweep_name)
@@ -294,3 +294,50 @@ def test_split_inner_caps_block_length():
         cuts = _natural_cuts(inner, size)
         ends = set(itertools.accumulate(len(b) for b in blocks))
         assert {i + 1 for i in cuts} <= ends  # every natural cut is a block end
+
+
+# ------------------------------------------------------------------------------- packaging
+
+def test_schema_ships_as_package_data_and_loads_from_an_installed_package(tmp_path):
+    """A non-editable install finds the config schema as package data.
+
+    setuptools' `build_py` fills the build directory that a wheel packs as its purelib (the
+    venv's setuptools has no `bdist_wheel` without the `wheel` package, so the test stops one step
+    before zipping); that directory, put first on sys.path, is the installed package: the schema
+    is in its file list and `grid.load_schema()` / `grid.SCHEMA_PATH` find it there."""
+    import json
+    import shutil
+    import subprocess
+    import sys
+
+    # build from a copy, so no build/ or *.egg-info lands in the work tree
+    src = tmp_path / "src_tree"
+    shutil.copytree(ROOT / "src", src / "src",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "*.nbi", "*.nbc"))
+    shutil.copy(ROOT / "pyproject.toml", src / "pyproject.toml")
+    site = tmp_path / "site"
+    res = subprocess.run([sys.executable, "-c", "from setuptools import setup; setup()", "-q",
+                          "build_py", "--build-lib", str(site)], cwd=src, capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    files = sorted(p.relative_to(site).as_posix() for p in site.rglob("*") if p.is_file())
+    assert "sweep/schema/config.schema.yaml" in files, files
+    assert "sweep/grid.py" in files and "sweep/core/integrate.py" in files
+    probe = ("import json, sys; sys.path.insert(0, sys.argv[1]); import sweep.grid as g; "
+             "print(json.dumps({'file': g.__file__, 'path': str(g.SCHEMA_PATH), "
+             "'exists': g.SCHEMA_PATH.is_file(), 'schema': g.load_schema()}))")
+    res = subprocess.run([sys.executable, "-c", probe, str(site)], capture_output=True, text=True,
+                         timeout=300, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    got = json.loads(res.stdout.strip().splitlines()[-1])
+    assert Path(got["file"]).resolve().is_relative_to(site.resolve())   # the installed copy, not src/
+    assert Path(got["path"]).resolve().is_relative_to(site.resolve()) and got["exists"]
+    assert got["schema"] == json.loads(json.dumps(SCHEMA))
+
+
+def test_workflow_validates_against_the_packaged_schema():
+    """No second copy of the schema: the workflow loads the packaged file."""
+    assert not (ROOT / "workflow" / "schemas").exists()
+    smk = (ROOT / "workflow" / "rules" / "common.smk").read_text()
+    assert "validate(config, str(sweep_grid.SCHEMA_PATH))" in smk
+    assert grid.SCHEMA_PATH.is_file() and grid.SCHEMA_PATH.parent.parent == Path(grid.__file__).parent

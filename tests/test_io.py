@@ -20,7 +20,7 @@ import yaml
 from sweep import batch, grid, io, outcomes
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml")
+SCHEMA = grid.load_schema()
 
 
 def settings_for(**grid_axes) -> dict:

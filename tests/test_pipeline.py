@@ -31,7 +31,7 @@ from conftest import copy_workflow
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml")
+SCHEMA = grid.load_schema()
 # A Snakemake call here takes ~3 s to parse and, for a run, ~3 s per job on a busy 2-core
 # machine; 10 min flags a hang (e.g. a notebook kernel that never starts), not slowness.
 TIMEOUT_S = 600

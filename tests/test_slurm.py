@@ -34,7 +34,7 @@ from test_faults import cube_content  # noqa: E402  (cube variables and attribut
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml")
+SCHEMA = grid.load_schema()
 PROFILE = ROOT / "workflow" / "profiles" / "slurm"
 OVERLAY = ROOT / "tests" / "cluster" / "profile"
 TIMEOUT_S = 600

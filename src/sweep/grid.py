@@ -54,7 +54,22 @@ CHUNK_FORMAT = 1
 # has probability ~ n^2 / 2^65 < 3e-8.
 CHUNK_ID_HEX = 16
 
-SCHEMA_PATH = Path(__file__).resolve().parents[2] / "workflow" / "schemas" / "config.schema.yaml"
+# The config schema ships as package data (sweep/schema/config.schema.yaml, see pyproject.toml),
+# so an installed (non-editable) package finds it too; the Snakemake workflow validates against
+# this same file (workflow/rules/common.smk).
+SCHEMA_RESOURCE = ("schema", "config.schema.yaml")
+
+
+def schema_path() -> Path:
+    """Filesystem path of the packaged config schema (for tools that want a path, e.g.
+    snakemake.utils.validate). The package is installed as files, never zipped, so the
+    importlib.resources traversable is a real path."""
+    from importlib.resources import files
+
+    return Path(str(files(__package__).joinpath(*SCHEMA_RESOURCE)))
+
+
+SCHEMA_PATH = schema_path()
 
 NOTEBOOKS = ("halt_time", "frequency_ramps", "roll_slip", "cost")
 
@@ -84,10 +99,15 @@ def sha256_hex(text: str) -> str:
 # --------------------------------------------------------------------------------------------
 
 def load_schema(path: str | Path | None = None) -> dict:
-    """The config JSON schema (YAML file), by default workflow/schemas/config.schema.yaml."""
+    """The config JSON schema (YAML file), by default the packaged sweep/schema/config.schema.yaml
+    (read with importlib.resources)."""
     import yaml
 
-    with open(path or SCHEMA_PATH, encoding="utf-8") as fh:
+    if path is None:
+        from importlib.resources import files
+
+        return yaml.safe_load(files(__package__).joinpath(*SCHEMA_RESOURCE).read_text(encoding="utf-8"))
+    with open(path, encoding="utf-8") as fh:
         return yaml.safe_load(fh)
 
 

@@ -19,18 +19,18 @@ RESULTS = f"results/{SWEEP_NAME}"
 
 # Numbers written like 1e-10 (YAML 1.1, hence Snakemake's loader, reads them as strings) become
 # floats where the schema expects a number, before anything validates the config.
-sweep_grid.coerce_numbers(config, sweep_grid.load_schema(workflow.source_path("../schemas/config.schema.yaml")))
+sweep_grid.coerce_numbers(config, sweep_grid.load_schema())
 
 # Readable messages (key, value, allowed range) and the cross-field rules JSON schema cannot
 # express (mu_d <= mu_s, alpha0 != 0, finite numbers, dt for the fixed step) come first; then
 # Snakemake's own validation against the same schema fills the defaults into `config`.
 try:
-    sweep_grid.check_config(config, sweep_grid.load_schema(workflow.source_path("../schemas/config.schema.yaml")))
+    sweep_grid.check_config(config, sweep_grid.load_schema())
 except sweep_grid.SweepConfigError as err:
     raise WorkflowError(str(err)) from None
-validate(config, "../schemas/config.schema.yaml")
+validate(config, str(sweep_grid.SCHEMA_PATH))  # the packaged schema (sweep/schema/), absolute path
 
-SETTINGS = sweep_grid.normalize(config, sweep_grid.load_schema(workflow.source_path("../schemas/config.schema.yaml")))
+SETTINGS = sweep_grid.normalize(config, sweep_grid.load_schema())
 SETTINGS_JSON = sweep_grid.canonical_json(SETTINGS)
 PLAN = sweep_grid.plan_chunks(SETTINGS)
 CHUNK_DIR = f"{RESULTS}/chunks"
