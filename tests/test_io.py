@@ -297,6 +297,165 @@ def test_verification_cache_skips_unchanged_files_only(tmp_path, tiny, monkeypat
     assert calls == [paths[2].stem]
 
 
+# ------------------------------------------------------------------------------- error bars
+
+def test_every_time_and_frequency_variable_gets_an_error_variable():
+    marked = {v.name for v in io.VARIABLES if v.numerical_error}
+    assert {"t_halt", "t_level", "precession_hz", "normal_force_hz"} <= marked
+    names = {v.name: v for v in io.ERROR_VARIABLES}
+    for v in io.VARIABLES:
+        e = names.get(v.name + "_numerical_error")
+        assert (e is not None) == v.numerical_error, v.name
+        if e is not None:
+            assert e.units == v.units and e.per_level == v.per_level and e.kind == "float"
+            assert "absolute difference to a rerun at rtol/100" in e.long_name
+    assert names["reference_outcome"].kind == "outcome"
+    assert io.variables(False) == io.VARIABLES
+    assert io.variables(True) == io.VARIABLES + io.ERROR_VARIABLES
+
+
+def _perturbed(s: dict, dt: float) -> dict:
+    """`s` with every marked time shifted by dt and every frequency scaled by (1 + dt)."""
+    out = json.loads(json.dumps(s))   # deep copy (NaN survives json round trip in Python)
+    out["t_halt"] += dt
+    for lv in out["levels"]:
+        lv["t"] += dt
+        lv["precession_hz"] *= 1 + dt
+        lv["normal_force_hz"] *= 1 + dt
+    return out
+
+
+def test_numerical_errors_are_absolute_differences_with_nan_and_inf_rules(tiny):
+    point = (0.1, 3.755e-6, 3.004e-5, 3e-4, 0.6, 20.0)
+    levels = tiny["levels"]
+    main = fake_summary(point, levels)
+    ref = _perturbed(main, 0.25)
+    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref)
+    assert s["reference_outcome"] == ref["outcome_code"]
+    assert s["t_halt_numerical_error"] == pytest.approx(0.25, abs=1e-12)
+    for j, lv in enumerate(s["levels"]):
+        assert lv["t_level_numerical_error"] == pytest.approx(0.25, abs=1e-12)
+        assert lv["precession_hz_numerical_error"] == pytest.approx(0.25 * main["levels"][j]["precession_hz"])
+        if j == 0:   # fake_summary has no normal-force frequency at the first level: no error bar
+            assert math.isnan(lv["normal_force_hz_numerical_error"])
+        else:
+            assert lv["normal_force_hz_numerical_error"] == pytest.approx(0.25 * main["levels"][j]["normal_force_hz"])
+    # the main result itself is untouched
+    for k in ("t_halt", "outcome_code", "t_end"):
+        assert s[k] == main[k]
+    # a rerun that ended physically without the last level: that level's value is an artefact (inf)
+    ref2 = _perturbed(main, 0.25)
+    ref2["levels"][-1]["t"] = math.nan
+    ref2["outcome"], ref2["outcome_code"] = "t_max", outcomes.T_MAX
+    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref2)
+    assert math.isinf(s["levels"][-1]["t_level_numerical_error"])
+    assert s["levels"][0]["t_level_numerical_error"] == pytest.approx(0.25, abs=1e-12)
+    # ... the same after a numerical failure of the rerun (step limit): unknown (NaN), not inf
+    ref2["outcome"], ref2["outcome_code"] = "step_limit", outcomes.STEP_LIMIT
+    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref2)
+    assert math.isnan(s["levels"][-1]["t_level_numerical_error"])
+    assert s["reference_outcome"] == outcomes.STEP_LIMIT
+    # a rerun that raised: NaN errors, flagged as numerical_error, main result kept
+    s = io.add_numerical_errors(json.loads(json.dumps(main)), None)
+    assert s["reference_outcome"] == outcomes.NUMERICAL_ERROR and s["t_halt"] == main["t_halt"]
+    assert math.isnan(s["t_halt_numerical_error"])
+    assert all(math.isnan(lv[k]) for lv in s["levels"] for k in lv if k.endswith("_numerical_error"))
+
+
+class TolCore:
+    """Stands in for sweep.simulate: results shift with the tolerance (t += 1e6 rtol); the
+    tighter rerun of `bad_alpha0` raises."""
+
+    def __init__(self, bad_alpha0: float):
+        self.bad_alpha0 = bad_alpha0
+        self.rtols = []
+
+    @staticmethod
+    def point(scene):
+        return (scene["contact"]["mu_d"], scene["contact"]["k1"], scene["contact"]["k2"],
+                scene["contact"]["k3"], scene["initial"]["alpha"], -scene["initial"]["omega"][2])
+
+    def __call__(self, scene):
+        rtol = scene["solver"]["rtol"]
+        self.rtols.append(rtol)
+        if scene["initial"]["alpha"] == self.bad_alpha0 and rtol < 1e-9:
+            raise FloatingPointError("synthetic failure of the rerun")
+
+        class R:
+            summary = _perturbed(fake_summary(self.point(scene), scene["stop"]["levels"]), 1e6 * rtol)
+        return R()
+
+
+def test_error_estimate_chunk_and_cube(tmp_path, tiny, monkeypatch):
+    monkeypatch.setattr(batch, "_warmed_up", True)
+    cfg = yaml.safe_load((ROOT / "config" / "tiny.yaml").read_text())
+    cfg["grid"].update(mu_d=[0.1], k3=[3e-4], alpha0=[0.6, 1.2], omega0=[10.0, 20.0])
+    cfg["outputs"]["error_estimate"] = True
+    settings = grid.normalize(cfg, SCHEMA, check_scenes=False)
+    rtol = settings["solver"]["rtol"]
+    plan = grid.plan_chunks(settings)
+    core = TolCore(bad_alpha0=1.2)
+    paths = []
+    for cid, chunk in plan.items():
+        batch.run_chunk(chunk, tmp_path / f"{cid}.nc", simulate=core)
+        paths.append(tmp_path / f"{cid}.nc")
+        assert io.verify_chunk(paths[-1], chunk) is None
+    assert sorted(set(core.rtols)) == [rtol / 100, rtol]   # every scene once at each tolerance
+    assert len(core.rtols) == 2 * sum(len(c.points) for c in plan.values())
+    cube_path = io.gather(paths, settings, tmp_path / "cube.nc")
+    dt = 1e6 * (rtol - rtol / 100)
+    with xr.open_dataset(cube_path) as cube:
+        for v in io.ERROR_VARIABLES:
+            assert cube[v.name].attrs["long_name"] == v.long_name and cube[v.name].attrs["units"]
+        assert cube.t_level_numerical_error.attrs["units"] == "s"
+        assert cube.precession_hz_numerical_error.attrs["units"] == "Hz"
+        ref = json.loads(cube.attrs["error_estimate_solver"])
+        assert ref["rtol"] == rtol / 100 and ref["atol"] == settings["solver"]["atol"] / 100
+        good = cube.sel(alpha0=0.6)
+        np.testing.assert_allclose(good.t_halt_numerical_error.values, dt, rtol=1e-9)
+        np.testing.assert_allclose(good.t_level_numerical_error.values, dt, rtol=1e-9)
+        assert (good.reference_outcome.values == good.outcome.values).all()
+        bad = cube.sel(alpha0=1.2)   # the rerun raised: main result kept, errors NaN, flagged
+        assert (bad.reference_outcome.values == outcomes.NUMERICAL_ERROR).all()
+        assert (bad.outcome.values != outcomes.NUMERICAL_ERROR).all()
+        assert np.isfinite(bad.t_halt.values).all() and np.isnan(bad.t_halt_numerical_error.values).all()
+        assert np.isnan(bad.precession_hz_numerical_error.values).all()
+    # without the option: no error variables, and the plan is the one of a config without the key
+    cfg["outputs"]["error_estimate"] = False
+    off = grid.normalize(cfg, SCHEMA, check_scenes=False)
+    del cfg["outputs"]["error_estimate"]
+    assert grid.plan_chunks(off).keys() == grid.plan_chunks(grid.normalize(cfg, SCHEMA, check_scenes=False)).keys()
+    assert not set(grid.plan_chunks(off)) & set(plan)
+    other = write_all(off, tmp_path / "off")
+    with xr.open_dataset(io.gather(other, off, tmp_path / "off.nc")) as cube:
+        assert not any(n.endswith("_numerical_error") for n in cube.variables)
+        assert "reference_outcome" not in cube.variables and "error_estimate_solver" not in cube.attrs
+
+
+def test_chunk_without_its_error_variables_is_damaged(tmp_path, tiny):
+    cfg = yaml.safe_load((ROOT / "config" / "tiny.yaml").read_text())
+    cfg["outputs"]["error_estimate"] = True
+    settings = grid.normalize(cfg, SCHEMA, check_scenes=False)
+    chunk = next(iter(grid.plan_chunks(settings).values()))
+    sums = [io.add_numerical_errors(fake_summary(p, settings["levels"]), fake_summary(p, settings["levels"]))
+            for p in chunk.points]
+    path = io.write_chunk(chunk, sums, tmp_path / f"{chunk.id}.nc")
+    assert io.verify_chunk(path, chunk) is None
+    with xr.open_dataset(path) as ds:
+        assert (ds.t_halt_numerical_error.values == 0).all()
+        stripped = ds.drop_vars(["t_level_numerical_error"]).load()
+    io.write_atomic(stripped, path, finish=lambda tmp: _rechecksum(tmp))
+    assert "missing variables ['t_level_numerical_error']" in io.verify_chunk(path, chunk)
+
+
+def _rechecksum(tmp: Path) -> None:
+    import netCDF4
+
+    digest = io.file_checksum(tmp)
+    with netCDF4.Dataset(tmp, "a") as nc:
+        nc.setncattr("sweep_checksum", digest)
+
+
 # ------------------------------------------------------------------------------- notebooks
 
 def test_notebooks_cope_with_length_one_axes_and_nans(tmp_path):

@@ -60,16 +60,32 @@ def warm_up(scene: Mapping, simulate: Callable | None = None) -> float:
     return time.perf_counter() - t0
 
 
-def run_scene(scene: Mapping, n_levels: int, simulate: Callable | None = None) -> dict:
-    """The summary of one scene; an exception becomes outcome NUMERICAL_ERROR with NaNs."""
-    simulate = simulate or simulate_function()
-    t0 = time.perf_counter()
+def _summary_or_none(scene: Mapping, simulate: Callable, what: str) -> dict | None:
     try:
         return dict(simulate(scene).summary)
     except Exception:
-        log.error("scene %s raised; recorded as numerical_error:\n%s",
-                  _grid.canonical_json(scene), traceback.format_exc())
-        return _io.error_summary(n_levels, outcomes.NUMERICAL_ERROR, time.perf_counter() - t0)
+        log.error("%s of scene %s raised; recorded as numerical_error:\n%s",
+                  what, _grid.canonical_json(scene), traceback.format_exc())
+        return None
+
+
+def run_scene(scene: Mapping, n_levels: int, simulate: Callable | None = None,
+              reference_scene: Mapping | None = None) -> dict:
+    """The summary of one scene; an exception becomes outcome NUMERICAL_ERROR with NaNs.
+
+    `reference_scene`: the same scene with the tolerances of the error bars' rerun (settings
+    from `sweep.grid.error_reference`); when given, it is run too and the summary gets `<name>_numerical_error`
+    and `reference_outcome` (`sweep.io.add_numerical_errors`). A failed rerun leaves the main
+    result as it is: its errors are NaN and reference_outcome says why.
+    """
+    simulate = simulate or simulate_function()
+    t0 = time.perf_counter()
+    summary = _summary_or_none(scene, simulate, "run")
+    if summary is None:
+        summary = _io.error_summary(n_levels, outcomes.NUMERICAL_ERROR, time.perf_counter() - t0)
+    if reference_scene is not None:
+        _io.add_numerical_errors(summary, _summary_or_none(reference_scene, simulate, "error-estimate rerun"))
+    return summary
 
 
 def chunk_from_spec(spec_json: str) -> _grid.Chunk:
@@ -91,12 +107,14 @@ def run_chunk(chunk: _grid.Chunk, out_path: str | Path, simulate: Callable | Non
     settings = spec["settings"]
     n_levels = len(settings["levels"])
     scenes = [_grid.scene(settings, p) for p in chunk.points]
+    refs = ([_grid.scene(_grid.error_reference(settings), p) for p in chunk.points]
+            if settings.get("error_estimate", False) else [None] * len(scenes))
     t_warm = warm_up(scenes[0], simulate)
     log.info("chunk %s: %d scenes; warm-up %.2f s", chunk.id, len(scenes), t_warm)
     t0 = time.perf_counter()
     summaries, counts = [], collections.Counter()
-    for i, sc in enumerate(scenes, 1):
-        s = run_scene(sc, n_levels, simulate)
+    for i, (sc, ref) in enumerate(zip(scenes, refs), 1):
+        s = run_scene(sc, n_levels, simulate, ref)
         summaries.append(s)
         counts[s["outcome"]] += 1
         elapsed = time.perf_counter() - t0

@@ -350,7 +350,8 @@ def normalize(config: Mapping, schema: dict | None = None, check_scenes: bool = 
         "solver": solver,
         "stop": {"t_max": float(cfg["stop"]["t_max"]), "max_steps": int(cfg["stop"]["max_steps"])},
         "chunk_size": int(cfg["chunk_size"]),
-        "outputs": {"notebooks": list(cfg["outputs"]["notebooks"])},
+        "outputs": {"notebooks": list(cfg["outputs"]["notebooks"]),
+                    "error_estimate": bool(cfg["outputs"]["error_estimate"])},
     }
     if check_scenes:
         check_scenes_valid(settings)
@@ -407,8 +408,37 @@ def check_scenes_valid(settings: Mapping) -> None:
 
 
 def scene_settings(settings: Mapping) -> dict:
-    """The part of a normalised config that, with the point values, fixes a scene's result."""
-    return {k: copy.deepcopy(settings[k]) for k in ("disk", "gravity", "mu_s", "levels", "solver", "stop")}
+    """The part of a normalised config that, with the point values, fixes a chunk's content.
+
+    `error_estimate: true` (outputs.error_estimate: each scene is rerun at tighter tolerances and
+    the chunk holds the differences) is part of it; it is left out when false, so switching the
+    option off reuses the chunks computed without it.
+    """
+    part = {k: copy.deepcopy(settings[k]) for k in ("disk", "gravity", "mu_s", "levels", "solver", "stop")}
+    if settings.get("outputs", {}).get("error_estimate", False):
+        part["error_estimate"] = True
+    return part
+
+
+# outputs.error_estimate: every scene is rerun with rtol and atol divided by this factor (not below
+# the smallest tolerances the core accepts) and the step budget multiplied by ERROR_STEPS_FACTOR
+# (DOP853 is 8th order: 100x tighter tolerances cost ~100^(1/8) = 1.8x the steps).
+ERROR_TOL_FACTOR = 100.0
+ERROR_RTOL_MIN = 1.0e-14
+ERROR_ATOL_MIN = 1.0e-16
+ERROR_STEPS_FACTOR = 2
+
+
+def error_reference(settings_part: Mapping) -> dict:
+    """The scene settings (as `scene_settings` returns them) of the rerun behind the error bars:
+    rtol/100 (>= 1e-14), atol/100 (>= 1e-16), twice the step budget (<= 1e9); the rest alike."""
+    ref = copy.deepcopy(dict(settings_part))
+    so, stop = dict(ref["solver"]), dict(ref["stop"])
+    so["rtol"] = max(float(so["rtol"]) / ERROR_TOL_FACTOR, ERROR_RTOL_MIN)
+    so["atol"] = max(float(so["atol"]) / ERROR_TOL_FACTOR, ERROR_ATOL_MIN)
+    stop["max_steps"] = min(int(stop["max_steps"]) * ERROR_STEPS_FACTOR, 1_000_000_000)
+    ref["solver"], ref["stop"] = so, stop
+    return ref
 
 
 def grid_shape(settings: Mapping) -> tuple[int, ...]:

@@ -47,6 +47,8 @@ class Var:
     long_name: str
     get: Callable[[Mapping], Any]  # summary -> scalar, or (for per_level) level dict -> scalar
     per_level: bool = False
+    # a located time or a frequency: with outputs.error_estimate the cube gets <name>_numerical_error
+    numerical_error: bool = False
 
 
 def _d(key: str) -> Callable[[Mapping], Any]:
@@ -57,7 +59,7 @@ VARIABLES: tuple[Var, ...] = (
     Var("outcome", "outcome", "1", "why the integration ended (see flag_meanings)", lambda s: s["outcome_code"]),
     Var("t_end", "float", "s", "simulated time at the end of the integration", lambda s: s["t_end"]),
     Var("t_halt", "float", "s", "halt time (finite-time singularity) estimated from the final ramp",
-        lambda s: s["t_halt"]),
+        lambda s: s["t_halt"], numerical_error=True),
     Var("t_halt_error", "float", "s", "estimated error of the halt time", lambda s: s["t_halt_error"]),
     Var("halt_finite", "bool", "1", "whether the halt time was found finite", lambda s: s["halt_finite"]),
     Var("approach_exponent", "float", "1", "fitted exponent p of the final approach, inclination ~ (t_halt - t)^p",
@@ -65,11 +67,11 @@ VARIABLES: tuple[Var, ...] = (
     Var("ramp_exponent", "float", "1", "fitted exponent n of the precession ramp, Omega ~ (t_halt - t)^(-n)",
         lambda s: s["ramp_exponent"]),
     Var("t_level", "float", "s", "time at which the inclination first reaches the level",
-        lambda lv: lv["t"], per_level=True),
+        lambda lv: lv["t"], per_level=True, numerical_error=True),
     Var("precession_hz", "float", "Hz", "mean precession frequency over the three normal-force maxima before the level", lambda lv: lv["precession_hz"],
-        per_level=True),
+        per_level=True, numerical_error=True),
     Var("normal_force_hz", "float", "Hz", "normal-force oscillation frequency at the level",
-        lambda lv: lv["normal_force_hz"], per_level=True),
+        lambda lv: lv["normal_force_hz"], per_level=True, numerical_error=True),
     Var("slip_fraction", "float", "1", "fraction of the simulated time spent slipping",
         lambda s: s["slip_fraction"]),
     Var("n_transitions", "int", "1", "number of roll/slip transitions", lambda s: s["n_transitions"]),
@@ -90,6 +92,70 @@ VARIABLES: tuple[Var, ...] = (
     Var("wall_time", "float", "s", "wall-clock time of the integration", lambda s: s["wall_time"]),
 )
 VARIABLE_NAMES = tuple(v.name for v in VARIABLES)
+
+# ---- error bars (outputs.error_estimate): every scene is rerun with the tolerances of
+# sweep.grid.error_reference; each variable marked numerical_error=True gets <name>_numerical_error.
+ERROR_SUFFIX = "_numerical_error"
+# Reference outcomes that mean the rerun could not get where the main run got (not a physical end):
+# a value the main run has but such a rerun lacks has an unknown error (NaN), not an infinite one.
+REFERENCE_FAILURES = frozenset({outcomes.STEP_LIMIT, outcomes.STEP_SIZE_UNDERFLOW, outcomes.NUMERICAL_ERROR,
+                                outcomes.NOT_RUN})
+
+
+def _error_var(var: Var) -> Var:
+    key = var.name + ERROR_SUFFIX
+    return Var(key, "float", var.units,
+               f"{var.long_name}: absolute difference to a rerun at rtol/100 (numerical error estimate; "
+               "NaN where there is no value or the rerun failed, inf where only this run has a value)",
+               (lambda d: d[key]), per_level=var.per_level)
+
+
+ERROR_VARIABLES: tuple[Var, ...] = tuple(_error_var(v) for v in VARIABLES if v.numerical_error) + (
+    Var("reference_outcome", "outcome", "1",
+        "outcome of the rerun at rtol/100 that gives the *_numerical_error variables (see flag_meanings)",
+        lambda s: s["reference_outcome"]),
+)
+
+
+def variables(error_estimate: bool = False) -> tuple[Var, ...]:
+    """The variables of a chunk file / the cube: VARIABLES, plus ERROR_VARIABLES with error bars."""
+    return VARIABLES + (ERROR_VARIABLES if error_estimate else ())
+
+
+def _abs_difference(value: Any, ref: Any, ref_failed: bool) -> float:
+    a = math.nan if value is None else float(value)
+    b = math.nan if ref is None else float(ref)
+    if math.isnan(a):
+        return math.nan              # no value, no error bar
+    if math.isnan(b):
+        return math.nan if ref_failed else math.inf   # the tighter run has no such value
+    return abs(a - b)
+
+
+def add_numerical_errors(summary: dict, reference: Mapping | None) -> dict:
+    """Add `<name>_numerical_error` (|value - reference value|) to a scene's summary, in place,
+    for every variable marked numerical_error, and `reference_outcome`.
+
+    `reference`: the summary of the same scene rerun at tighter tolerances, or None where the
+    rerun raised (then every error is NaN and reference_outcome is numerical_error). A value the
+    reference lacks has error inf if the rerun ended physically (the value is a numerical
+    artefact), NaN if it ended in a numerical failure (step limit, underflow, error).
+    """
+    ref_code = outcomes.NUMERICAL_ERROR if reference is None else int(reference["outcome_code"])
+    failed = reference is None or ref_code in REFERENCE_FAILURES
+    summary["reference_outcome"] = ref_code
+    for var in VARIABLES:
+        if not var.numerical_error:
+            continue
+        key = var.name + ERROR_SUFFIX
+        if var.per_level:
+            for j, lv in enumerate(summary["levels"]):
+                ref = var.get(reference["levels"][j]) if reference is not None else None
+                lv[key] = _abs_difference(var.get(lv), ref, failed)
+        else:
+            summary[key] = _abs_difference(var.get(summary), var.get(reference) if reference is not None else None,
+                                           failed)
+    return summary
 LEVEL_ATTRS = {"units": "rad", "long_name": "inclination level"}
 
 
@@ -211,7 +277,7 @@ def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
     coords = {a: ("point", pts[:, i], _coord_attrs(a)) for i, a in enumerate(_grid.AXES)}
     coords["level"] = ("level", np.array(levels, dtype=np.float64), dict(LEVEL_ATTRS))
     data = {}
-    for var in VARIABLES:
+    for var in variables(bool(spec["settings"].get("error_estimate", False))):
         dims = ("point", "level") if var.per_level else ("point",)
         data[var.name] = (dims, _column(var, summaries, len(levels)), _var_attrs(var))
     from . import __version__
@@ -265,7 +331,11 @@ def verify_chunk(path: str | Path, chunk: _grid.Chunk | None = None) -> str | No
             return "no sweep_checksum attribute (incomplete write)"
         if file_checksum(path) != want:
             return "checksum mismatch (damaged data)"
-        missing = [v for v in VARIABLE_NAMES if v not in names]
+        try:
+            with_errors = bool(json.loads(attrs.get("sweep_chunk_spec", "{}"))["settings"].get("error_estimate", False))
+        except (ValueError, KeyError, TypeError, AttributeError):
+            with_errors = False
+        missing = [v.name for v in variables(with_errors) if v.name not in names]
         if missing:
             return f"missing variables {missing}"
         if chunk is not None:
@@ -410,7 +480,8 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
         identity = bool(np.array_equal(order, np.arange(n)))
         csizes = cube_chunksizes(shape + (n_levels,))
         data_vars, encoding = {}, {}
-        for var in VARIABLES:
+        error_estimate = bool(settings.get("outputs", {}).get("error_estimate", False))
+        for var in variables(error_estimate):
             arr = src[var.name].data
             if not identity:
                 arr = arr[order]
@@ -452,6 +523,10 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             "stop": _grid.canonical_json(settings["stop"]),
             "created": created,
         }
+        if error_estimate:  # the rerun's settings behind every *_numerical_error variable
+            ref = _grid.error_reference(_grid.scene_settings(settings))
+            attrs["error_estimate_solver"] = _grid.canonical_json(ref["solver"])
+            attrs["error_estimate_stop"] = _grid.canonical_json(ref["stop"])
         cube = xr.Dataset(data_vars, coords=coords, attrs=attrs)
         log.info("gathering %d chunk files, %d scenes, grid %s x %d levels into %s (netCDF chunks %s)",
                  len(paths), n, dict(zip(axes, shape)), n_levels, out_path, csizes)
