@@ -310,6 +310,39 @@ def test_damaged_chunk_is_recomputed_not_gathered(wd, first_run):
                 np.testing.assert_array_equal(after[var].values, before[var].values, err_msg=var)
 
 
+# ------------------------------------------------------------------------------- error bars
+
+def test_error_estimate_puts_error_bars_in_the_cube(wd, first_run):
+    """outputs.error_estimate through Snakemake: the cube's *_numerical_error are the differences
+    between the scenes run one by one at the sweep's tolerances and at rtol/100."""
+    cfg = tiny_config()
+    cfg.update(name="errbars", outputs={"notebooks": [], "error_estimate": True})
+    cfg["grid"].update(mu_d=[0.2], alpha0=[0.9, 1.1], omega0=[12.0])
+    settings = settings_of(cfg)
+    smk(wd, "-j2", "--configfile", write_config(wd, "errbars.yaml", cfg))
+    points = [p for chunk in plan_of(settings).values() for p in chunk.points]
+    main = simulate_in_snapshot(settings, points)
+    ref_settings = grid.error_reference(grid.scene_settings(settings))
+    assert ref_settings["solver"]["rtol"] == settings["solver"]["rtol"] / 100
+    ref = simulate_in_snapshot(ref_settings, points)
+    nonzero = 0
+    with xr.open_dataset(wd / "results" / "errbars" / "cube.nc") as cube:
+        assert json.loads(cube.attrs["error_estimate_solver"]) == ref_settings["solver"]
+        for point, m, r in zip(points, main, ref):
+            want = io.add_numerical_errors(m, r)
+            at = cube.sel(dict(zip(grid.AXES, point)))
+            assert int(at.reference_outcome) == r["outcome_code"] == m["outcome_code"] == outcomes.HALTED
+            for var in io.ERROR_VARIABLES:
+                w = [var.get(lv) for lv in want["levels"]] if var.per_level else var.get(want)
+                got = np.asarray(at[var.name].values, dtype=float)
+                np.testing.assert_array_equal(got, np.asarray(w, dtype=float), err_msg=f"{var.name} at {point}")
+                if var.name != "reference_outcome":
+                    assert not np.isinf(got).any() and (got[np.isfinite(got)] >= 0).all()
+                    nonzero += int((got[np.isfinite(got)] > 0).sum())
+            assert np.isfinite(at.t_level_numerical_error.values).all()   # halted: every level
+    assert nonzero > 0   # the rerun ran at another tolerance
+
+
 # ------------------------------------------------------------------------------- cluster profile
 
 def test_slurm_profile_dry_run_batches_chunk_jobs(tmp_path):
