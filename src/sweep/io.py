@@ -60,7 +60,8 @@ VARIABLES: tuple[Var, ...] = (
     Var("t_end", "float", "s", "simulated time at the end of the integration", lambda s: s["t_end"]),
     Var("t_halt", "float", "s", "halt time (finite-time singularity) estimated from the final ramp",
         lambda s: s["t_halt"], numerical_error=True),
-    Var("t_halt_error", "float", "s", "estimated error of the halt time", lambda s: s["t_halt_error"]),
+    Var("t_halt_error", "float", "s", "uncertainty of the extrapolation to the halt: t_halt minus the last "
+        "level time reached (event-location tolerance for a disk that lies flat)", lambda s: s["t_halt_error"]),
     Var("halt_finite", "bool", "1", "whether the halt time was found finite", lambda s: s["halt_finite"]),
     Var("approach_exponent", "float", "1", "fitted exponent p of the final approach, inclination ~ (t_halt - t)^p",
         lambda s: s.get("approach_exponent", math.nan)),
@@ -92,6 +93,7 @@ VARIABLES: tuple[Var, ...] = (
     Var("wall_time", "float", "s", "wall-clock time of the integration", lambda s: s["wall_time"]),
 )
 VARIABLE_NAMES = tuple(v.name for v in VARIABLES)
+LEVEL_ATTRS = {"units": "rad", "long_name": "inclination level"}
 
 # ---- error bars (outputs.error_estimate): every scene is rerun with the tolerances of
 # sweep.grid.error_reference; each variable marked numerical_error=True gets <name>_numerical_error.
@@ -156,7 +158,6 @@ def add_numerical_errors(summary: dict, reference: Mapping | None) -> dict:
             summary[key] = _abs_difference(var.get(summary), var.get(reference) if reference is not None else None,
                                            failed)
     return summary
-LEVEL_ATTRS = {"units": "rad", "long_name": "inclination level"}
 
 
 def error_summary(n_levels: int, outcome_code: int = outcomes.NUMERICAL_ERROR, wall_time: float = math.nan) -> dict:
