@@ -31,6 +31,9 @@ from .core.tableau import N_STAGES_EXTENDED
 NUMBA_CUDA_PIN = "numba-cuda==0.30.4"
 # threads per block: the kernel needs many registers per thread, so small blocks fill an SM best
 THREADS_PER_BLOCK = 64
+# local-array shapes must be literal constants to numba-cuda (an expression in the kernel is not folded)
+F_ROWS = 2 * N_DENSE
+LEV_COLS = LEVEL_COLS + 1
 
 
 class CudaUnavailableError(RuntimeError):
@@ -102,9 +105,9 @@ def _build_kernel(cuda_module):
         cs = cuda.local.array(N_CS, float64)
         wk = cuda.local.array((N_WORK, N_WCOLS), float64)
         K = cuda.local.array((N_STAGES_EXTENDED, N_FULL), float64)
-        F = cuda.local.array((2 * N_DENSE, N_FULL), float64)
+        F = cuda.local.array((F_ROWS, N_FULL), float64)
         trk = cuda.local.array(N_TRACK, float64)
-        lev = cuda.local.array((MAX_LEVELS, LEVEL_COLS + 1), float64)
+        lev = cuda.local.array((MAX_LEVELS, LEV_COLS), float64)
         samples = cuda.local.array((1, SAMPLE_COLS), float64)
         traj = cuda.local.array((1, TRAJ_COLS), float64)
         peaks = cuda.local.array((PEAK_RING, PEAK_COLS), float64)
