@@ -93,7 +93,8 @@ def _build_kernel(cuda_module):
     load = load_inputs.py_func if sim else load_inputs
     store = store_outputs.py_func if sim else store_outputs
 
-    @cuda.jit
+    # cache: the first compilation of the whole integrator for the GPU takes minutes (docs/performance.md)
+    @cuda.jit(cache=not sim)
     def batch_kernel(order, Y0, P, S, LE, LV, NL, CHI, counter, ISTATS, FSTATS, LEV, YEND, DER):
         y0 = cuda.local.array(N_FULL, float64)
         p0 = cuda.local.array(N_PARAMS, float64)
