@@ -219,3 +219,48 @@ def summaries_equal(a: Mapping, b: Mapping, rtol: float = 1e-9) -> list[str]:
         if k != "wall_time":
             cmp(a[k], b[k], k)
     return bad
+
+
+def run_chunks_job(specs: list[str], expected_ids: list[str], out_paths: list[str], log_path: str | None = None,
+                   device: str = "cuda") -> dict:
+    """Entry point of the Snakemake jobs `simulate_cuda_*` (workflow/scripts/simulate_cuda.py): the
+    scenes of several chunks in one `simulate_batch` call, then one chunk file each (atomic writes).
+
+    A scene the core refuses is recorded as numerical_error, as `batch.run_chunk` does."""
+    from . import batch as _batch
+    from . import grid as _grid
+    from . import io as _io
+
+    _batch.setup_logging(log_path)
+    chunks = [_batch.chunk_from_spec(s) for s in specs]
+    for ch, want in zip(chunks, expected_ids):
+        if ch.id != want:
+            raise ValueError(f"chunk spec hashes to {ch.id}, but the job is for {want}")
+    if len(chunks) != len(expected_ids) or len(chunks) != len(out_paths):
+        raise ValueError("specs, expected_ids and out_paths must have one entry per chunk")
+    summaries: list[dict | None] = []
+    loaded: list[Scene] = []
+    where: list[int] = []
+    for ch in chunks:
+        settings = ch.spec["settings"]
+        for p in ch.points:
+            cfg = _grid.scene(settings, p)
+            try:
+                loaded.append(load_scene(cfg))
+                where.append(len(summaries))
+                summaries.append(None)
+            except Exception:  # noqa: BLE001
+                log.exception("scene %s refused; recorded as numerical_error", _grid.canonical_json(cfg))
+                summaries.append(_io.error_summary(len(settings["levels"]), outcomes.NUMERICAL_ERROR))
+    log.info("%d chunks, %d scenes on %s", len(chunks), len(summaries), device)
+    stats: dict = {}
+    t0 = time.perf_counter()
+    for j, s in zip(where, simulate_batch(loaded, device=device, stats=stats)):
+        summaries[j] = s
+    seconds = time.perf_counter() - t0
+    log.info("batch done in %.2f s (%.1f scenes/s): %s", seconds, len(summaries) / max(seconds, 1e-9), stats)
+    k = 0
+    for ch, path in zip(chunks, out_paths):
+        _io.write_chunk(ch, summaries[k:k + len(ch.points)], path)
+        k += len(ch.points)
+    return dict(stats, seconds=seconds, chunks=len(chunks))
