@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -145,3 +146,42 @@ def test_halt_fit_kernel_matches_closed_forms():
     assert math.isclose(diagnostics.ramp_exponent(t, om, T), 1.5, rel_tol=1e-12)
     # gaps that do not shrink: no finite halt
     assert not diagnostics.halt_time(np.array([1.0, 2.0, 3.0]), levels[:3])["halt_finite"]
+
+
+@pytest.mark.slow
+def test_pipeline_on_cuda_gives_the_cpu_cube(tmp_path):
+    """The tiny sweep with execution.device cuda (the kernel under numba's simulator, one GPU job per
+    batch of chunks, resources gpu=1) gives the cube of the cpu run: every variable to 1e-9."""
+    import xarray as xr
+    import yaml
+
+    from conftest import copy_workflow
+
+    wd = copy_workflow(tmp_path / "wf")
+    cfg = yaml.safe_load((wd / "config" / "tiny.yaml").read_text())
+    cubes = {}
+    for device in ("cpu", "cuda"):
+        name = f"tiny_{device}"
+        (wd / "config" / f"{name}.yaml").write_text(yaml.safe_dump(
+            dict(cfg, name=name, execution={"device": device, "chunk_size": 5})))
+        env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1" if device == "cuda" else "0")
+        cmd = [sys.executable, "-m", "snakemake", f"results/{name}/cube.nc", "-j2", "--resources", "gpu=1",
+               "--configfile", f"config/{name}.yaml"]
+        p = subprocess.run(cmd, cwd=wd, env=env, capture_output=True, text=True, timeout=900)
+        assert p.returncode == 0, (p.stdout + p.stderr)[-4000:]
+        out = p.stdout + p.stderr
+        if device == "cuda":
+            # 4 chunks of 1-3 scenes in batches of <= 5 scenes: 2 GPU jobs, no per-chunk job
+            assert len(re.findall(r"rule simulate_cuda_[0-9a-f]{16}:", out)) == 2
+            assert "rule simulate_chunk:" not in out
+        cubes[device] = xr.open_dataset(wd / "results" / name / "cube.nc")
+    a, b = cubes["cpu"], cubes["cuda"]
+    assert set(a.data_vars) == set(b.data_vars)
+    for v in a.data_vars:
+        if v == "wall_time":
+            continue
+        x, y = a[v].values, b[v].values
+        if x.dtype.kind == "f":
+            assert np.allclose(x, y, rtol=1e-9, atol=0.0, equal_nan=True), v
+        else:
+            assert (x == y).all(), v
