@@ -2,8 +2,8 @@
 # process, writing results/chunks/<id>.nc.
 # Device cuda: one job per GPU batch of consecutive chunks (at most execution.chunk_size scenes in all),
 # one sweep.simulate_batch call on the GPU, writing every chunk file of the batch; `resources: gpu=1`
-# lets `--resources gpu=1` (one GPU on this machine) and the SLURM profile (slurm_extra "--gpus=1")
-# schedule it. The chunk files, their ids and the cube are the same whichever device made them.
+# lets `--resources gpu=1` (one GPU on this machine) schedule it, and the SLURM executor plugin turns
+# it into `sbatch --gpus=1`. The chunk files, their ids and the cube are the same whichever device made them.
 
 DEVICE = SETTINGS["execution"]["device"]
 
@@ -47,6 +47,5 @@ else:
                 gpu=1,
                 mem_mb=16000,
                 runtime=240,
-                slurm_extra="'--gpus=1'",
             script:
                 "../scripts/simulate_cuda.py"
