@@ -47,10 +47,16 @@ def scenes(n: int, seed: int) -> list[dict]:
     return out
 
 
+CPU_SECONDS: dict[str, float] = {}
+
+
 def timed(label: str, fn):
+    """(result, wall seconds); the process's CPU seconds (all threads) go to CPU_SECONDS[label]."""
+    c0 = time.process_time()
     t0 = time.perf_counter()
     res = fn()
     dt = time.perf_counter() - t0
+    CPU_SECONDS[label] = time.process_time() - c0
     return res, dt
 
 
@@ -76,9 +82,9 @@ def main(argv=None) -> int:
     rows = []
     ref = None
     if not args.skip_1core:
-        ref, t1 = timed("1 core", lambda: sweep.simulate_batch(sc, device="cpu", workers=1))
+        ref, t1 = timed("cpu, 1 thread", lambda: sweep.simulate_batch(sc, device="cpu", workers=1))
         rows.append(("cpu, 1 thread", t1, ref))
-    allc, tn = timed("all", lambda: sweep.simulate_batch(sc, device="cpu", workers=workers))
+    allc, tn = timed(f"cpu, {workers} threads", lambda: sweep.simulate_batch(sc, device="cpu", workers=workers))
     rows.append((f"cpu, {workers} threads", tn, allc))
     if ref is None:
         ref = allc
@@ -90,7 +96,7 @@ def main(argv=None) -> int:
         _, tc = timed("gpu warm", lambda: sweep.simulate_batch(sc[:8], device="cuda"))
         print(f"GPU compile + warm-up (8 scenes): {tc:.1f} s (numba-cuda caches the kernel: once per machine)")
         stats: dict = {}
-        res, tg = timed("gpu", lambda: sweep.simulate_batch(sc, device="cuda", stats=stats))
+        res, tg = timed("cuda", lambda: sweep.simulate_batch(sc, device="cuda", stats=stats))
         rows.append(("cuda", tg, res))
         gpu_line = (f"GPU launch: {stats['blocks']} blocks x {stats['threads_per_block']} threads = {stats['threads']} "
                     f"persistent threads; {stats['regs_per_thread']} registers and {stats['local_mem_per_thread']} B "
@@ -100,10 +106,15 @@ def main(argv=None) -> int:
         print("GPU figures not measured on this machine; run this script where `nvidia-smi` shows a GPU")
 
     base = rows[0][1]
-    print(f"\n{'run':<20} {'seconds':>9} {'scenes/s':>10} {'x ' + rows[0][0]:>18}  summaries equal (1e-9)")
+    # cores used = the process's CPU seconds / wall seconds: on a shared machine the threads get less
+    # than a core each, and this column says how much they got
+    print(f"\n{'run':<20} {'seconds':>9} {'scenes/s':>10} {'x ' + rows[0][0]:>18} {'cores used':>11}  "
+          "summaries equal (1e-9)")
     for label, dt, res in rows:
         same = sum(summaries_equal(r, s, rtol=1e-9) == [] for r, s in zip(ref, res))
-        print(f"{label:<20} {dt:9.2f} {len(sc) / dt:10.2f} {base / dt:18.2f}  {same}/{len(sc)}")
+        print(f"{label:<20} {dt:9.2f} {len(sc) / dt:10.2f} {base / dt:18.2f} {CPU_SECONDS[label] / dt:11.2f}  "
+              f"{same}/{len(sc)}")
+    print(f"load average (1, 5, 15 min) at the end: {os.getloadavg()}")
     if gpu_line:
         print(gpu_line)
     steps = np.array([s["n_steps"] + s["n_rejected"] for s in ref], dtype=float)
