@@ -18,6 +18,7 @@ import math
 import os
 
 import numpy as np
+from numba import float64, int64
 
 from .core.dop853 import N_DENSE
 from .core.ensemble import (MAX_LEVELS, N_DERIVED, N_SCRATCH, PEAK_RING, load_inputs, solve_scene,
@@ -41,7 +42,11 @@ class CudaUnavailableError(RuntimeError):
 
 
 _kernel = None
-cuda = None   # numba.cuda once require_cuda has imported it (a module global: the simulator swaps it in kernels)
+# Set by _build_kernel; module globals, not closure variables, so that the kernel has no closure (numba
+# can cache it) and the simulator can swap `cuda` for its own module in it.
+cuda = None   # numba.cuda once require_cuda has imported it
+_load = load_inputs
+_store = store_outputs
 
 
 def require_cuda():
@@ -84,14 +89,12 @@ def kernel():
 
 
 def _build_kernel(cuda_module):
-    global cuda
-    from numba import float64, int64
-
+    global cuda, _load, _store
     cuda = cuda_module
-
     sim = simulator_enabled()
-    load = load_inputs.py_func if sim else load_inputs
-    store = store_outputs.py_func if sim else store_outputs
+    # the simulator's arrays are Python objects: there the copies run as plain Python
+    _load = load_inputs.py_func if sim else load_inputs
+    _store = store_outputs.py_func if sim else store_outputs
 
     # cache: the first compilation of the whole integrator for the GPU takes minutes (docs/performance.md)
     @cuda.jit(cache=not sim)
@@ -123,11 +126,11 @@ def _build_kernel(cuda_module):
             if k >= n:
                 break
             i = order[k]
-            load(i, Y0, P, S, LE, LV, y0, p0, s, le, lv)
+            _load(i, Y0, P, S, LE, LV, y0, p0, s, le, lv)
             nl = NL[i]
             solve_scene(y0, p0, s, le[:nl], lv[:nl], CHI[i], y, p, cs, wk, K, F, trk, lev[:nl], samples[:0],
                         traj[:0], peaks, y_end, scratch, istats, fstats, derived)
-            store(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER)
+            _store(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER)
 
     return batch_kernel
 
