@@ -115,6 +115,19 @@ def main(argv=None) -> int:
         print(f"{label:<20} {dt:9.2f} {len(sc) / dt:10.2f} {base / dt:18.2f} {CPU_SECONDS[label] / dt:11.2f}  "
               f"{same}/{len(sc)}")
     print(f"load average (1, 5, 15 min) at the end: {os.getloadavg()}")
+    if not args.skip_1core and workers > 1:
+        # what `workers` threads would take on an idle machine: the one-thread run's per-scene times
+        # handed out in the batch's order to whichever thread is free (as run_cpu does)
+        import heapq
+
+        from sweep.ensemble import Batch
+
+        free = [0.0] * workers
+        for i in Batch(sc).order:
+            heapq.heapreplace(free, free[0] + ref[int(i)]["wall_time"])
+        ideal = sum(s["wall_time"] for s in ref) / max(free)
+        print(f"idle-machine estimate for {workers} threads (one-thread scene times, dynamic hand-out): "
+              f"{ideal:.2f}x one thread")
     if gpu_line:
         print(gpu_line)
     steps = np.array([s["n_steps"] + s["n_rejected"] for s in ref], dtype=float)
