@@ -121,7 +121,7 @@ def run_cpu(batch: Batch, workers: int) -> dict:
     if workers == 1:
         worker()
     else:
-        threads = [threading.Thread(target=worker, name=f"sweep-batch-{j}") for j in range(workers)]
+        threads = [threading.Thread(target=worker, name=f"sweep-batch-{j}", daemon=True) for j in range(workers)]
         for t in threads:
             t.start()
         for t in threads:
