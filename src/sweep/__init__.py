@@ -8,5 +8,6 @@ except PackageNotFoundError:  # running from a source tree without installation
 
 from .errors import ConfigError  # noqa: E402
 from .simulate import SimulationResult, simulate  # noqa: E402
+from .ensemble import simulate_batch  # noqa: E402
 
-__all__ = ["simulate", "SimulationResult", "ConfigError", "__version__"]
+__all__ = ["simulate", "simulate_batch", "SimulationResult", "ConfigError", "__version__"]

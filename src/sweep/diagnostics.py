@@ -22,43 +22,15 @@ ln Omega_i against ln(t_halt - t_i) over the reached levels.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from .core.ensemble import (D_APPROACH, D_HALT_FINITE, D_THALT, D_THALT_ERR, N_DERIVED, halt_fit, halt_from_three,
+                            ramp_fit)
 
 
 def _halt_from_three(t: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     """(t_halt, p) from three level times t (increasing) and inclinations b (decreasing), or NaNs."""
-    t1, t2, t3 = (float(x) for x in t)
-    b1, b2, b3 = (float(x) for x in b)
-    d1, d2 = t2 - t1, t3 - t2
-    if not (d1 > 0.0 and d2 > 0.0):
-        return math.nan, math.nan
-    rho = math.log(b1 / b2) / math.log(b2 / b3)
-    if d1 / d2 <= rho:       # the root x runs off to infinity: no finite halt
-        return math.nan, math.nan
-
-    def F(x):
-        return math.log((x - t1) / (x - t2)) / math.log((x - t2) / (x - t3)) - rho
-
-    lo = t3 + 1e-12 * max(1.0, abs(t3))
-    hi = t3 + d2
-    while F(hi) < 0.0:
-        hi = t3 + 2.0 * (hi - t3)
-        if hi - t3 > 1e12 * d2:
-            return math.nan, math.nan
-    # F increases from -rho at x = t3+ to d1/d2 - rho > 0 at infinity; bisection to round-off
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if mid <= lo or mid >= hi:
-            break
-        if F(mid) < 0.0:
-            lo = mid
-        else:
-            hi = mid
-    x = 0.5 * (lo + hi)
-    p = math.log(b2 / b3) / math.log((x - t2) / (x - t3))
-    return x, p
+    return halt_from_three(*(float(x) for x in t), *(float(x) for x in b))
 
 
 def halt_time(level_t: np.ndarray, levels: np.ndarray) -> dict:
@@ -67,32 +39,18 @@ def halt_time(level_t: np.ndarray, levels: np.ndarray) -> dict:
     Returns t_halt, t_halt_error (the extrapolated remainder t_halt - t_last, see the module
     docstring), approach exponent
     p (beta ~ (t_halt - t)^p), and halt_finite (False where the gaps do not shrink fast enough).
+    The numbers come from the numba kernel `core.ensemble.halt_fit`, which the batch path runs on
+    its device.
     """
-    ok = np.isfinite(level_t)
-    t = np.asarray(level_t)[ok]
-    b = np.asarray(levels)[ok]
-    res = {"t_halt": math.nan, "t_halt_error": math.nan, "approach_exponent": math.nan, "halt_finite": False}
-    if t.size < 3:
-        return res
-    th, p = _halt_from_three(t[-3:], b[-3:])
-    if not math.isfinite(th):
-        return res
-    res.update(t_halt=th, approach_exponent=p, halt_finite=True)
-    # the part of t_halt that is extrapolated, not located: the halt lies after the last level
-    res["t_halt_error"] = th - float(t[-1])
-    return res
+    lt = np.ascontiguousarray(level_t, dtype=float)
+    out = np.empty(N_DERIVED)
+    halt_fit(lt, np.ascontiguousarray(levels, dtype=float), lt.shape[0], out)
+    return {"t_halt": float(out[D_THALT]), "t_halt_error": float(out[D_THALT_ERR]),
+            "approach_exponent": float(out[D_APPROACH]), "halt_finite": bool(out[D_HALT_FINITE])}
 
 
 def ramp_exponent(level_t: np.ndarray, precession: np.ndarray, t_halt: float) -> float:
-    """n in Omega ~ (t_halt - t)^(-n), least squares over levels with finite values; NaN if < 2."""
-    if not math.isfinite(t_halt):
-        return math.nan
-    lt = np.asarray(level_t, dtype=float)
-    om = np.abs(np.asarray(precession, dtype=float))
-    ok = np.isfinite(lt) & np.isfinite(om) & (om > 0) & (lt < t_halt)
-    if ok.sum() < 2:
-        return math.nan
-    x = np.log(t_halt - lt[ok])
-    yv = np.log(om[ok])
-    slope = np.polyfit(x, yv, 1)[0]
-    return float(-slope)
+    """n in Omega ~ (t_halt - t)^(-n), least squares over levels with finite values; NaN if < 2
+    (the numba kernel `core.ensemble.ramp_fit`)."""
+    lt = np.ascontiguousarray(level_t, dtype=float)
+    return float(ramp_fit(lt, np.ascontiguousarray(precession, dtype=float), lt.shape[0], float(t_halt)))

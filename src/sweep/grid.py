@@ -352,6 +352,8 @@ def normalize(config: Mapping, schema: dict | None = None, check_scenes: bool = 
         "chunk_size": int(cfg["chunk_size"]),
         "outputs": {"notebooks": list(cfg["outputs"]["notebooks"]),
                     "error_estimate": bool(cfg["outputs"]["error_estimate"])},
+        # where chunks run; not part of scene_settings, so never of a chunk's identity
+        "execution": {"device": cfg["execution"]["device"], "chunk_size": int(cfg["execution"]["chunk_size"])},
     }
     if check_scenes:
         check_scenes_valid(settings)
@@ -543,6 +545,28 @@ def plan_chunks(settings: Mapping) -> dict[str, Chunk]:
             cid, text = chunk_id_of(part, points, core)
             chunks[cid] = Chunk(cid, tuple(points), text)
     return chunks
+
+
+def plan_device_jobs(plan: Mapping[str, Chunk], scenes_per_job: int) -> dict[str, list[str]]:
+    """Device `cuda`: the chunks of `plan` (in plan order) cut into GPU jobs of consecutive chunks
+    with at most `scenes_per_job` scenes in all (a chunk larger than that is a job of its own).
+    Job id: the hash of its chunk ids, so an unchanged run of chunks keeps its job."""
+    jobs: dict[str, list[str]] = {}
+    cur: list[str] = []
+    n = 0
+
+    def close():
+        if cur:
+            jobs[sha256_hex(",".join(cur))[:CHUNK_ID_HEX]] = list(cur)
+
+    for cid, chunk in plan.items():
+        if cur and n + len(chunk.points) > scenes_per_job:
+            close()
+            cur, n = [], 0
+        cur.append(cid)
+        n += len(chunk.points)
+    close()
+    return jobs
 
 
 def grid_index(settings: Mapping) -> dict[str, dict[float, int]]:

@@ -17,6 +17,7 @@ is the contact-point velocity on a1, a2 (non-zero: the scene starts sliding); th
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -116,7 +117,15 @@ def max_level(params: np.ndarray) -> float:
     (and above the root of f = 0), and its energy must increase with beta; found on a grid with
     1e-4 rad spacing, which is far finer than the spacing of any sensible level set.
     """
-    return float(model.steady_rolling_max_level(params, 1e-4))
+    # it depends on G, h, A, C only (the disk and gravity): memoized, since a sweep shares them
+    return _max_level(*(float(params[i]) for i in (model.P_G, model.P_H, model.P_A, model.P_C)))
+
+
+@functools.lru_cache(maxsize=1024)
+def _max_level(g: float, h: float, a: float, c: float) -> float:
+    p = np.zeros(model.N_PARAMS)
+    p[model.P_G], p[model.P_H], p[model.P_A], p[model.P_C] = g, h, a, c
+    return float(model.steady_rolling_max_level(p, 1e-4))
 
 
 def load_scene(src) -> Scene:

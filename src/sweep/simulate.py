@@ -7,10 +7,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import diagnostics, outcomes
+from . import outcomes
 from .core import model
+from .core.ensemble import D_APPROACH, D_HALT_FINITE, D_RAMP, D_THALT, D_THALT_ERR, N_DERIVED, summary_fits
 from .core.integrate import integrate
-from .core.roots import EVENT_TOL_TAU
 from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_FLAT, I_IMPACTS,
                           I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
                           I_TRANS, N_SETTINGS, S_ATOL, S_EXTRA, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL,
@@ -99,6 +99,60 @@ def _finite_or_nan(x: float) -> float:
     return float(x) if math.isfinite(x) else math.nan
 
 
+def summary_from(sc: Scene, istats: np.ndarray, fstats: np.ndarray, lev: np.ndarray, y_end: np.ndarray,
+                 wall: float, fits: np.ndarray | None = None) -> dict:
+    """The JSON-able summary (SI) of a scene from the kernel's outputs: istats, fstats, lev (levels x
+    [tau, alpha, dtheta/dtau, f_hat]), y_end. fits: the scene's `core.ensemble.summary_fits` (D_*),
+    computed here unless the caller has them (the batch path computes them per scene on its device)."""
+    chi = sc.chi
+    escale = sc.energy_scale
+    levels = sc.levels
+    level_t = lev[:, 0] * chi
+    prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)   # a frequency: magnitude of dtheta/dt / 2 pi
+    nf_hz = lev[:, 3] / chi
+    code = int(istats[I_OUTCOME])
+    lay_flat = bool(istats[I_FLAT])
+    if fits is None:
+        # the disk that reached the table face-down halted there, located as an event
+        fits = np.empty(N_DERIVED)
+        summary_fits(level_t, prec_hz, np.asarray(levels, dtype=float), len(levels), lay_flat,
+                     float(fstats[F_TEND]), chi, fits)
+    t_end = float(fstats[F_TEND]) * chi
+    dis = y_end[model.Y_DSLIDE:model.Y_DK3 + 1] * escale
+    return {
+        "outcome": outcomes.NAMES[code],
+        "outcome_code": code,
+        "t_end": t_end,
+        "t_halt": _finite_or_nan(fits[D_THALT]),
+        "t_halt_error": _finite_or_nan(fits[D_THALT_ERR]),
+        "lay_flat": lay_flat,
+        "halt_finite": bool(fits[D_HALT_FINITE]),
+        "approach_exponent": _finite_or_nan(fits[D_APPROACH]),
+        "ramp_exponent": float(fits[D_RAMP]),
+        "levels": [
+            {"inclination": float(b), "t": _finite_or_nan(level_t[i]),
+             "precession_hz": _finite_or_nan(prec_hz[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
+            for i, b in enumerate(levels)
+        ],
+        "normal_force_hz_max": float(fstats[F_NFMAX]) / chi if fstats[F_NFMAX] > 0.0 else math.nan,
+        "slip_fraction": float(fstats[F_SLIDETIME] / fstats[F_TEND]) if fstats[F_TEND] > 0 else 0.0,
+        "n_transitions": int(istats[I_TRANS]),
+        "n_stick": int(istats[I_STICK]),
+        "n_impacts": int(istats[I_IMPACTS]),
+        "energy_initial": float(fstats[F_E0]) * escale,
+        "energy_final": float(fstats[F_EEND]) * escale,
+        "dissipation": {"sliding": float(dis[0]), "k1": float(dis[1]), "k2": float(dis[2]),
+                        "k3": float(dis[3]), "impact": float(fstats[F_DIMPACT]) * escale},
+        "n_steps": int(istats[I_STEPS]),
+        "n_rejected": int(istats[I_REJECTED]),
+        "n_steps_sliding": int(istats[I_SLIDE_STEPS]),
+        "n_rejected_sliding": int(istats[I_SLIDE_REJECTED]),
+        "n_rhs": int(istats[I_RHS]),
+        "n_events": int(istats[I_EVENTS]),
+        "wall_time": wall,
+    }
+
+
 def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationResult:
     """Run one scene. `scene`: path to a YAML scene file or a dict of the same structure.
 
@@ -126,52 +180,7 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
     istats, fstats, lev, samp, traj, peaks, y_end = out
     wall = time.perf_counter() - t0
 
-    levels = sc.levels
-    level_t = lev[:, 0] * chi
-    prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)   # a frequency: magnitude of dtheta/dt / 2 pi
-    nf_hz = lev[:, 3] / chi
-    code = int(istats[I_OUTCOME])
-    lay_flat = bool(istats[I_FLAT])
-    if lay_flat:
-        # the disk reached the table face-down: that is its halt, located as an event
-        fit = {"t_halt": float(fstats[F_TEND]) * chi, "t_halt_error": EVENT_TOL_TAU * chi, "halt_finite": True,
-               "approach_exponent": math.nan}
-    else:
-        fit = diagnostics.halt_time(level_t, levels)
-    t_end = float(fstats[F_TEND]) * chi
-    dis = y_end[model.Y_DSLIDE:model.Y_DK3 + 1] * escale
-    summary = {
-        "outcome": outcomes.NAMES[code],
-        "outcome_code": code,
-        "t_end": t_end,
-        "t_halt": _finite_or_nan(fit["t_halt"]),
-        "t_halt_error": _finite_or_nan(fit["t_halt_error"]),
-        "lay_flat": lay_flat,
-        "halt_finite": bool(fit["halt_finite"]),
-        "approach_exponent": _finite_or_nan(fit["approach_exponent"]),
-        "ramp_exponent": diagnostics.ramp_exponent(level_t, prec_hz, fit["t_halt"]),
-        "levels": [
-            {"inclination": float(b), "t": _finite_or_nan(level_t[i]),
-             "precession_hz": _finite_or_nan(prec_hz[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
-            for i, b in enumerate(levels)
-        ],
-        "normal_force_hz_max": float(fstats[F_NFMAX]) / chi if fstats[F_NFMAX] > 0.0 else math.nan,
-        "slip_fraction": float(fstats[F_SLIDETIME] / fstats[F_TEND]) if fstats[F_TEND] > 0 else 0.0,
-        "n_transitions": int(istats[I_TRANS]),
-        "n_stick": int(istats[I_STICK]),
-        "n_impacts": int(istats[I_IMPACTS]),
-        "energy_initial": float(fstats[F_E0]) * escale,
-        "energy_final": float(fstats[F_EEND]) * escale,
-        "dissipation": {"sliding": float(dis[0]), "k1": float(dis[1]), "k2": float(dis[2]),
-                        "k3": float(dis[3]), "impact": float(fstats[F_DIMPACT]) * escale},
-        "n_steps": int(istats[I_STEPS]),
-        "n_rejected": int(istats[I_REJECTED]),
-        "n_steps_sliding": int(istats[I_SLIDE_STEPS]),
-        "n_rejected_sliding": int(istats[I_SLIDE_REJECTED]),
-        "n_rhs": int(istats[I_RHS]),
-        "n_events": int(istats[I_EVENTS]),
-        "wall_time": wall,
-    }
+    summary = summary_from(sc, istats, fstats, lev, y_end, wall)
     samples = None
     if sample_tau is not None:
         R = sc.config["disk"]["radius"]

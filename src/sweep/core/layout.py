@@ -73,7 +73,8 @@ N_FSTATS = 8
 T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PHI_A, T_PHI_B, T_TA, T_TB, T_PREV_OK, T_TPREV, T_HPREV = range(9)
 T_PENDING, T_AFTER_HALT, T_NPK = 9, 10, 11
 T_DIMPACT_HALT = 12   # impact dissipation up to the halt (steps after it only resolve Phi maxima)
-N_TRACK = 13
+T_PEAK_RING = 13  # 1: the peak buffer is a ring of its last rows (batch path; only the summary is kept)
+N_TRACK = 14
 
 # --- output buffers -----------------------------------------------------------------------------
 TRAJ_COLS = 2 + N_FULL + 1     # tau, y[0:N_FULL], Phi, mode

@@ -13,7 +13,7 @@ from .contact import EV_LEVEL, eval_rhs, mode_energy
 from .dop853 import dense_eval
 from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, N_CS, T_NEXT_LEVEL,
                      T_NEXT_SAMPLE, T_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
-                     T_NPK, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
+                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
 from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA, Y_W3
 from .roots import brent_max_phi, locate
 
@@ -128,44 +128,52 @@ def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk,
             tpk, pvk = tp2, pv2
             dense_eval(F, 0, y, t, h, tpk, n, ybuf)
         thk = ybuf[Y_THETA]
+        # row of peak j: j itself, or j % cap where the buffer is a ring (trk[T_PEAK_RING])
+        cap = peaks.shape[0]
+        last = (npk - 1) % cap if npk > 0 else 0
         # round-off wiggles (e.g. of a creeping slip) have no prominence; real nutation peaks rise
         # ~0.1 Phi above the bracket ends
         genuine = pvk - max(pa, phi_c) > PEAK_PROMINENCE * abs(pvk)
         if genuine and npk > 0:
             thd = abs(y[Y_W3] / math.cos(y[Y_ALPHA]))
-            if tpk - peaks[npk - 1, 0] < MIN_PEAK_SEPARATION * 2.0 * math.pi / max(thd, 1e-300):
-                if pvk > peaks[npk - 1, 1]:
-                    peaks[npk - 1, 0] = tpk
-                    peaks[npk - 1, 1] = pvk
-                    peaks[npk - 1, 2] = thk
+            if tpk - peaks[last, 0] < MIN_PEAK_SEPARATION * 2.0 * math.pi / max(thd, 1e-300):
+                if pvk > peaks[last, 1]:
+                    peaks[last, 0] = tpk
+                    peaks[last, 1] = pvk
+                    peaks[last, 2] = thk
                 genuine = False
         if genuine:
-            if npk >= peaks.shape[0]:
+            if npk >= cap and trk[T_PEAK_RING] == 0.0:
                 istats[I_OVERFLOW] |= 2
             else:
-                _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running)
+                _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats)
                 npk += 1
     trk[T_NPK] = npk
     istats[I_PEAKS] = npk
 
 
 @njit(cache=True)
-def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running):
-    peaks[npk, 0] = tpk
-    peaks[npk, 1] = pvk
-    peaks[npk, 2] = thk
+def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats):
+    cap = peaks.shape[0]
+    peaks[npk % cap, 0] = tpk
+    peaks[npk % cap, 1] = pvk
+    peaks[npk % cap, 2] = thk
     if npk >= 2 and (running or tpk <= fstats[F_TEND]):
-        fstats[F_NFMAX] = max(fstats[F_NFMAX], 2.0 / (tpk - peaks[npk - 2, 0]))
+        fstats[F_NFMAX] = max(fstats[F_NFMAX], 2.0 / (tpk - peaks[(npk - 2) % cap, 0]))
     # resolve levels that now have a maximum after them: f_hat = 2 / (t_k - t_{k-2}) and the mean
     # precession rate over the same window
     for L in range(level_out.shape[0]):
         if level_out[L, 4] == 1.0 and tpk > level_out[L, 0]:
             j = npk - 1
-            while j >= 0 and peaks[j, 0] > level_out[L, 0]:
+            while j >= 0 and j > npk - cap and peaks[j % cap, 0] > level_out[L, 0]:
                 j -= 1
             if j >= 2:
-                level_out[L, 3] = 2.0 / (peaks[j, 0] - peaks[j - 2, 0])
-                level_out[L, 2] = (peaks[j, 2] - peaks[j - 2, 2]) / (peaks[j, 0] - peaks[j - 2, 0])
+                if j - 2 <= npk - cap:
+                    istats[I_OVERFLOW] |= 2   # a ring too short for this look-back (never on the CPU path)
+                else:
+                    level_out[L, 3] = 2.0 / (peaks[j % cap, 0] - peaks[(j - 2) % cap, 0])
+                    level_out[L, 2] = (peaks[j % cap, 2] - peaks[(j - 2) % cap, 2]) / \
+                        (peaks[j % cap, 0] - peaks[(j - 2) % cap, 0])
             level_out[L, 4] = 0.0
             trk[T_PENDING] -= 1.0
 

@@ -1,0 +1,257 @@
+"""The batch path: one scene per worker on fixed-size per-worker buffers, and the summary fits.
+
+`solve_scene` integrates one scene with `integrate.run`, the same kernel `sweep.simulate` calls,
+and computes the summary's fitted numbers (halt time and its error, approach and ramp exponents)
+with `summary_fits`, which `sweep.simulate` calls too. Every buffer has a size fixed by layout.py
+and MAX_LEVELS / PEAK_RING, so the same functions run
+
+  * on the CPU: `solve_index` on buffers each thread allocates once (sweep.ensemble, threads);
+  * on CUDA: numba-cuda compiles these @njit functions, and everything they call, as device
+    functions of the persistent-thread kernel (sweep.ensemble.cuda_kernel) with the buffers in
+    `cuda.local.array`s. There is no second copy of the physics or of the event logic.
+
+The only difference to `sweep.simulate` is the peak buffer: a ring of the last PEAK_RING normal-
+force maxima (layout.T_PEAK_RING) instead of every maximum, since the summary needs only the last
+few. A scene whose look-back outgrows the ring (never seen) flags I_OVERFLOW, and the caller reruns
+it with `sweep.simulate`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .integrate import run
+from .layout import (F_TEND, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
+                     N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS)
+from .model import N_FULL, N_PARAMS
+from .roots import EVENT_TOL_TAU
+from .dop853 import N_DENSE
+from .tableau import N_STAGES_EXTENDED
+
+# Levels per scene on the batch path (the per-thread buffers have a fixed size on CUDA).
+MAX_LEVELS = 16
+# Rows of the ring of normal-force maxima: the level frequencies look back at most ~3 maxima.
+PEAK_RING = 16
+
+# --- the summary's fitted numbers (SI: s) ------------------------------------------------------
+D_THALT, D_THALT_ERR, D_HALT_FINITE, D_APPROACH, D_RAMP = range(5)
+N_DERIVED = 5
+# rows of the per-scene scratch: level times (s), precession frequencies (Hz)
+R_LEVEL_T, R_PREC_HZ = 0, 1
+N_SCRATCH = 2
+TWO_PI = 2.0 * math.pi
+
+
+# --- halt time and exponents (diagnostics.py explains the method) -------------------------------
+@njit(cache=True)
+def _halt_residual(x, t1, t2, t3, rho):
+    return math.log((x - t1) / (x - t2)) / math.log((x - t2) / (x - t3)) - rho
+
+
+@njit(cache=True)
+def halt_from_three(t1, t2, t3, b1, b2, b3):
+    """(t_halt, p) from three level times t1 < t2 < t3 and inclinations b1 > b2 > b3, or NaNs."""
+    d1 = t2 - t1
+    d2 = t3 - t2
+    if not (d1 > 0.0 and d2 > 0.0):
+        return math.nan, math.nan
+    rho = math.log(b1 / b2) / math.log(b2 / b3)
+    if d1 / d2 <= rho:       # the root x runs off to infinity: no finite halt
+        return math.nan, math.nan
+    lo = t3 + 1e-12 * max(1.0, abs(t3))
+    hi = t3 + d2
+    while _halt_residual(hi, t1, t2, t3, rho) < 0.0:
+        hi = t3 + 2.0 * (hi - t3)
+        if hi - t3 > 1e12 * d2:
+            return math.nan, math.nan
+    # the residual increases from -rho at x = t3+ to d1/d2 - rho > 0 at infinity: bisection to round-off
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        if _halt_residual(mid, t1, t2, t3, rho) < 0.0:
+            lo = mid
+        else:
+            hi = mid
+    x = 0.5 * (lo + hi)
+    return x, math.log(b2 / b3) / math.log((x - t2) / (x - t3))
+
+
+@njit(cache=True)
+def halt_fit(level_t, levels, nl, out):
+    """out[D_THALT, D_THALT_ERR, D_HALT_FINITE, D_APPROACH] from the last reached levels
+    (diagnostics.halt_time: the fit on the last three; its error bar is the extrapolated remainder
+    t_halt - t_last, the part of t_halt the fit adds)."""
+    out[D_THALT] = math.nan
+    out[D_THALT_ERR] = math.nan
+    out[D_HALT_FINITE] = 0.0
+    out[D_APPROACH] = math.nan
+    i1 = i2 = i3 = -1   # the last three reached levels, i1 the last
+    count = 0
+    for i in range(nl):
+        if math.isfinite(level_t[i]):
+            i3, i2, i1 = i2, i1, i
+            count += 1
+    if count < 3:
+        return
+    th, p = halt_from_three(level_t[i3], level_t[i2], level_t[i1], levels[i3], levels[i2], levels[i1])
+    if not math.isfinite(th):
+        return
+    out[D_THALT] = th
+    out[D_APPROACH] = p
+    out[D_HALT_FINITE] = 1.0
+    out[D_THALT_ERR] = th - level_t[i1]
+
+
+@njit(cache=True)
+def ramp_fit(level_t, precession, nl, t_halt):
+    """n in Omega ~ (t_halt - t)^(-n): least squares of ln|Omega| on ln(t_halt - t) over the levels
+    with finite values before t_halt; NaN if fewer than two."""
+    if not math.isfinite(t_halt):
+        return math.nan
+    m = 0
+    sx = 0.0
+    sy = 0.0
+    for i in range(nl):
+        om = abs(precession[i])
+        if math.isfinite(level_t[i]) and math.isfinite(om) and om > 0.0 and level_t[i] < t_halt:
+            m += 1
+            sx += math.log(t_halt - level_t[i])
+            sy += math.log(om)
+    if m < 2:
+        return math.nan
+    mx = sx / m
+    my = sy / m
+    sxx = 0.0
+    sxy = 0.0
+    for i in range(nl):
+        om = abs(precession[i])
+        if math.isfinite(level_t[i]) and math.isfinite(om) and om > 0.0 and level_t[i] < t_halt:
+            dx = math.log(t_halt - level_t[i]) - mx
+            sxx += dx * dx
+            sxy += dx * (math.log(om) - my)
+    if sxx == 0.0:
+        return math.nan
+    return -sxy / sxx
+
+
+@njit(cache=True)
+def summary_fits(level_t, prec_hz, levels, nl, lay_flat, t_end_tau, chi, out):
+    """The summary's fitted numbers into out (D_*). level_t (s), prec_hz (Hz), levels (rad): the
+    first nl entries. A disk that lay flat halted at the located event t_end_tau."""
+    if lay_flat:
+        out[D_THALT] = t_end_tau * chi
+        out[D_THALT_ERR] = EVENT_TOL_TAU * chi
+        out[D_HALT_FINITE] = 1.0
+        out[D_APPROACH] = math.nan
+    else:
+        halt_fit(level_t, levels, nl, out)
+    out[D_RAMP] = ramp_fit(level_t, prec_hz, nl, out[D_THALT])
+
+
+# --- one scene on fixed buffers -----------------------------------------------------------------
+@njit(cache=True)
+def solve_scene(y0, p0, settings, level_e, levels, chi, y, p, cs, wk, K, F, trk, lev, samples, traj, peaks,
+                y_end, scratch, istats, fstats, derived):
+    """Integrate one scene (inputs y0, p0, settings, level_e, levels: nl = level_e.shape[0]) on the
+    given buffers, as integrate.integrate does without samples or trajectory, then its fits.
+
+    lev (nl x LEVEL_COLS + 1) receives the levels (tau, alpha, dtheta/dtau, f_hat, pending);
+    istats, fstats, y_end, derived (D_*) the rest. Every buffer is reset here."""
+    nl = level_e.shape[0]
+    for i in range(N_FULL):
+        y[i] = y0[i]
+        y_end[i] = 0.0
+    for i in range(N_PARAMS):
+        p[i] = p0[i]
+    for i in range(N_CS):
+        cs[i] = 0.0
+    for r in range(wk.shape[0]):
+        for c in range(wk.shape[1]):
+            wk[r, c] = 0.0
+    for r in range(K.shape[0]):
+        for c in range(K.shape[1]):
+            K[r, c] = 0.0
+    for r in range(F.shape[0]):
+        for c in range(F.shape[1]):
+            F[r, c] = 0.0
+    for r in range(peaks.shape[0]):
+        for c in range(peaks.shape[1]):
+            peaks[r, c] = 0.0
+    for i in range(N_TRACK):
+        trk[i] = 0.0
+    trk[T_PEAK_RING] = 1.0
+    for i in range(N_ISTATS):
+        istats[i] = 0
+    for i in range(N_FSTATS):
+        fstats[i] = 0.0
+    for L in range(nl):
+        for c in range(LEVEL_COLS):
+            lev[L, c] = math.nan
+        lev[L, LEVEL_COLS] = 0.0
+    run(y, p, settings, level_e, scratch[0, :0], cs, wk, K, F, trk, istats, fstats, lev, samples, traj, peaks,
+        y_end)
+    # the fits on the level times (s) and precession frequencies (Hz), as sweep.simulate forms them
+    for L in range(nl):
+        scratch[R_LEVEL_T, L] = lev[L, 0] * chi
+        scratch[R_PREC_HZ, L] = abs(lev[L, 2]) / chi / TWO_PI
+    summary_fits(scratch[R_LEVEL_T], scratch[R_PREC_HZ], levels, nl, istats[I_FLAT] != 0, fstats[F_TEND], chi,
+                 derived)
+
+
+# --- the batch's arrays ---------------------------------------------------------------------------
+# inputs, one row per scene: Y0 (N_FULL), P (N_PARAMS), S (N_SETTINGS), LE level energies and LV level
+# inclinations (MAX_LEVELS, the first NL used), CHI (s). Outputs: ISTATS, FSTATS, LEV (MAX_LEVELS x
+# LEVEL_COLS), YEND (N_FULL), DER (N_DERIVED).
+
+def work_buffers():
+    """One worker's buffers (CPU): the shapes the CUDA kernel gives its local arrays."""
+    return (np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
+            np.zeros((N_STAGES_EXTENDED, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK),
+            np.zeros((MAX_LEVELS, LEVEL_COLS + 1)), np.zeros((1, SAMPLE_COLS)), np.zeros((1, TRAJ_COLS)),
+            np.zeros((PEAK_RING, PEAK_COLS)), np.zeros(N_FULL), np.zeros((N_SCRATCH, MAX_LEVELS)),
+            np.zeros(N_ISTATS, np.int64), np.zeros(N_FSTATS), np.zeros(N_DERIVED))
+
+
+@njit(cache=True)
+def load_inputs(i, Y0, P, S, LE, LV, y0, p0, s, le, lv):
+    """Copy scene i's inputs into a worker's buffers."""
+    for j in range(N_FULL):
+        y0[j] = Y0[i, j]
+    for j in range(N_PARAMS):
+        p0[j] = P[i, j]
+    for j in range(N_SETTINGS):
+        s[j] = S[i, j]
+    for j in range(MAX_LEVELS):
+        le[j] = LE[i, j]
+        lv[j] = LV[i, j]
+
+
+@njit(cache=True)
+def store_outputs(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER):
+    """Copy a worker's results for scene i into the batch's output arrays."""
+    for j in range(N_ISTATS):
+        ISTATS[i, j] = istats[j]
+    for j in range(N_FSTATS):
+        FSTATS[i, j] = fstats[j]
+    for L in range(nl):
+        for c in range(LEVEL_COLS):
+            LEV[i, L, c] = lev[L, c]
+    for j in range(N_FULL):
+        YEND[i, j] = y_end[j]
+    for j in range(N_DERIVED):
+        DER[i, j] = derived[j]
+
+
+@njit(cache=True, nogil=True)
+def solve_index(i, Y0, P, S, LE, LV, NL, CHI, y0, p0, s, le, lv, y, p, cs, wk, K, F, trk, lev, samples, traj,
+                peaks, y_end, scratch, istats, fstats, derived, ISTATS, FSTATS, LEV, YEND, DER):
+    """Scene i of the batch on one CPU worker's buffers (releases the GIL: threads run in parallel)."""
+    load_inputs(i, Y0, P, S, LE, LV, y0, p0, s, le, lv)
+    nl = NL[i]
+    solve_scene(y0, p0, s, le[:nl], lv[:nl], CHI[i], y, p, cs, wk, K, F, trk, lev[:nl], samples[:0], traj[:0],
+                peaks, y_end, scratch, istats, fstats, derived)
+    store_outputs(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER)
+    return istats[I_OVERFLOW]

@@ -1,0 +1,182 @@
+"""CUDA execution of the batch path (`sweep.simulate_batch(..., device="cuda")`).
+
+numba-cuda is imported here only, and only when device="cuda" is asked for: `require_cuda` fails at
+once, with the reason, where the package or a GPU is missing. The kernel is one persistent thread per
+resident slot: each thread takes the next scene index from an atomic counter when its scene ends
+(scenes differ ~100x in cost), copies the scene's inputs into its local arrays, integrates it with
+`core.ensemble.solve_scene` (numba-cuda compiles that @njit function and everything it calls, the
+whole hybrid integrator and model, as device functions: no second copy of the physics), and writes
+the results into the preallocated device arrays. float64 throughout.
+
+Under numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, used by the tests on machines without a GPU)
+the same kernel runs in Python threads; the copies in and out then run as plain Python (their
+`py_func`) on the simulator's arrays and `solve_scene` as its CPU compilation.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+from numba import float64, int64
+
+from .core.dop853 import N_DENSE
+from .core.ensemble import (MAX_LEVELS, N_DERIVED, N_SCRATCH, PEAK_RING, load_inputs, solve_scene,
+                            store_outputs)
+from .core.layout import (LEVEL_COLS, N_CS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK, N_WCOLS, N_WORK,
+                          PEAK_COLS, SAMPLE_COLS, TRAJ_COLS)
+from .core.model import N_FULL, N_PARAMS
+from .core.tableau import N_STAGES_EXTENDED
+
+# numba-cuda release the lock pins (requirements.lock); named in the error message
+NUMBA_CUDA_PIN = "numba-cuda==0.30.4"
+# threads per block: the kernel needs many registers per thread, so small blocks fill an SM best
+THREADS_PER_BLOCK = 64
+# local-array shapes must be literal constants to numba-cuda (an expression in the kernel is not folded)
+F_ROWS = 2 * N_DENSE
+LEV_COLS = LEVEL_COLS + 1
+
+
+class CudaUnavailableError(RuntimeError):
+    """device='cuda' was asked for on a machine that cannot run it."""
+
+
+_kernel = None
+# Set by _build_kernel; module globals, not closure variables, so that the kernel has no closure (numba
+# can cache it) and the simulator can swap `cuda` for its own module in it.
+cuda = None   # numba.cuda once require_cuda has imported it
+_load = load_inputs
+_store = store_outputs
+
+
+def require_cuda():
+    """numba.cuda, after checking that it can run here; CudaUnavailableError naming the reason."""
+    try:
+        from numba import cuda
+    except ImportError as exc:
+        raise CudaUnavailableError(
+            f"device='cuda' needs the numba-cuda package ({NUMBA_CUDA_PIN}, pinned in requirements.lock; "
+            f"import failed: {exc}); use device='cpu'") from None
+    if simulator_enabled():
+        return cuda
+    try:
+        ok = cuda.is_available()
+    except Exception as exc:  # a broken driver install raises instead of answering False
+        raise CudaUnavailableError(f"device='cuda': the CUDA driver cannot be used here ({exc}); use device='cpu'") \
+            from None
+    if not ok:
+        raise CudaUnavailableError(
+            "device='cuda': no CUDA GPU is available on this machine (numba.cuda.is_available() is False: no "
+            "NVIDIA GPU or driver); use device='cpu', or set NUMBA_ENABLE_CUDASIM=1 for numba's (slow) simulator")
+    return cuda
+
+
+def simulator_enabled() -> bool:
+    """True under numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1)."""
+    try:
+        from numba.cuda.core import config
+        return bool(config.ENABLE_CUDASIM)
+    except ImportError:
+        return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0")
+
+
+def kernel():
+    """The batch kernel (built once per process)."""
+    global _kernel
+    if _kernel is None:
+        _kernel = _build_kernel(require_cuda())
+    return _kernel
+
+
+def _build_kernel(cuda_module):
+    global cuda, _load, _store
+    cuda = cuda_module
+    sim = simulator_enabled()
+    # the simulator's arrays are Python objects: there the copies run as plain Python
+    _load = load_inputs.py_func if sim else load_inputs
+    _store = store_outputs.py_func if sim else store_outputs
+
+    # cache: the first compilation of the whole integrator for the GPU takes minutes (docs/performance.md)
+    @cuda.jit(cache=not sim)
+    def batch_kernel(order, Y0, P, S, LE, LV, NL, CHI, counter, ISTATS, FSTATS, LEV, YEND, DER):
+        y0 = cuda.local.array(N_FULL, float64)
+        p0 = cuda.local.array(N_PARAMS, float64)
+        s = cuda.local.array(N_SETTINGS, float64)
+        le = cuda.local.array(MAX_LEVELS, float64)
+        lv = cuda.local.array(MAX_LEVELS, float64)
+        y = cuda.local.array(N_FULL, float64)
+        p = cuda.local.array(N_PARAMS, float64)
+        cs = cuda.local.array(N_CS, float64)
+        wk = cuda.local.array((N_WORK, N_WCOLS), float64)
+        K = cuda.local.array((N_STAGES_EXTENDED, N_FULL), float64)
+        F = cuda.local.array((F_ROWS, N_FULL), float64)
+        trk = cuda.local.array(N_TRACK, float64)
+        lev = cuda.local.array((MAX_LEVELS, LEV_COLS), float64)
+        samples = cuda.local.array((1, SAMPLE_COLS), float64)
+        traj = cuda.local.array((1, TRAJ_COLS), float64)
+        peaks = cuda.local.array((PEAK_RING, PEAK_COLS), float64)
+        y_end = cuda.local.array(N_FULL, float64)
+        scratch = cuda.local.array((N_SCRATCH, MAX_LEVELS), float64)
+        istats = cuda.local.array(N_ISTATS, int64)
+        fstats = cuda.local.array(N_FSTATS, float64)
+        derived = cuda.local.array(N_DERIVED, float64)
+        n = order.shape[0]
+        while True:
+            k = cuda.atomic.add(counter, 0, 1)   # the next scene, whichever thread is free
+            if k >= n:
+                break
+            i = order[k]
+            _load(i, Y0, P, S, LE, LV, y0, p0, s, le, lv)
+            nl = NL[i]
+            solve_scene(y0, p0, s, le[:nl], lv[:nl], CHI[i], y, p, cs, wk, K, F, trk, lev[:nl], samples[:0],
+                        traj[:0], peaks, y_end, scratch, istats, fstats, derived)
+            _store(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER)
+
+    return batch_kernel
+
+
+def launch_shape(cuda, n: int, regs_per_thread: int | None) -> tuple[int, int]:
+    """(blocks, threads per block): as many threads as the GPU keeps resident (by the kernel's
+    registers per thread), at most one per scene."""
+    tpb = THREADS_PER_BLOCK
+    if simulator_enabled():
+        return 1, max(1, min(2, n))   # two simulated threads share the scenes: the counter is exercised
+    dev = cuda.get_current_device()
+    sms = dev.MULTIPROCESSOR_COUNT
+    regs = max(regs_per_thread or 255, 1)
+    per_sm = min(dev.MAX_THREADS_PER_MULTIPROCESSOR, dev.MAX_REGISTERS_PER_MULTIPROCESSOR // regs)
+    blocks_per_sm = max(per_sm // tpb, 1)
+    blocks = min(sms * blocks_per_sm, math.ceil(n / tpb))
+    return max(blocks, 1), tpb
+
+
+def run_cuda(order, Y0, P, S, LE, LV, NL, CHI, outputs) -> dict:
+    """Run the batch on the GPU; fills `outputs` (ISTATS, FSTATS, LEV, YEND, DER, host arrays) and
+    returns launch facts (blocks, threads, registers and local memory per thread, GPU seconds)."""
+    import time
+
+    cuda = require_cuda()
+    kern = kernel()
+    n = int(order.shape[0])
+    d_in = [cuda.to_device(np.ascontiguousarray(a)) for a in (order, Y0, P, S, LE, LV, NL, CHI)]
+    d_counter = cuda.to_device(np.zeros(1, np.int64))
+    d_out = [cuda.to_device(a) for a in outputs]
+    regs = local = None
+    launch = kern
+    if not simulator_enabled():
+        # compile for these argument types first: the registers per thread fix the launch shape
+        launch = kern.specialize(*d_in, d_counter, *d_out)
+        try:
+            regs = int(launch.get_regs_per_thread())
+            local = int(launch.get_local_mem_per_thread())
+        except Exception:   # a numba-cuda without these queries: the figures are reported as unknown
+            regs = local = None
+    blocks, tpb = launch_shape(cuda, n, regs)
+    t0 = time.perf_counter()
+    launch[blocks, tpb](*d_in, d_counter, *d_out)
+    cuda.synchronize()
+    seconds = time.perf_counter() - t0
+    for d, h in zip(d_out, outputs):
+        d.copy_to_host(h)
+    return {"blocks": blocks, "threads_per_block": tpb, "threads": blocks * tpb, "regs_per_thread": regs,
+            "local_mem_per_thread": local, "gpu_seconds": seconds}
