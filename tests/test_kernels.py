@@ -65,18 +65,24 @@ def test_rk_step_is_the_tableau_applied_to_the_model(setup):
     assert ist[L.I_RHS] == T.N_STAGES      # 11 stages + f(t + h, y_new); stage 0 is the given f
 
 
-def test_error_norm_is_hairers_dop853_norm():
+@pytest.mark.parametrize("alpha", [0.3, 1.0, -1.5707, 1.5707963])
+def test_error_norm_is_hairers_dop853_norm(alpha):
+    """Hairer's norm, with the inclination's error relative to min(|alpha|, pi/2 - |alpha|)."""
     rng = np.random.default_rng(3)
     n = M.N_CORE
     K = rng.normal(size=(T.N_STAGES_EXTENDED, M.N_FULL))
     y = rng.normal(size=M.N_FULL)
+    y[M.Y_ALPHA] = alpha
     y_new = y + 1e-3 * rng.normal(size=M.N_FULL)
+    y_new[M.Y_ALPHA] = alpha * (1.0 - 1e-8)
     h, rtol, atol = 0.01, 1e-8, 1e-10
-    sc = atol + rtol * np.maximum(np.abs(y[:n]), np.abs(y_new[:n]))
+    mag = np.maximum(np.abs(y[:n]), np.abs(y_new[:n]))
+    mag[M.Y_ALPHA] = min(abs(alpha), 0.5 * math.pi - abs(alpha) * (1.0 - 1e-8))
+    sc = atol + rtol * mag
     e5 = np.sum(((T.E5 @ K[:13, :n]) / sc) ** 2)
     e3 = np.sum(((T.E3 @ K[:13, :n]) / sc) ** 2)
     ref = h * e5 / math.sqrt((e5 + 0.01 * e3) * n)
-    assert D.error_norm(K, h, y, y_new, M.N_FULL, rtol, atol) == pytest.approx(ref, rel=1e-13)
+    assert D.error_norm(K, h, y, y_new, M.N_FULL, rtol, atol) == pytest.approx(ref, rel=1e-12)
 
 
 def test_dense_output_interpolates_the_step_at_seventh_order(setup):
