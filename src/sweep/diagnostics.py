@@ -11,7 +11,9 @@ is Aitken's delta-squared extrapolation. The error estimate is the change of t_h
 uses the previous three levels instead (or, where that fit has no root, the remainder t_halt - t3).
 
 Ramp exponent n of the precession frequency, Omega ~ (t_halt - t)^(-n): least squares of
-ln Omega_i against ln(t_halt - t_i) over the reached levels.
+ln Omega_i against ln(t_halt - t_i) over the reached levels with a precession frequency (the mean
+over whole precession cycles, docs/model.md); its error is the standard error of the slope (NaN
+with only two levels).
 """
 from __future__ import annotations
 
@@ -84,14 +86,29 @@ def halt_time(level_t: np.ndarray, levels: np.ndarray) -> dict:
 
 def ramp_exponent(level_t: np.ndarray, precession: np.ndarray, t_halt: float) -> float:
     """n in Omega ~ (t_halt - t)^(-n), least squares over levels with finite values; NaN if < 2."""
+    return ramp_fit(level_t, precession, t_halt)[0]
+
+
+def ramp_fit(level_t: np.ndarray, precession: np.ndarray, t_halt: float) -> tuple[float, float]:
+    """(n, standard error of n): n in Omega ~ (t_halt - t)^(-n) by least squares of ln Omega
+    against ln(t_halt - t) over the levels with finite values; NaN if fewer than 2 (error: 3)."""
     if not math.isfinite(t_halt):
-        return math.nan
+        return math.nan, math.nan
     lt = np.asarray(level_t, dtype=float)
     om = np.abs(np.asarray(precession, dtype=float))
     ok = np.isfinite(lt) & np.isfinite(om) & (om > 0) & (lt < t_halt)
-    if ok.sum() < 2:
-        return math.nan
+    k = int(ok.sum())
+    if k < 2:
+        return math.nan, math.nan
     x = np.log(t_halt - lt[ok])
     yv = np.log(om[ok])
-    slope = np.polyfit(x, yv, 1)[0]
-    return float(-slope)
+    xm = x - x.mean()
+    sxx = float(np.dot(xm, xm))
+    if not sxx > 0.0:
+        return math.nan, math.nan
+    slope = float(np.dot(xm, yv - yv.mean())) / sxx
+    err = math.nan
+    if k > 2:
+        res = yv - yv.mean() - slope * xm
+        err = math.sqrt(float(np.dot(res, res)) / (k - 2) / sxx)
+    return -slope, err

@@ -18,8 +18,8 @@ from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND,
 from .errors import ConfigError
 from .scene import Scene, load_scene
 
-# After the smallest level, the normal-force frequency of that level needs the next peak of Phi;
-# a peak comes every nutation period (~10-40 steps), so 5000 extra steps only bound a pathology.
+# After the smallest level, its frequencies need HALF_CYCLES (4) more precession cycles and the
+# next counted peak of Phi (~10-40 steps per cycle), so 5000 extra steps only bound a pathology.
 EXTRA_STEPS_FOR_PEAKS = 5000
 
 
@@ -128,7 +128,12 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
 
     levels = sc.levels
     level_t = lev[:, 0] * chi
-    prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)   # a frequency: magnitude of dtheta/dt / 2 pi
+    # frequencies (docs/model.md, 'Frequencies at the levels'): magnitude of the mean dtheta/dt over
+    # whole precession cycles around the level / 2 pi; Phi's dominant frequency over the same
+    # window (ringing ratio x precession); the paper's f_hat = 2/T over three counted Phi maxima
+    prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)
+    ratio = lev[:, 4]
+    ring_hz = ratio * prec_hz
     nf_hz = lev[:, 3] / chi
     code = int(istats[I_OUTCOME])
     lay_flat = bool(istats[I_FLAT])
@@ -138,6 +143,7 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
                "approach_exponent": math.nan}
     else:
         fit = diagnostics.halt_time(level_t, levels)
+    ramp_n, ramp_err = diagnostics.ramp_fit(level_t, prec_hz, fit["t_halt"])
     t_end = float(fstats[F_TEND]) * chi
     dis = y_end[model.Y_DSLIDE:model.Y_DK3 + 1] * escale
     summary = {
@@ -149,10 +155,12 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
         "lay_flat": lay_flat,
         "halt_finite": bool(fit["halt_finite"]),
         "approach_exponent": _finite_or_nan(fit["approach_exponent"]),
-        "ramp_exponent": diagnostics.ramp_exponent(level_t, prec_hz, fit["t_halt"]),
+        "ramp_exponent": _finite_or_nan(ramp_n),
+        "ramp_exponent_error": _finite_or_nan(ramp_err),
         "levels": [
             {"inclination": float(b), "t": _finite_or_nan(level_t[i]),
-             "precession_hz": _finite_or_nan(prec_hz[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
+             "precession_hz": _finite_or_nan(prec_hz[i]), "ringing_hz": _finite_or_nan(ring_hz[i]),
+             "ringing_ratio": _finite_or_nan(ratio[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
             for i, b in enumerate(levels)
         ],
         "normal_force_hz_max": float(fstats[F_NFMAX]) / chi if fstats[F_NFMAX] > 0.0 else math.nan,
