@@ -20,9 +20,10 @@ least-squares line and applying a 4-term Blackman-Harris window, nu maximises
 section). The ringing frequency is nu times the precession frequency (simulate.py).
 
 Normal-force maxima (f_hat = 2/T over three consecutive counted maxima, tracking.py): a located
-maximum of Phi counts only with hysteresis: it rose PEAK_HYSTERESIS |Phi| above the lowest value
-since the previous counted maximum, and it is confirmed once Phi (at a step end) has fallen
-PEAK_HYSTERESIS |Phi| below it; of the maxima in between, the highest counts.
+maximum of Phi counts only with hysteresis H = PEAK_HYSTERESIS A, A the amplitude of Phi's swing
+(the rise of the last counted maximum above the lowest Phi before it; |Phi(0)| before the first):
+it rose H above the lowest Phi since the previous counted maximum, and it is confirmed once Phi
+(at a step end) has fallen H below it; of the maxima in between, the highest counts.
 
 Buffer `fq` (float64, (FQ_LEVEL0 + n_levels) x FQ_COLS): row 0 scalars (Q_*), rows 1, 2 the ring
 buffers (up, down: times then Phi), row FQ_LEVEL0 + L the window of level L (LW_* head, then the
@@ -44,7 +45,7 @@ SAMPLES_PER_CYCLE = 16          # S: lattice points per precession cycle (Nyquis
 HALF_CYCLES = 4                 # whole precession cycles on each side of the level (8 in the window)
 RING = HALF_CYCLES * SAMPLES_PER_CYCLE + 1
 WIN_LEN = 2 * HALF_CYCLES * SAMPLES_PER_CYCLE + 1
-PEAK_HYSTERESIS = 0.01          # fraction of |Phi| a normal-force maximum must rise and fall by
+PEAK_HYSTERESIS = 0.01          # fraction of Phi's swing a normal-force maximum must rise and fall by
 RINGING_MIN_AMPLITUDE = 1e-8    # below this amplitude of Phi's oscillation (relative to Phi) no ringing
 ZERO_PAD = 4                    # coarse frequency grid: 1/(ZERO_PAD window length) per cycle
 BH = (0.35875, 0.48829, 0.14128, 0.01168)   # 4-term Blackman-Harris window (sidelobes < -92 dB)
@@ -61,6 +62,8 @@ Q_CAND_T = 8
 Q_CAND_PHI = 9
 Q_CAND_TH = 10
 Q_LO = 11          # lowest Phi since the last counted maximum
+Q_AMP = 12         # amplitude of Phi's swing: rise of the last counted maximum
+Q_CAND_RISE = 13   # rise of the candidate above Q_LO
 FQ_LEVEL0 = 3      # first row of the level windows
 # head of a level window row
 LW_STATE = 0       # 0 not crossed, 1 crossed (waiting for a lattice point after it), 2 collecting, 3 done
@@ -88,6 +91,7 @@ def freq_start(theta0, phi0, fq):
         fq[1 + r, RING] = phi0
         fq[0, Q_CNT + r] = 1.0
     fq[0, Q_LO] = phi0
+    fq[0, Q_AMP] = abs(phi0)
 
 
 @njit(cache=True)
@@ -327,27 +331,29 @@ def ringing_ratio(v, i0, i1, S):
 
 @njit(cache=True)
 def peak_candidate(tpk, pvk, thk, fq):
-    """A located maximum of Phi: it becomes the candidate if it rose PEAK_HYSTERESIS |Phi| above
-    the lowest value since the last counted maximum, or replaces a lower candidate."""
+    """A located maximum of Phi: it becomes the candidate if it rose PEAK_HYSTERESIS A above the
+    lowest Phi since the last counted maximum, or replaces a lower candidate."""
+    rise = pvk - fq[0, Q_LO]
     if fq[0, Q_CAND] > 0.0:
-        if pvk > fq[0, Q_CAND_PHI]:
-            fq[0, Q_CAND_T] = tpk
-            fq[0, Q_CAND_PHI] = pvk
-            fq[0, Q_CAND_TH] = thk
-    elif pvk - fq[0, Q_LO] >= PEAK_HYSTERESIS * abs(pvk):
-        fq[0, Q_CAND] = 1.0
-        fq[0, Q_CAND_T] = tpk
-        fq[0, Q_CAND_PHI] = pvk
-        fq[0, Q_CAND_TH] = thk
+        if pvk <= fq[0, Q_CAND_PHI]:
+            return
+    elif not rise >= PEAK_HYSTERESIS * fq[0, Q_AMP]:
+        return
+    fq[0, Q_CAND] = 1.0
+    fq[0, Q_CAND_T] = tpk
+    fq[0, Q_CAND_PHI] = pvk
+    fq[0, Q_CAND_TH] = thk
+    fq[0, Q_CAND_RISE] = rise
 
 
 @njit(cache=True)
 def peak_confirmed(phi_c, fq):
-    """Phi at a step end: True if it confirms the candidate maximum (a fall of PEAK_HYSTERESIS
-    |Phi| below it); otherwise it lowers the running minimum."""
+    """Phi at a step end: True if it confirms the candidate maximum (a fall of PEAK_HYSTERESIS A
+    below it; its rise becomes A); otherwise it lowers the running minimum."""
     if fq[0, Q_CAND] > 0.0:
-        if fq[0, Q_CAND_PHI] - phi_c >= PEAK_HYSTERESIS * abs(fq[0, Q_CAND_PHI]):
+        if fq[0, Q_CAND_PHI] - phi_c >= PEAK_HYSTERESIS * fq[0, Q_AMP]:
             fq[0, Q_CAND] = 0.0
+            fq[0, Q_AMP] = fq[0, Q_CAND_RISE]
             fq[0, Q_LO] = phi_c
             return True
         return False
