@@ -55,12 +55,13 @@ def nutation_hz(beta, scene):
 @pytest.mark.parametrize("beta, thickness", [(0.1, 0.0128), (0.01, 0.0128), (0.1, 0.03)])
 def test_steady_rolling_precession_and_ringing_match_analytic(beta, thickness):
     """A steady rolling disk (finite thickness) nudged in omega_1 by 1e-6/chi and drained by a tiny
-    k2 so that it crosses the level: precession and ringing equal the analytic values to 1e-6."""
+    k2 so that it crosses the level: precession and ringing equal the analytic values to 1e-6.
+    (The drain shifts the quasi-steady precession by ~200 k2/R relative: k2/R = 1e-10.)"""
     sc0 = load_scene(make_scene(disk__thickness=thickness))
     chi, h = sc0.chi, sc0.params[model.P_H]
-    b0 = beta * (1 + 2e-4)
+    b0 = beta * (1 + 2e-7)
     w3 = -math.sqrt(model.steady_rolling_w3sq(b0, sc0.params))
-    cfg = make_scene(**ROLL_ONLY, disk__thickness=thickness, contact__k2=1e-7 * sc0.config["disk"]["radius"],
+    cfg = make_scene(**ROLL_ONLY, disk__thickness=thickness, contact__k2=1e-10 * sc0.config["disk"]["radius"],
                      initial__alpha=math.pi / 2 - b0, initial__omega=[1e-6 / chi, h * w3 / chi, w3 / chi],
                      stop__levels=[beta], stop__t_max=1e4 * chi)
     s = sweep.simulate(cfg).summary
@@ -83,18 +84,21 @@ SLIP_SCENES = [dict(mu_d=0.3023712257849475, k3=0.0, alpha0=1.2699491501272135, 
 
 
 def _whole_cycle_mean(t, theta, tl, cycles):
-    """Mean dtheta/dt / 2 pi over theta(tl) -+ 2 pi cycles, from the trajectory by linear
-    interpolation (first reach), or NaN where the trajectory does not cover it."""
+    """Mean dtheta/dt / 2 pi over the lattice points theta(0) + j 2 pi/16 reached first at J -+ 16
+    cycles, J the last one reached at or before tl, from the trajectory (step-end states, linear
+    interpolation), or NaN where the trajectory does not cover it."""
+    S = fr.SAMPLES_PER_CYCLE
     sgn = math.copysign(1.0, theta[-1] - theta[0])
-    u = sgn * theta
-    env = np.maximum.accumulate(u)                     # first-reach envelope
-    ul = np.interp(tl, t, env)
-    lo, hi = ul - 2 * math.pi * cycles, ul + 2 * math.pi * cycles
-    if hi > env[-1] or lo < env[0]:
+    env = np.maximum.accumulate(sgn * (theta - theta[0])) * S / (2 * math.pi)   # first reach, in lattice units
+    J = math.floor(np.interp(tl, t, env))
+    lo, hi = J - S * cycles, J + S * cycles
+    if hi > env[-1] or lo < 0:
         return math.nan
-    ta = np.interp(lo, env, t)
-    tb = np.interp(hi, env, t)
-    return 2 * cycles / (tb - ta) / 2
+    # the envelope is flat where theta turns back: the first time it reaches a value
+    i_lo, i_hi = np.searchsorted(env, [lo, hi])
+    ta = np.interp(lo, env[i_lo - 1:i_lo + 1], t[i_lo - 1:i_lo + 1])
+    tb = np.interp(hi, env[i_hi - 1:i_hi + 1], t[i_hi - 1:i_hi + 1])
+    return 2 * cycles / (tb - ta)
 
 
 @pytest.mark.parametrize("k", range(len(SLIP_SCENES)))
@@ -125,17 +129,18 @@ def test_slip_heavy_scenes_have_robust_frequencies(k):
 
 
 def test_ringing_ratio_of_a_sampled_tone():
-    """The spectral kernel on samples uniform in theta (16 per cycle, 8 cycles): the tone's
-    frequency to 1e-9 with a trend and a weaker harmonic; NaN without an oscillation."""
+    """The spectral kernel on samples uniform in theta (16 per cycle, 8 cycles): a tone on a
+    straight line to 1e-8 (a weighted least-squares fit: no leakage), 1e-5 with a harmonic of 30 %
+    of it beside; NaN without an oscillation."""
     S = fr.SAMPLES_PER_CYCLE
     n = 8 * S + 1
     k = np.arange(n)
     nu0 = 0.8376
-    for extra in (0.0, 0.3):
+    for extra, tol in ((0.0, 1e-8), (0.3, 1e-5)):
         v = 1.3 + 2e-3 * k + 0.2 * np.cos(2 * math.pi * nu0 * k / S + 0.4) \
             + extra * 0.2 * np.cos(2 * math.pi * 2 * nu0 * k / S + 1.0)
         got = fr.ringing_ratio(v.copy(), 0, n - 1, S)
-        assert abs(got - nu0) < 1e-9, (extra, got)
+        assert abs(got / nu0 - 1) < tol, (extra, got)
     flat = 1.3 + 2e-3 * k + 1e-12 * np.cos(2 * math.pi * nu0 * k / S)
     assert math.isnan(fr.ringing_ratio(flat, 0, n - 1, S))
 

@@ -14,10 +14,11 @@ each side, or as many as the scene has before and after the level (the same on b
 which cannot collapse: theta has to turn 2m full times inside the window whatever Phi does.
 
 Ringing ratio: the dominant frequency of Phi over the same window, in cycles of Phi per
-precession cycle: the Phi samples are uniform in theta (S per cycle); after removing their
-least-squares line and applying a 4-term Blackman-Harris window, nu maximises
-|sum_k v_k exp(-2 pi i nu k/S)| over nu in [2/(2m), S/2] (a 4x zero-padded grid, refined by golden
-section). The ringing frequency is nu times the precession frequency (simulate.py).
+precession cycle: the Phi samples are uniform in theta (S per cycle); nu is the frequency of the
+sinusoid that, with a straight line, fits them best in least squares weighted by a 4-term
+Blackman-Harris window (a periodogram without the leakage of the negative frequency: exact for a
+tone on a line), searched over nu in [2/(2m), S/2] on a grid of 1/(4 * 2m) and refined by golden
+section. The ringing frequency is nu times the precession frequency (simulate.py).
 
 Normal-force maxima (f_hat = 2/T over three consecutive counted maxima, tracking.py): a located
 maximum of Phi counts only with hysteresis H = PEAK_HYSTERESIS A, A the amplitude of Phi's swing
@@ -246,46 +247,87 @@ def finish_levels(fq, level_out):
 
 
 @njit(cache=True)
-def _power(v, i0, i1, S, nu):
-    """|sum_k v[i0 + k] exp(-2 pi i nu k / S)|^2 by a rotating phasor."""
+def _tone_fit(v, i0, i1, S, nu, e2s):
+    """Weighted least squares of the detrended samples v[i0..i1] (already weighted-orthogonal to
+    1 and k, weights: Blackman-Harris) on cos and sin of 2 pi nu k/S, with those two also
+    projected off 1 and k. Returns (explained weighted sum of squares, amplitude). e2s: 1/sqrt of
+    the weighted sum of (k - kbar)^2; the weights sum to 1 (normalised here)."""
+    N = i1 - i0 + 1
     c = math.cos(2.0 * math.pi * nu / S)
-    s = -math.sin(2.0 * math.pi * nu / S)
+    s = math.sin(2.0 * math.pi * nu / S)
     zr = 1.0
     zi = 0.0
-    ar = 0.0
-    ai = 0.0
-    for i in range(i0, i1 + 1):
-        ar += v[i] * zr
-        ai += v[i] * zi
+    km = 0.5 * (N - 1)
+    wsum = 0.0
+    scc = 0.0
+    sss = 0.0
+    scs = 0.0
+    sc1 = 0.0
+    ss1 = 0.0
+    sc2 = 0.0
+    ss2 = 0.0
+    pc = 0.0
+    ps = 0.0
+    for k in range(N):
+        w = _bh(k, N)
+        wsum += w
+        e2 = (k - km) * e2s
+        scc += w * zr * zr
+        sss += w * zi * zi
+        scs += w * zr * zi
+        sc1 += w * zr
+        ss1 += w * zi
+        sc2 += w * zr * e2
+        ss2 += w * zi * e2
+        pc += w * v[i0 + k] * zr
+        ps += w * v[i0 + k] * zi
         zr, zi = zr * c - zi * s, zr * s + zi * c
-    return ar * ar + ai * ai
+    # Gram matrix of cos, sin after removing their projections on 1 and k (orthonormal:
+    # 1/sqrt(wsum) and e2 scaled so that sum w e2^2 = 1, by the symmetric weights about km)
+    g11 = scc - sc1 * sc1 / wsum - sc2 * sc2
+    g22 = sss - ss1 * ss1 / wsum - ss2 * ss2
+    g12 = scs - sc1 * ss1 / wsum - sc2 * ss2
+    det = g11 * g22 - g12 * g12
+    if not det > 1e-14 * (g11 * g22):
+        return 0.0, 0.0
+    a = (g22 * pc - g12 * ps) / det
+    b = (g11 * ps - g12 * pc) / det
+    return a * pc + b * ps, math.sqrt(a * a + b * b)
+
+
+@njit(cache=True)
+def _bh(k, N):
+    """4-term Blackman-Harris window at sample k of N."""
+    x = 2.0 * math.pi * k / (N - 1)
+    return BH[0] - BH[1] * math.cos(x) + BH[2] * math.cos(2.0 * x) - BH[3] * math.cos(3.0 * x)
 
 
 @njit(cache=True)
 def ringing_ratio(v, i0, i1, S):
-    """Dominant frequency of the samples v[i0..i1] (uniform, S per cycle) in cycles per cycle;
-    NaN where their oscillation is below RINGING_MIN_AMPLITUDE of their mean. Overwrites
-    v[i0..i1] with the detrended, windowed samples."""
+    """Dominant frequency of the samples v[i0..i1] (uniform, S per cycle) in cycles per cycle: the
+    frequency of the sinusoid that, with a straight line, fits them best by least squares weighted
+    with a Blackman-Harris window (exact for a tone on a line: no leakage of its negative
+    frequency). NaN where its amplitude is below RINGING_MIN_AMPLITUDE of the samples' mean.
+    Overwrites v[i0..i1] with the samples less their weighted straight line."""
     N = i1 - i0 + 1
-    if N < 3:
+    if N < 5:
         return math.nan
-    # least-squares line over k = 0 .. N-1
     km = 0.5 * (N - 1)
-    sv = 0.0
-    skv = 0.0
-    skk = 0.0
+    sw = 0.0
+    swv = 0.0
+    swkk = 0.0
+    swkv = 0.0
     for k in range(N):
-        sv += v[i0 + k]
-        skv += (k - km) * v[i0 + k]
-        skk += (k - km) * (k - km)
-    mean = sv / N
-    slope = skv / skk
-    wsum = 0.0
+        w = _bh(k, N)
+        sw += w
+        swv += w * v[i0 + k]
+        swkk += w * (k - km) * (k - km)
+        swkv += w * (k - km) * v[i0 + k]
+    mean = swv / sw
+    slope = swkv / swkk
     for k in range(N):
-        x = 2.0 * math.pi * k / (N - 1)
-        w = BH[0] - BH[1] * math.cos(x) + BH[2] * math.cos(2.0 * x) - BH[3] * math.cos(3.0 * x)
-        wsum += w
-        v[i0 + k] = w * (v[i0 + k] - mean - slope * (k - km))
+        v[i0 + k] = v[i0 + k] - mean - slope * (k - km)
+    e2s = 1.0 / math.sqrt(swkk)
     cycles = (N - 1) / S
     nu_lo = LOWEST_BIN / cycles
     nu_hi = 0.5 * S
@@ -294,7 +336,7 @@ def ringing_ratio(v, i0, i1, S):
     nu_best = nu_lo
     nu = nu_lo
     while nu <= nu_hi:
-        pw = _power(v, i0, i1, S, nu)
+        pw, _ = _tone_fit(v, i0, i1, S, nu, e2s)
         if pw > best:
             best = pw
             nu_best = nu
@@ -305,8 +347,8 @@ def ringing_ratio(v, i0, i1, S):
     b = min(nu_best + dnu, nu_hi)
     x1 = a + g * (b - a)
     x2 = b - g * (b - a)
-    f1 = _power(v, i0, i1, S, x1)
-    f2 = _power(v, i0, i1, S, x2)
+    f1, _ = _tone_fit(v, i0, i1, S, x1, e2s)
+    f2, _ = _tone_fit(v, i0, i1, S, x2, e2s)
     for _ in range(100):
         if b - a <= 1e-13 * b:
             break
@@ -315,15 +357,15 @@ def ringing_ratio(v, i0, i1, S):
             x2 = x1
             f2 = f1
             x1 = a + g * (b - a)
-            f1 = _power(v, i0, i1, S, x1)
+            f1, _ = _tone_fit(v, i0, i1, S, x1, e2s)
         else:
             a = x1
             x1 = x2
             f1 = f2
             x2 = b - g * (b - a)
-            f2 = _power(v, i0, i1, S, x2)
+            f2, _ = _tone_fit(v, i0, i1, S, x2, e2s)
     nu_star = 0.5 * (a + b)
-    amp = 2.0 * math.sqrt(max(f1, f2, best)) / wsum
+    _, amp = _tone_fit(v, i0, i1, S, nu_star, e2s)
     if not amp > RINGING_MIN_AMPLITUDE * abs(mean):
         return math.nan
     return nu_star
