@@ -382,8 +382,9 @@ def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
     grows it 4x and reruns (the run is deterministic). peak_cap covers ~1.6e4 nutation periods, far
     more than a scene to its halt has, so the rerun is for pathological scenes only. Returns a KernelOutput of arrays:
     istats, fstats (layout.I_*, F_*), levels (n_levels x layout.LEVEL_COLS: tau, alpha, mean
-    dtheta/dtau over whole precession cycles, f_hat, ringing ratio, cycles in the window), samples (layout.SAMPLE_COLS), trajectory (layout.TRAJ_COLS), peaks (tau, Phi, theta),
-    y_end (N_FULL)."""
+    dtheta/dtau over whole precession cycles, f_hat, ringing ratio, cycles in the window), samples
+    (layout.SAMPLE_COLS), trajectory (layout.TRAJ_COLS), peaks (tau, Phi, theta: the counted
+    maxima), y_end (N_FULL)."""
     while True:
         istats = np.zeros(N_ISTATS, np.int64)
         fstats = np.zeros(N_FSTATS)
