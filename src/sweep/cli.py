@@ -78,7 +78,8 @@ def _print_human(s: dict) -> None:
     print(f"t_halt           {s['t_halt']:.6f} s  +- {s['t_halt_error']:.3g} s  (finite: {s['halt_finite']})")
     print(f"ramp exponent    {s['ramp_exponent']:.4f} +- {s['ramp_exponent_error']:.2g}   "
           f"approach exponent {s['approach_exponent']:.4f}")
-    print("levels           inclination (rad)   t (s)          precession (Hz)   ringing (Hz)      normal force f_hat (Hz)")
+    print("levels           inclination (rad)   t (s)          precession (Hz)   ringing (Hz)      "
+          "normal force f_hat (Hz)")
     for lv in s["levels"]:
         print(f"                 {lv['inclination']:<18.3g} {lv['t']:<14.6f} {lv['precession_hz']:<17.6g} "
               f"{lv['ringing_hz']:<17.6g} {lv['normal_force_hz']:.6g}")
