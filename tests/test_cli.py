@@ -10,7 +10,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "config" / "scenes" / "kessler2002.yaml"
-SUMMARY_KEYS = {"outcome", "t_end", "t_halt", "t_halt_error", "ramp_exponent", "levels", "slip_fraction",
+SUMMARY_KEYS = {"outcome", "t_end", "t_halt", "t_halt_error", "ramp_exponent", "ramp_exponent_error", "levels", "slip_fraction",
                 "n_transitions", "n_stick", "energy_initial", "energy_final", "dissipation", "n_steps", "n_rhs"}
 
 
@@ -34,7 +34,8 @@ def test_json_output_and_samples_match_the_api(tmp_path):
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert SUMMARY_KEYS <= set(out)
-    assert set(out["levels"][0]) == {"inclination", "t", "precession_hz", "normal_force_hz"}
+    assert set(out["levels"][0]) == {"inclination", "t", "precession_hz", "ringing_hz", "ringing_ratio",
+                                     "normal_force_hz"}
     assert set(out["dissipation"]) == {"sliding", "k1", "k2", "k3", "impact"}
     s = out["samples"]
     assert s["t"] == [0.0, 0.5, 1.25]

@@ -79,7 +79,7 @@ def _finite_tree(x, path=""):
 
 
 # fit diagnostics that are NaN by definition when fewer than three levels were reached
-FIT_KEYS = {"t_halt", "t_halt_error", "approach_exponent", "ramp_exponent"}
+FIT_KEYS = {"t_halt", "t_halt_error", "approach_exponent", "ramp_exponent", "ramp_exponent_error"}
 
 
 @pytest.fixture(scope="module", autouse=True)

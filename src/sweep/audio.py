@@ -139,8 +139,9 @@ def write_wav(path, ring: Ringing) -> Path:
 # --- frequencies of the simulation, for the spectrogram overlay -------------------------------
 
 def normal_force_frequency_track(peaks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(t, f) of the paper's normal-force frequency f = 2/T, T spanning three consecutive located
-    maxima of N (result.peaks, times in s), placed at the middle maximum."""
+    """(t, f) of the paper's normal-force frequency f = 2/T, T spanning three consecutive counted
+    maxima of N (result.peaks, times in s: located maxima past the 1 % hysteresis, docs/model.md),
+    placed at the middle maximum."""
     tp = np.asarray(peaks)[:, 0] if peaks is not None and len(peaks) else np.zeros(0)
     if len(tp) < 3:
         return np.zeros(0), np.zeros(0)

@@ -76,10 +76,13 @@ def write_trajectory(result, path) -> None:
 def _print_human(s: dict) -> None:
     print(f"outcome          {s['outcome']}  (t_end = {s['t_end']:.6f} s)")
     print(f"t_halt           {s['t_halt']:.6f} s  +- {s['t_halt_error']:.3g} s  (finite: {s['halt_finite']})")
-    print(f"ramp exponent    {s['ramp_exponent']:.4f}   approach exponent {s['approach_exponent']:.4f}")
-    print("levels           inclination (rad)   t (s)          precession (Hz)   normal force (Hz)")
+    print(f"ramp exponent    {s['ramp_exponent']:.4f} +- {s['ramp_exponent_error']:.2g}   "
+          f"approach exponent {s['approach_exponent']:.4f}")
+    print("levels           inclination (rad)   t (s)          precession (Hz)   ringing (Hz)      "
+          "normal force f_hat (Hz)")
     for lv in s["levels"]:
-        print(f"                 {lv['inclination']:<18.3g} {lv['t']:<14.6f} {lv['precession_hz']:<17.6g} {lv['normal_force_hz']:.6g}")
+        print(f"                 {lv['inclination']:<18.3g} {lv['t']:<14.6f} {lv['precession_hz']:<17.6g} "
+              f"{lv['ringing_hz']:<17.6g} {lv['normal_force_hz']:.6g}")
     print(f"max normal-force frequency {s['normal_force_hz_max']:.6g} Hz")
     print(f"slip fraction    {s['slip_fraction']:.4f}   transitions {s['n_transitions']}   stick episodes {s['n_stick']}   impacts {s['n_impacts']}")
     print(f"energy           {s['energy_initial']:.6g} J -> {s['energy_final']:.6g} J")

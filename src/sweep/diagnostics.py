@@ -18,14 +18,16 @@ true miss in 8 of 26 scenes (up to 9.6x) and far above it in others (that triple
 quantity: t_halt_numerical_error (outputs.error_estimate).
 
 Ramp exponent n of the precession frequency, Omega ~ (t_halt - t)^(-n): least squares of
-ln Omega_i against ln(t_halt - t_i) over the reached levels.
+ln Omega_i against ln(t_halt - t_i) over the reached levels with a precession frequency (the mean
+over whole precession cycles, docs/model.md); its error is the standard error of the slope (NaN
+with only two levels).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .core.ensemble import (D_APPROACH, D_HALT_FINITE, D_THALT, D_THALT_ERR, N_DERIVED, halt_fit, halt_from_three,
-                            ramp_fit)
+from .core.ensemble import (D_APPROACH, D_HALT_FINITE, D_THALT, D_THALT_ERR, N_DERIVED, halt_fit, halt_from_three)
+from .core.ensemble import ramp_fit as _ramp_fit
 
 
 def _halt_from_three(t: np.ndarray, b: np.ndarray) -> tuple[float, float]:
@@ -50,7 +52,14 @@ def halt_time(level_t: np.ndarray, levels: np.ndarray) -> dict:
 
 
 def ramp_exponent(level_t: np.ndarray, precession: np.ndarray, t_halt: float) -> float:
-    """n in Omega ~ (t_halt - t)^(-n), least squares over levels with finite values; NaN if < 2
-    (the numba kernel `core.ensemble.ramp_fit`)."""
+    """n in Omega ~ (t_halt - t)^(-n), least squares over levels with finite values; NaN if < 2."""
+    return ramp_fit(level_t, precession, t_halt)[0]
+
+
+def ramp_fit(level_t: np.ndarray, precession: np.ndarray, t_halt: float) -> tuple[float, float]:
+    """(n, standard error of n): n in Omega ~ (t_halt - t)^(-n) by least squares of ln Omega
+    against ln(t_halt - t) over the levels with finite values; NaN if fewer than 2 (error: 3).
+    The numba kernel `core.ensemble.ramp_fit`, which the batch path runs on its device."""
     lt = np.ascontiguousarray(level_t, dtype=float)
-    return float(ramp_fit(lt, np.ascontiguousarray(precession, dtype=float), lt.shape[0], float(t_halt)))
+    n, err = _ramp_fit(lt, np.ascontiguousarray(precession, dtype=float), lt.shape[0], float(t_halt))
+    return float(n), float(err)

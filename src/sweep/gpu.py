@@ -21,6 +21,7 @@ import numpy as np
 from numba import float64, int64
 
 from .core.dop853 import N_DENSE
+from .core.frequency import FQ_COLS, FQ_LEVEL0
 from .core.ensemble import (MAX_LEVELS, N_DERIVED, N_SCRATCH, PEAK_RING, load_inputs, solve_scene,
                             store_outputs)
 from .core.layout import (LEVEL_COLS, N_CS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK, N_WCOLS, N_WORK,
@@ -35,6 +36,7 @@ THREADS_PER_BLOCK = 64
 # local-array shapes must be literal constants to numba-cuda (an expression in the kernel is not folded)
 F_ROWS = 2 * N_DENSE
 LEV_COLS = LEVEL_COLS + 1
+FQ_ROWS = FQ_LEVEL0 + MAX_LEVELS
 
 
 class CudaUnavailableError(RuntimeError):
@@ -116,6 +118,7 @@ def _build_kernel(cuda_module):
         traj = cuda.local.array((1, TRAJ_COLS), float64)
         peaks = cuda.local.array((PEAK_RING, PEAK_COLS), float64)
         y_end = cuda.local.array(N_FULL, float64)
+        fq = cuda.local.array((FQ_ROWS, FQ_COLS), float64)
         scratch = cuda.local.array((N_SCRATCH, MAX_LEVELS), float64)
         istats = cuda.local.array(N_ISTATS, int64)
         fstats = cuda.local.array(N_FSTATS, float64)
@@ -129,7 +132,7 @@ def _build_kernel(cuda_module):
             _load(i, Y0, P, S, LE, LV, y0, p0, s, le, lv)
             nl = NL[i]
             solve_scene(y0, p0, s, le[:nl], lv[:nl], CHI[i], y, p, cs, wk, K, F, trk, lev[:nl], samples[:0],
-                        traj[:0], peaks, y_end, scratch, istats, fstats, derived)
+                        traj[:0], peaks, y_end, fq, scratch, istats, fstats, derived)
             _store(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER)
 
     return batch_kernel

@@ -65,14 +65,22 @@ VARIABLES: tuple[Var, ...] = (
     Var("halt_finite", "bool", "1", "whether the halt time was found finite", lambda s: s["halt_finite"]),
     Var("approach_exponent", "float", "1", "fitted exponent p of the final approach, inclination ~ (t_halt - t)^p",
         lambda s: s.get("approach_exponent", math.nan)),
-    Var("ramp_exponent", "float", "1", "fitted exponent n of the precession ramp, Omega ~ (t_halt - t)^(-n)",
-        lambda s: s["ramp_exponent"]),
+    Var("ramp_exponent", "float", "1", "fitted exponent n of the precession ramp, Omega ~ (t_halt - t)^(-n), "
+        "from the precession frequencies over whole cycles", lambda s: s["ramp_exponent"]),
+    Var("ramp_exponent_error", "float", "1", "standard error of the fitted ramp exponent (least-squares slope)",
+        lambda s: s["ramp_exponent_error"]),
     Var("t_level", "float", "s", "time at which the inclination first reaches the level",
         lambda lv: lv["t"], per_level=True, numerical_error=True),
-    Var("precession_hz", "float", "Hz", "mean precession frequency over the three normal-force maxima before the level", lambda lv: lv["precession_hz"],
+    Var("precession_hz", "float", "Hz", "precession frequency at the level: mean dtheta/dt / 2 pi over 8 whole "
+        "precession cycles around the level time", lambda lv: lv["precession_hz"], per_level=True,
+        numerical_error=True),
+    Var("ringing_hz", "float", "Hz", "ringing frequency at the level: dominant frequency of the normal force over "
+        "the same whole precession cycles", lambda lv: lv["ringing_hz"], per_level=True, numerical_error=True),
+    Var("ringing_ratio", "float", "1", "ringing frequency / precession frequency at the level (normal-force "
+        "oscillations per precession cycle)", lambda lv: lv["ringing_ratio"], per_level=True),
+    Var("normal_force_hz", "float", "Hz", "paper's normal-force frequency f_hat = 2/T, T spanning the three "
+        "counted normal-force maxima before the level (1 % hysteresis)", lambda lv: lv["normal_force_hz"],
         per_level=True, numerical_error=True),
-    Var("normal_force_hz", "float", "Hz", "normal-force oscillation frequency at the level",
-        lambda lv: lv["normal_force_hz"], per_level=True, numerical_error=True),
     Var("slip_fraction", "float", "1", "fraction of the simulated time spent slipping",
         lambda s: s["slip_fraction"]),
     Var("n_transitions", "int", "1", "number of roll/slip transitions", lambda s: s["n_transitions"]),
@@ -166,8 +174,9 @@ def error_summary(n_levels: int, outcome_code: int = outcomes.NUMERICAL_ERROR, w
     return {
         "outcome": outcomes.NAMES[outcome_code], "outcome_code": outcome_code,
         "t_end": nan, "t_halt": nan, "t_halt_error": nan, "halt_finite": False, "approach_exponent": nan,
-        "ramp_exponent": nan,
-        "levels": [{"inclination": nan, "t": nan, "precession_hz": nan, "normal_force_hz": nan}
+        "ramp_exponent": nan, "ramp_exponent_error": nan,
+        "levels": [{"inclination": nan, "t": nan, "precession_hz": nan, "ringing_hz": nan, "ringing_ratio": nan,
+                    "normal_force_hz": nan}
                    for _ in range(n_levels)],
         "slip_fraction": nan, "n_transitions": None, "n_stick": None, "n_impacts": None,
         "energy_initial": nan, "energy_final": nan,

@@ -9,7 +9,7 @@ import numpy as np
 
 from . import outcomes
 from .core import model
-from .core.ensemble import D_APPROACH, D_HALT_FINITE, D_RAMP, D_THALT, D_THALT_ERR, N_DERIVED, summary_fits
+from .core.ensemble import D_APPROACH, D_HALT_FINITE, D_RAMP, D_RAMP_ERR, D_THALT, D_THALT_ERR, N_DERIVED, summary_fits
 from .core.integrate import integrate
 from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_FLAT, I_IMPACTS,
                           I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
@@ -18,8 +18,8 @@ from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND,
 from .errors import ConfigError
 from .scene import Scene, load_scene
 
-# After the smallest level, the normal-force frequency of that level needs the next peak of Phi;
-# a peak comes every nutation period (~10-40 steps), so 5000 extra steps only bound a pathology.
+# After the smallest level, its frequencies need HALF_CYCLES (4) more precession cycles and the
+# next counted peak of Phi (~10-40 steps per cycle), so 5000 extra steps only bound a pathology.
 EXTRA_STEPS_FOR_PEAKS = 5000
 
 
@@ -102,13 +102,18 @@ def _finite_or_nan(x: float) -> float:
 def summary_from(sc: Scene, istats: np.ndarray, fstats: np.ndarray, lev: np.ndarray, y_end: np.ndarray,
                  wall: float, fits: np.ndarray | None = None) -> dict:
     """The JSON-able summary (SI) of a scene from the kernel's outputs: istats, fstats, lev (levels x
-    [tau, alpha, dtheta/dtau, f_hat]), y_end. fits: the scene's `core.ensemble.summary_fits` (D_*),
+    layout.LEVEL_COLS: tau, alpha, mean dtheta/dtau, f_hat, ringing ratio, window cycles), y_end. fits: the scene's `core.ensemble.summary_fits` (D_*),
     computed here unless the caller has them (the batch path computes them per scene on its device)."""
     chi = sc.chi
     escale = sc.energy_scale
     levels = sc.levels
     level_t = lev[:, 0] * chi
-    prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)   # a frequency: magnitude of dtheta/dt / 2 pi
+    # frequencies (docs/model.md, 'Frequencies at the levels'): magnitude of the mean dtheta/dt over
+    # whole precession cycles around the level / 2 pi; Phi's dominant frequency over the same
+    # window (ringing ratio x precession); the paper's f_hat = 2/T over three counted Phi maxima
+    prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)
+    ratio = lev[:, 4]
+    ring_hz = ratio * prec_hz
     nf_hz = lev[:, 3] / chi
     code = int(istats[I_OUTCOME])
     lay_flat = bool(istats[I_FLAT])
@@ -128,10 +133,12 @@ def summary_from(sc: Scene, istats: np.ndarray, fstats: np.ndarray, lev: np.ndar
         "lay_flat": lay_flat,
         "halt_finite": bool(fits[D_HALT_FINITE]),
         "approach_exponent": _finite_or_nan(fits[D_APPROACH]),
-        "ramp_exponent": float(fits[D_RAMP]),
+        "ramp_exponent": _finite_or_nan(fits[D_RAMP]),
+        "ramp_exponent_error": _finite_or_nan(fits[D_RAMP_ERR]),
         "levels": [
             {"inclination": float(b), "t": _finite_or_nan(level_t[i]),
-             "precession_hz": _finite_or_nan(prec_hz[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
+             "precession_hz": _finite_or_nan(prec_hz[i]), "ringing_hz": _finite_or_nan(ring_hz[i]),
+             "ringing_ratio": _finite_or_nan(ratio[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
             for i, b in enumerate(levels)
         ],
         "normal_force_hz_max": float(fstats[F_NFMAX]) / chi if fstats[F_NFMAX] > 0.0 else math.nan,

@@ -22,6 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .frequency import FQ_COLS, FQ_LEVEL0
 from .integrate import run
 from .layout import (F_TEND, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
                      N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS)
@@ -36,8 +37,8 @@ MAX_LEVELS = 16
 PEAK_RING = 16
 
 # --- the summary's fitted numbers (SI: s) ------------------------------------------------------
-D_THALT, D_THALT_ERR, D_HALT_FINITE, D_APPROACH, D_RAMP = range(5)
-N_DERIVED = 5
+D_THALT, D_THALT_ERR, D_HALT_FINITE, D_APPROACH, D_RAMP, D_RAMP_ERR = range(6)
+N_DERIVED = 6
 # rows of the per-scene scratch: level times (s), precession frequencies (Hz)
 R_LEVEL_T, R_PREC_HZ = 0, 1
 N_SCRATCH = 2
@@ -107,10 +108,11 @@ def halt_fit(level_t, levels, nl, out):
 
 @njit(cache=True)
 def ramp_fit(level_t, precession, nl, t_halt):
-    """n in Omega ~ (t_halt - t)^(-n): least squares of ln|Omega| on ln(t_halt - t) over the levels
-    with finite values before t_halt; NaN if fewer than two."""
+    """(n, standard error of n), n in Omega ~ (t_halt - t)^(-n): least squares of ln|Omega| on
+    ln(t_halt - t) over the levels with finite values before t_halt; NaN if fewer than two (the
+    error: fewer than three)."""
     if not math.isfinite(t_halt):
-        return math.nan
+        return math.nan, math.nan
     m = 0
     sx = 0.0
     sy = 0.0
@@ -121,7 +123,7 @@ def ramp_fit(level_t, precession, nl, t_halt):
             sx += math.log(t_halt - level_t[i])
             sy += math.log(om)
     if m < 2:
-        return math.nan
+        return math.nan, math.nan
     mx = sx / m
     my = sy / m
     sxx = 0.0
@@ -132,9 +134,18 @@ def ramp_fit(level_t, precession, nl, t_halt):
             dx = math.log(t_halt - level_t[i]) - mx
             sxx += dx * dx
             sxy += dx * (math.log(om) - my)
-    if sxx == 0.0:
-        return math.nan
-    return -sxy / sxx
+    if not sxx > 0.0:
+        return math.nan, math.nan
+    slope = sxy / sxx
+    if m < 3:
+        return -slope, math.nan
+    ssr = 0.0
+    for i in range(nl):
+        om = abs(precession[i])
+        if math.isfinite(level_t[i]) and math.isfinite(om) and om > 0.0 and level_t[i] < t_halt:
+            r = math.log(om) - my - slope * (math.log(t_halt - level_t[i]) - mx)
+            ssr += r * r
+    return -slope, math.sqrt(ssr / (m - 2) / sxx)
 
 
 @njit(cache=True)
@@ -148,17 +159,18 @@ def summary_fits(level_t, prec_hz, levels, nl, lay_flat, t_end_tau, chi, out):
         out[D_APPROACH] = math.nan
     else:
         halt_fit(level_t, levels, nl, out)
-    out[D_RAMP] = ramp_fit(level_t, prec_hz, nl, out[D_THALT])
+    out[D_RAMP], out[D_RAMP_ERR] = ramp_fit(level_t, prec_hz, nl, out[D_THALT])
 
 
 # --- one scene on fixed buffers -----------------------------------------------------------------
 @njit(cache=True)
 def solve_scene(y0, p0, settings, level_e, levels, chi, y, p, cs, wk, K, F, trk, lev, samples, traj, peaks,
-                y_end, scratch, istats, fstats, derived):
+                y_end, fq, scratch, istats, fstats, derived):
     """Integrate one scene (inputs y0, p0, settings, level_e, levels: nl = level_e.shape[0]) on the
     given buffers, as integrate.integrate does without samples or trajectory, then its fits.
 
-    lev (nl x LEVEL_COLS + 1) receives the levels (tau, alpha, dtheta/dtau, f_hat, pending);
+    lev (nl x LEVEL_COLS + 1) receives the levels (layout.LEVEL_COLS, then pending), fq the
+    frequency windows (core.frequency);
     istats, fstats, y_end, derived (D_*) the rest. Every buffer is reset here."""
     nl = level_e.shape[0]
     for i in range(N_FULL):
@@ -180,6 +192,9 @@ def solve_scene(y0, p0, settings, level_e, levels, chi, y, p, cs, wk, K, F, trk,
     for r in range(peaks.shape[0]):
         for c in range(peaks.shape[1]):
             peaks[r, c] = 0.0
+    for r in range(FQ_LEVEL0 + nl):
+        for c in range(FQ_COLS):
+            fq[r, c] = 0.0
     for i in range(N_TRACK):
         trk[i] = 0.0
     trk[T_PEAK_RING] = 1.0
@@ -192,7 +207,7 @@ def solve_scene(y0, p0, settings, level_e, levels, chi, y, p, cs, wk, K, F, trk,
             lev[L, c] = math.nan
         lev[L, LEVEL_COLS] = 0.0
     run(y, p, settings, level_e, scratch[0, :0], cs, wk, K, F, trk, istats, fstats, lev, samples, traj, peaks,
-        y_end)
+        y_end, fq[:FQ_LEVEL0 + nl])
     # the fits on the level times (s) and precession frequencies (Hz), as sweep.simulate forms them
     for L in range(nl):
         scratch[R_LEVEL_T, L] = lev[L, 0] * chi
@@ -211,7 +226,8 @@ def work_buffers():
     return (np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
             np.zeros((N_STAGES_EXTENDED, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK),
             np.zeros((MAX_LEVELS, LEVEL_COLS + 1)), np.zeros((1, SAMPLE_COLS)), np.zeros((1, TRAJ_COLS)),
-            np.zeros((PEAK_RING, PEAK_COLS)), np.zeros(N_FULL), np.zeros((N_SCRATCH, MAX_LEVELS)),
+            np.zeros((PEAK_RING, PEAK_COLS)), np.zeros(N_FULL), np.zeros((FQ_LEVEL0 + MAX_LEVELS, FQ_COLS)),
+            np.zeros((N_SCRATCH, MAX_LEVELS)),
             np.zeros(N_ISTATS, np.int64), np.zeros(N_FSTATS), np.zeros(N_DERIVED))
 
 
@@ -247,11 +263,11 @@ def store_outputs(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LE
 
 @njit(cache=True, nogil=True)
 def solve_index(i, Y0, P, S, LE, LV, NL, CHI, y0, p0, s, le, lv, y, p, cs, wk, K, F, trk, lev, samples, traj,
-                peaks, y_end, scratch, istats, fstats, derived, ISTATS, FSTATS, LEV, YEND, DER):
+                peaks, y_end, fq, scratch, istats, fstats, derived, ISTATS, FSTATS, LEV, YEND, DER):
     """Scene i of the batch on one CPU worker's buffers (releases the GIL: threads run in parallel)."""
     load_inputs(i, Y0, P, S, LE, LV, y0, p0, s, le, lv)
     nl = NL[i]
     solve_scene(y0, p0, s, le[:nl], lv[:nl], CHI[i], y, p, cs, wk, K, F, trk, lev[:nl], samples[:0], traj[:0],
-                peaks, y_end, scratch, istats, fstats, derived)
+                peaks, y_end, fq, scratch, istats, fstats, derived)
     store_outputs(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER)
     return istats[I_OVERFLOW]

@@ -17,6 +17,7 @@ from numba import njit
 from .. import outcomes as oc
 from .contact import (EV_AGAINST1, EV_CONE, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
+from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start, lattice_step
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
@@ -24,7 +25,7 @@ from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
-from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_U1, Y_W1
+from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_W1
 from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, hermite_peak, locate, sign_rate
 from .tableau import N_STAGES_EXTENDED
 from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
@@ -193,7 +194,7 @@ def mark_halt(t_halt, y_halt, n, p, cs, fstats, trk, y_end):
 
 @njit(cache=True)
 def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, level_out, samples, traj,
-        peaks, y_end):
+        peaks, y_end, fq):
     """Integrate one scene in place of the given buffers (see integrate for their shapes)."""
     rtol = settings[S_RTOL]
     atol = settings[S_ATOL]
@@ -235,6 +236,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     if want_traj:
         record_traj(t, y, aux[X_PHI], cs, n, traj, istats)
     trk[T_PHI_B] = aux[X_PHI]
+    if peaks_on:
+        freq_start(y[Y_THETA], aux[X_PHI], fq)
     h = initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats)
     after_reject = False
     h = min(h, h_max)
@@ -279,7 +282,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 y_seg[i] = y_new[i]
         if running:
             t_halt = record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk, peaks_on,
-                                   u_tol, wk, istats)
+                                   u_tol, wk, istats, fq)
             if t_halt >= 0.0:
                 outcome = oc.HALTED
                 dense_eval(F, 0, y, t, h, t_halt, n, wk[W_YBUF])
@@ -289,12 +292,14 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         record_samples(t, y, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, F, n, p, cs, sample_tau,
                        samples, trk, wk, istats)
         if peaks_on:
+            lattice_step(t, y, h, seg_end, y_seg[Y_THETA], F, n, p, cs, fq, level_out, trk, wk, istats)
             if first_k >= 0:
                 eval_rhs(seg_end, y_seg, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
                 phi_c = wk[W_AUXBUF, X_PHI]
             else:
                 phi_c = aux_new[X_PHI]
-            track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running)
+            track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running,
+                        fq)
             shift_peak_window(t, y, h, seg_end, phi_c, F, n, cs, trk, wk)
 
         # --- advance ------------------------------------------------------------------------------
@@ -359,6 +364,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
 
     if outcome < 0:
         outcome = oc.STEP_LIMIT
+    if peaks_on:
+        finish_levels(fq, level_out)
     if outcome == oc.HALTED:
         fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the halt
     else:
@@ -374,9 +381,10 @@ def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
     """Run one scene (CPU). Allocates the buffers; if the trajectory or peak buffer overflowed, it
     grows it 4x and reruns (the run is deterministic). peak_cap covers ~1.6e4 nutation periods, far
     more than a scene to its halt has, so the rerun is for pathological scenes only. Returns a KernelOutput of arrays:
-    istats, fstats (layout.I_*, F_*), levels (n_levels x 5: tau, alpha, dtheta/dtau, f_hat,
-    pending), samples (layout.SAMPLE_COLS), trajectory (layout.TRAJ_COLS), peaks (tau, Phi, theta),
-    y_end (N_FULL)."""
+    istats, fstats (layout.I_*, F_*), levels (n_levels x layout.LEVEL_COLS: tau, alpha, mean
+    dtheta/dtau over whole precession cycles, f_hat, ringing ratio, cycles in the window), samples
+    (layout.SAMPLE_COLS), trajectory (layout.TRAJ_COLS), peaks (tau, Phi, theta: the counted
+    maxima), y_end (N_FULL)."""
     while True:
         istats = np.zeros(N_ISTATS, np.int64)
         fstats = np.zeros(N_FSTATS)
@@ -388,9 +396,10 @@ def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
         y = np.zeros(N_FULL)
         y[:y0.shape[0]] = y0
         y_end = np.zeros(N_FULL)
+        fq = np.zeros((FQ_LEVEL0 + level_e.shape[0], FQ_COLS))
         run(y, p.copy(), settings, level_e, sample_tau, np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
             np.zeros((N_STAGES_EXTENDED, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK), istats, fstats, levels, samples,
-            traj, peaks, y_end)
+            traj, peaks, y_end, fq)
         over = istats[I_OVERFLOW]
         if over == 0:
             break

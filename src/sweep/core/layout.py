@@ -79,5 +79,6 @@ N_TRACK = 14
 # --- output buffers -----------------------------------------------------------------------------
 TRAJ_COLS = 2 + N_FULL + 1     # tau, y[0:N_FULL], Phi, mode
 SAMPLE_COLS = N_FULL + 3       # y[0:N_FULL], energy, Phi, mode
-LEVEL_COLS = 4                 # tau, alpha, dtheta/dtau, f_hat
+LEVEL_COLS = 6                 # tau, alpha, mean dtheta/dtau, f_hat, ringing ratio, window cycles
+L_PENDING = LEVEL_COLS         # column of the level buffer: 1 while the level's f_hat waits for a maximum
 PEAK_COLS = 3                  # tau, Phi, theta

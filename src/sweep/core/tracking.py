@@ -1,30 +1,29 @@
 """Recorders that read an accepted step's dense output: halt levels, samples, Phi maxima, trajectory.
 
 They never change the trajectory. `trk` (float64, layout.T_*) carries their state between steps;
-level_out columns: tau, alpha, dtheta/dtau, f_hat (paper's 2/T over three Phi maxima), pending.
+level_out columns: tau, alpha, mean dtheta/dtau over whole precession cycles, f_hat (paper's 2/T
+over three counted Phi maxima), ringing ratio, cycles in the window (frequency.py), pending f_hat.
 """
 from __future__ import annotations
-
-import math
 
 from numba import njit
 
 from .contact import EV_LEVEL, eval_rhs, mode_energy
 from .dop853 import dense_eval
+from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, open_level, peak_candidate, peak_confirmed
 from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, N_CS, T_NEXT_LEVEL,
-                     T_NEXT_SAMPLE, T_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
+                     T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
                      T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
-from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA, Y_W3
+from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA
 from .roots import brent_max_phi, locate
 
 # Minimum prominence of a located maximum of Phi over its bracket ends, relative to Phi.
 PEAK_PROMINENCE = 1e-6
-# Minimum separation of two Phi maxima, as a fraction of the precession period 2 pi/|dtheta/dtau|.
-MIN_PEAK_SEPARATION = 0.01
 
 
 @njit(cache=True)
-def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk, track_peaks, u_tol, wk, istats):
+def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk, track_peaks, u_tol, wk, istats,
+                  fq):
     """Record the halt levels crossed on [t, seg_end] (energy is monotone: one root each).
 
     Returns the tau of the last level if it was reached in this segment (the scene halts), else -1.
@@ -46,10 +45,10 @@ def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk,
         dense_eval(F, 0, y, t, h, tl, n, ybuf)
         level_out[L, 0] = tl
         level_out[L, 1] = ybuf[Y_ALPHA]
-        level_out[L, 2] = ybuf[Y_W3] / math.cos(ybuf[Y_ALPHA])
         if track_peaks:
-            level_out[L, 4] = 1.0
+            level_out[L, L_PENDING] = 1.0
             trk[T_PENDING] += 1.0
+            open_level(L, tl, fq, trk)
         trk[T_NEXT_LEVEL] = L + 1
         istats[I_LEVELS] = L + 1
         if L + 1 == nl:
@@ -60,7 +59,7 @@ def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk,
 @njit(cache=True)
 def halt_flat(t, level_out, trk, level_e):
     """The disk lies flat at t: the levels not yet crossed are crossed now (the face impact
-    dissipates what is left); levels recorded with the instantaneous precession rate unknown."""
+    dissipates what is left); levels recorded without frequencies."""
     nl = level_e.shape[0]
     for L in range(int(trk[T_NEXT_LEVEL]), nl):
         level_out[L, 0] = t
@@ -108,10 +107,11 @@ def record_traj(t, y, phi, cs, n, traj, istats):
 
 
 @njit(cache=True)
-def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running):
+def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running, fq):
     """Phi at the last three segment ends a < b >= c brackets a maximum: locate it (Brent) on the
-    two steps' dense outputs, keep it if it stands out of its bracket and is not closer than a small
-    fraction of the precession period to the previous one, and resolve pending levels' f_hat."""
+    two steps' dense outputs; if it stands out of its bracket it passes the hysteresis filter
+    (frequency.peak_candidate); Phi at this segment end may confirm the candidate, which is then
+    counted and resolves pending levels' f_hat."""
     npk = int(trk[T_NPK])
     pa = trk[T_PHI_A]
     pb = trk[T_PHI_B]
@@ -128,42 +128,34 @@ def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk,
             tpk, pvk = tp2, pv2
             dense_eval(F, 0, y, t, h, tpk, n, ybuf)
         thk = ybuf[Y_THETA]
-        # row of peak j: j itself, or j % cap where the buffer is a ring (trk[T_PEAK_RING])
-        cap = peaks.shape[0]
-        last = (npk - 1) % cap if npk > 0 else 0
         # round-off wiggles (e.g. of a creeping slip) have no prominence; real nutation peaks rise
         # ~0.1 Phi above the bracket ends
         genuine = pvk - max(pa, phi_c) > PEAK_PROMINENCE * abs(pvk)
-        if genuine and npk > 0:
-            thd = abs(y[Y_W3] / math.cos(y[Y_ALPHA]))
-            if tpk - peaks[last, 0] < MIN_PEAK_SEPARATION * 2.0 * math.pi / max(thd, 1e-300):
-                if pvk > peaks[last, 1]:
-                    peaks[last, 0] = tpk
-                    peaks[last, 1] = pvk
-                    peaks[last, 2] = thk
-                genuine = False
         if genuine:
-            if npk >= cap and trk[T_PEAK_RING] == 0.0:
-                istats[I_OVERFLOW] |= 2
-            else:
-                _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats)
-                npk += 1
+            peak_candidate(tpk, pvk, thk, fq)
+    if peak_confirmed(phi_c, fq):
+        if npk >= peaks.shape[0] and trk[T_PEAK_RING] == 0.0:
+            istats[I_OVERFLOW] |= 2
+        else:
+            _add_peak(fq[0, Q_CAND_T], fq[0, Q_CAND_PHI], fq[0, Q_CAND_TH], npk, level_out, peaks, trk, fstats,
+                      running, istats)
+            npk += 1
     trk[T_NPK] = npk
     istats[I_PEAKS] = npk
 
 
 @njit(cache=True)
 def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats):
-    cap = peaks.shape[0]
+    cap = peaks.shape[0]   # row of peak j: j, or j % cap where the buffer is a ring (trk[T_PEAK_RING])
     peaks[npk % cap, 0] = tpk
     peaks[npk % cap, 1] = pvk
     peaks[npk % cap, 2] = thk
     if npk >= 2 and (running or tpk <= fstats[F_TEND]):
         fstats[F_NFMAX] = max(fstats[F_NFMAX], 2.0 / (tpk - peaks[(npk - 2) % cap, 0]))
-    # resolve levels that now have a maximum after them: f_hat = 2 / (t_k - t_{k-2}) and the mean
-    # precession rate over the same window
+    # resolve levels that now have a counted maximum after them: f_hat = 2 / (t_k - t_{k-2}) over
+    # the last three counted maxima at or before the level
     for L in range(level_out.shape[0]):
-        if level_out[L, 4] == 1.0 and tpk > level_out[L, 0]:
+        if level_out[L, L_PENDING] == 1.0 and tpk > level_out[L, 0]:
             j = npk - 1
             while j >= 0 and j > npk - cap and peaks[j % cap, 0] > level_out[L, 0]:
                 j -= 1
@@ -172,9 +164,7 @@ def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats
                     istats[I_OVERFLOW] |= 2   # a ring too short for this look-back (never on the CPU path)
                 else:
                     level_out[L, 3] = 2.0 / (peaks[j % cap, 0] - peaks[(j - 2) % cap, 0])
-                    level_out[L, 2] = (peaks[j % cap, 2] - peaks[(j - 2) % cap, 2]) / \
-                        (peaks[j % cap, 0] - peaks[(j - 2) % cap, 0])
-            level_out[L, 4] = 0.0
+            level_out[L, L_PENDING] = 0.0
             trk[T_PENDING] -= 1.0
 
 
