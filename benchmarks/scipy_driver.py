@@ -91,7 +91,44 @@ SIGN = ("sign0", "sign1", "sign2")
 UNSTICK = ("unstick0", "unstick1", "unstick2")
 ORDER = (*SIGN, *UNSTICK, "cone", "slipslow", "slipstop", "slipfast", "slave", "contact", "side", "face",
          "slave_lost")
-DIP_CHECKED = {*SIGN, "cone", "side"}   # also checked at the step midpoint (a double crossing)
+DIP_CHECKED = {*SIGN, "cone", "side"}   # also checked inside a step (a double crossing)
+
+
+def _axes_rate(i, y, f):
+    """d/dtau of omega.a_i from the state and its derivative (kinematics of the a-frame)."""
+    s, c = math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA])
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    if i == 0:
+        return f[Y_W1]
+    if i == 1:
+        return f[Y_W2] * c - f[Y_W3] * s - w1 * (w2 * s + w3 * c)
+    return f[Y_W2] * s + f[Y_W3] * c + w1 * (w2 * c - w3 * s)
+
+
+def _hermite_min(g0, d0, g1, d1):
+    """x in (0, 1) of the lowest interior minimum of the cubic Hermite interpolant (end values g,
+    end slopes d per unit x); None if it has none."""
+    a = 3.0 * (d0 + d1) + 6.0 * (g0 - g1)
+    b = -6.0 * (g0 - g1) - 4.0 * d0 - 2.0 * d1
+    c = d0
+    xs = []
+    if a == 0.0:
+        if b != 0.0:
+            xs.append(-c / b)
+    else:
+        disc = b * b - 4.0 * a * c
+        if disc >= 0.0:
+            q = -0.5 * (b + math.copysign(math.sqrt(disc), b))
+            if q != 0.0:
+                xs += [q / a, c / q]
+    best = None
+    for x in xs:
+        if 0.0 < x < 1.0 and 2.0 * a * x + b > 0.0:
+            h = ((1 + 2 * x) * (1 - x) ** 2 * g0 + x * (1 - x) ** 2 * d0 + x * x * (3 - 2 * x) * g1
+                 + x * x * (x - 1) * d1)
+            if best is None or h < best[1]:
+                best = (x, h)
+    return None if best is None else best[0]
 
 METHODS = {"RK23": _si.RK23, "RK45": _si.RK45, "DOP853": _si.DOP853, "Radau": _si.Radau, "BDF": _si.BDF,
            "LSODA": _si.LSODA}
@@ -154,6 +191,19 @@ class Contact:
         c.stuck = list(self.stuck)
         return c
 
+    def sig_arr(self):
+        """sigma_i as the model's array (rebuilt only when the signs changed)."""
+        key = tuple(self.sig)
+        if getattr(self, "_sk", None) != key:
+            self._sk, self._sa = key, np.array(key)
+        return self._sa
+
+    def stuck_arr(self):
+        key = tuple(self.stuck)
+        if getattr(self, "_tk", None) != key:
+            self._tk, self._ta = key, np.array([1.0 if v else 0.0 for v in key])
+        return self._ta
+
 
 def _axes(y):
     """omega.a_1, omega.a_2, omega.a_3."""
@@ -174,16 +224,15 @@ class Disk:
         self.S = np.zeros((7, 12))
         self.calls = 0
         self.t_impact = -math.inf
+        self.log = None
 
     # -- right-hand sides --
 
     def model(self, t, y, mode, c, nx, ny, p=None):
         dy = np.empty(self.n)
         aux = np.empty(N_AUX)
-        sig = np.array(c.sig)
-        stuck = np.array([1.0 if s else 0.0 for s in c.stuck])
-        self.be.rhs(t, y, self.p if p is None else p, ROLL if mode == ROLL else SLIDE, c.side, sig, stuck,
-                    nx, ny, self.n, dy, aux)
+        self.be.rhs(t, y, self.p if p is None else p, ROLL if mode == ROLL else SLIDE, c.side, c.sig_arr(),
+                    c.stuck_arr(), nx, ny, self.n, dy, aux)
         self.calls += 1
         return dy, aux
 
@@ -372,6 +421,8 @@ class Disk:
         if abs(need) < 1.0 or (force and (1.0 if need > 0.0 else -1.0) == c.sig[i]):
             c.stuck[i] = True
             self.stats["n_stick"] += 1
+            if self.log is not None:
+                self.log.append((t, "stick", i, need))
         else:
             c.stuck[i] = False
             c.sig[i] = 1.0 if need > 0.0 else -1.0
@@ -461,7 +512,7 @@ def _locate(g, a, ga, b, gb):
 
 def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | None = None,
               sample_tau=None, backend: Backend | None = None, max_segments: int = 200_000,
-              max_wall: float = math.inf) -> dict:
+              max_wall: float = math.inf, log: list | None = None, clock=time.perf_counter) -> dict:
     """Integrate one scene with a SciPy stepper and the contact rules written above.
 
     scene: a scene dict/YAML path or a validated `Scene` (its solver section is ignored except
@@ -473,7 +524,8 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
     (restarts), n_events, n_transitions, n_stick, n_impacts, t_end, wall (s), timed_out, and
     diagnostics (counts of rules the kernel may not have: onset_repelling, unstick_at_restart,
     released_by_impulse, fold_by_failure; events by kind).
-    max_wall: give up (outcome 'step_limit', timed_out True) once this much wall time is used.
+    max_wall: give up (outcome 'step_limit', timed_out True) once this much time is used, measured
+    by `clock` (wall time by default; time.process_time for CPU time).
     """
     be = backend or numba_backend()
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
@@ -495,8 +547,9 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                  onset_repelling=0, unstick_at_restart=0, released_by_impulse=0, fold_by_failure=0,
                  impact_loss=0.0)
     kinds: dict[str, int] = {}
-    w0 = time.perf_counter()
+    w0 = clock()
     disk = Disk(be, sc.params, n, u_tol, stats)
+    disk.log = log
     p = disk.p
     k_on = [disk.k[i] > 0.0 for i in range(3)]
 
@@ -553,7 +606,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
         if next_level == nl:
             finish(outcomes.HALTED, t)
             break
-        if stats["n_segments"] >= max_segments or time.perf_counter() - w0 > max_wall:
+        if stats["n_segments"] >= max_segments or clock() - w0 > max_wall:
             stats["timed_out"] = True
             finish(outcomes.STEP_LIMIT, t)
             break
@@ -571,8 +624,8 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
         def info(tt, yy):
             """(aux, nu, dcross) at a point of this segment (cached per time)."""
             hit = cache.get(tt)
-            if hit is not None and np.array_equal(hit[0], yy):
-                return hit[1]
+            if hit is not None:
+                return hit
             _, a, nu_ = disk.rhs(tt, yy, seg, seed[0])
             dc = math.nan
             if seg.mode == SLAVED and not math.isnan(nu_):
@@ -580,7 +633,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             r = (a, nu_, dc)
             if len(cache) > 64:
                 cache.clear()
-            cache[tt] = (np.array(yy), r)
+            cache[tt] = r
             return r
 
         active = []
@@ -643,12 +696,13 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
 
         def fun(tt, yy):
             calls[0] += 1
-            if calls[0] % 2000 == 0 and time.perf_counter() - w0 > max_wall:
+            if calls[0] % 2000 == 0 and clock() - w0 > max_wall:
                 raise _Timeout
             return disk.rhs(tt, yy, seg, seed[0])[0]
 
         solver = solver_cls(fun, t, y, t_max, rtol=rtol, atol=atol)
         first_step = True
+        f_old = np.array(solver.f) if hasattr(solver, "f") else disk.rhs(t, y, seg, seed[0])[0]
         ev = None
         try:
             while ev is None and outcome < 0:
@@ -671,6 +725,8 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                     break
                 t_old, t_new = solver.t_old, solver.t
                 y_new = np.array(solver.y)
+                f_new = np.array(solver.f) if hasattr(solver, "f") else disk.rhs(t_new, y_new, seg, seed[0])[0]
+                cache.clear()   # a time maps to one state within one step's dense output
                 a_new, nu_new, _ = info(t_new, y_new)
                 if a_new[X_OK] < 0.0:
                     finish(outcomes.PAINLEVE, t_old)
@@ -678,7 +734,12 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                     break
                 if seg.mode == SLAVED and not math.isnan(nu_new):
                     seed[0] = nu_new
-                dense = solver.dense_output()
+                dense_box = []
+
+                def dense(tt):
+                    if not dense_box:
+                        dense_box.append(solver.dense_output())
+                    return dense_box[0](tt)
 
                 def gd(kind, tt):
                     return gval(kind, tt, dense(tt)) + shift[kind]
@@ -704,10 +765,24 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             best = cand if best is None or cand[:2] < best[:2] else best
                             continue
                     elif k in DIP_CHECKED and g_old[k] > 0.0 and g_new[k] > 0.0:
-                        tm = 0.5 * (t_old + t_new)
-                        gm = gd(k, tm)
-                        if gm <= 0.0:
-                            br = (t_old, g_old[k], tm, gm)
+                        # a double crossing inside the step: the signs and side by the minimum of
+                        # the cubic Hermite interpolant (exact end slopes), the cone at the midpoint;
+                        # confirmed on the dense output
+                        hstep = t_new - t_old
+                        if k == "side":
+                            x = _hermite_min(g_old[k], seg.side * y[Y_W1] * hstep, g_new[k],
+                                             seg.side * y_new[Y_W1] * hstep)
+                        elif k[:4] == "sign":
+                            i = int(k[4])
+                            x = _hermite_min(g_old[k], seg.sig[i] * _axes_rate(i, y, f_old) * hstep, g_new[k],
+                                             seg.sig[i] * _axes_rate(i, y_new, f_new) * hstep)
+                        else:
+                            x = 0.5
+                        if x is not None:
+                            tm = t_old + x * hstep
+                            gm = gd(k, tm)
+                            if gm <= 0.0:
+                                br = (t_old, g_old[k], tm, gm)
                     if br is not None:
                         _, tb = _locate(lambda tt, k=k: gd(k, tt), *br)
                         cand = (tb, ORDER.index(k), k, False)
@@ -743,6 +818,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                     t, y = t_seg, y_seg
                     break
                 g_old = g_new
+                f_old = f_new
                 first_step = False
                 t, y = t_new, y_new
                 if solver.status == "finished":
@@ -768,7 +844,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 next_level = nl
             finish(code, t)
 
-    wall = time.perf_counter() - w0
+    wall = clock() - w0
     n_rhs = disk.calls
     return dict(outcome=outcomes.NAMES[outcome], outcome_code=outcome, level_tau=level_tau,
                 level_alpha=level_alpha, sample_tau=smp, samples=samples, t_end=t_end,
@@ -783,6 +859,8 @@ def _apply(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
     now: the event happened at the restart itself (the state never left that surface)."""
     stats["n_events"] += 1
     kinds[kind] = kinds.get(kind, 0) + 1
+    if disk.log is not None:
+        disk.log.append((t, kind, c.mode, tuple(c.stuck), tuple(c.sig)))
     g_before = _axes(y)
     if kind[:4] == "sign":
         disk.stick_test(int(kind[4]), t, y, c, force=now)
