@@ -459,6 +459,8 @@ class Disk:
                         c.stuck[i] = False
                         c.sig[i] = 1.0 if need > 0.0 else -1.0
                         self.stats["unstick_at_restart"] += 1
+                        if self.log is not None:
+                            self.log.append((t, "unstick_at_restart", i, need, c.mode))
                         changed = True
                         break
             if not changed and c.mode == ROLL and self.cone_violated(t, y, c):
