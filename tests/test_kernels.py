@@ -188,3 +188,29 @@ def test_hermite_peak_is_the_interpolants_maximum():
     x = R.hermite_peak(0.0, 0.9, -0.1, -1.1)
     assert x == pytest.approx(0.45, abs=1e-12)
     assert R.hermite_peak(0.0, 1.0, 1.0, 1.0) == -1.0   # a straight line has no interior extremum
+
+
+@pytest.mark.parametrize("k1", [1e-3, 0.1, 1.0])
+@pytest.mark.parametrize("w1", [0.05, -0.05])
+def test_settle_signs_releases_a_stuck_component_the_moment_cannot_hold(setup, k1, w1):
+    """After a discrete update a stuck component stays stuck iff the moment needed to hold it is
+    within the limit (|sigma needed| <= 1); otherwise it is released towards the needed moment
+    (its un-stick event, |sigma| rising to 1, cannot happen from above 1). A component the
+    Filippov rule holds (`held`) is left alone."""
+    p, y, cs0 = setup
+    pp = p.copy()
+    pp[M.P_K1], pp[M.P_K2], pp[M.P_K3] = k1, 0.0, 0.0
+    y1 = y.copy()
+    y1[M.Y_W1] = w1
+    for held in (-1, 0):
+        cs = cs0.copy()
+        cs[L.CS_MODE] = L.ROLL
+        cs[L.CS_STUCK] = 1.0
+        wk, ist = _work()
+        C.eval_rhs(0.0, y1, pp, cs, M.N_CORE, wk[L.W_DYTMP], wk[L.W_AUXTMP], wk, ist)
+        need = wk[L.W_AUXTMP, M.X_SIG1]
+        C.settle_signs(0.0, y1, pp, cs, M.N_CORE, wk, ist, held)
+        if abs(need) <= 1.0 or held == 0:
+            assert cs[L.CS_STUCK] == 1.0
+        else:
+            assert cs[L.CS_STUCK] == 0.0 and cs[L.CS_SIG] == math.copysign(1.0, need)

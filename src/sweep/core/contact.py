@@ -346,15 +346,29 @@ def release_moved(y, cs, g_before):
 
 
 @njit(cache=True)
-def settle_signs(t, y, p, cs, n, wk, istats):
-    """After a discrete update: a free moment component whose sign function sigma_i (omega.a_i) is
-    <= 0 has reached its switching surface at this same event (two components of a spin-free
-    rocking disk pass omega.a_i = 0 together); it gets the stick test now, since its own event,
-    g going from > 0 to <= 0, can no longer happen."""
+def settle_signs(t, y, p, cs, n, wk, istats, held):
+    """After a discrete update, every moment component is made consistent with the new state.
+
+    A stuck component whose holding moment now exceeds the limit (|sigma needed| > 1: the update
+    changed the dynamics, e.g. rolling resumed after a slip) is released in the direction of the
+    needed moment: its un-stick event, |sigma| rising to 1, can no longer happen. A free component
+    whose sign function sigma_i (omega.a_i) is <= 0 has reached its switching surface at this same
+    event (two components of a spin-free rocking disk pass omega.a_i = 0 together) and gets the
+    stick test now, since its own event, g going from > 0 to <= 0, can no longer happen. `held` is
+    a component the caller holds on its surface by the Filippov rule (-1: none).
+    """
     k = (p[P_K1], p[P_K2], p[P_K3])
-    for _ in range(3):
+    for _ in range(6):
         eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
         found = -1
+        for i in range(3):
+            if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 1.0 and i != held \
+                    and abs(wk[W_AUXTMP, X_SIG1 + i]) > 1.0:
+                found = i
+        if found >= 0:
+            cs[CS_STUCK + found] = 0.0
+            cs[CS_SIG + found] = 1.0 if wk[W_AUXTMP, X_SIG1 + found] > 0.0 else -1.0
+            continue
         for i in range(3):
             if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 0.0 \
                     and cs[CS_SIG + i] * wk[W_AUXTMP, X_G1 + i] <= 0.0:
@@ -430,6 +444,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     right-hand side and the event functions afterwards.
     """
     g_before = moment_axes_rates(y)
+    held = -1
     if k <= EV_SIGN3:
         stick_or_flip(k, t, y, p, cs, n, wk, istats)
     elif k >= EV_AGAINST1:
@@ -441,6 +456,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         if cs[CS_STUCK + i] == 0.0 and cs[CS_SIG + i] == sig_failed:
             cs[CS_STUCK + i] = 1.0
             istats[I_STICK] += 1
+            held = i
     elif k <= EV_UNSTICK3:
         i = k - EV_UNSTICK1
         eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
@@ -478,7 +494,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         # orders of magnitude in 1e-11 tau): its own event can no longer happen
         end_slip(y, p, cs, wk, istats)
     release_moved(y, cs, g_before)
-    settle_signs(t, y, p, cs, n, wk, istats)
+    settle_signs(t, y, p, cs, n, wk, istats, held)
     # a rolling state must be admissible after every discrete update: a moment sign that flips or
     # sticks changes the friction that rolling needs, and it may jump outside the static cone
     if cs[CS_MODE] == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
