@@ -103,7 +103,7 @@ def compare(rec: dict) -> dict:
         res["why"] = "driver exception: " + d["exception"]
         return res
     if d["timed_out"]:
-        res["why"] = "over the wall-time cap"
+        res["why"] = "over the time cap"
         return res
     res["compared"] = True
     keys = sorted(set(k["q"]) | set(d["q"]))
