@@ -1,42 +1,54 @@
-"""A SciPy driver of the same Euler's-disk model: `solve_ivp` with terminal events and a restart loop.
+"""A SciPy driver of the same Euler's-disk model: SciPy's own steppers, located events, restarts.
 
-This is what a researcher would write instead of `sweep`'s hybrid integrator (issue #3): the same
-equations (`sweep.core.model.rhs`, numba-compiled, or its plain-Python/NumPy `py_func` for the
-"plain NumPy" peer), the same plastic impulse (`sweep.core.impulse.project_velocity`) and the
-discrete rules of `sweep.core.contact`, written out again here (independently, in plain Python;
-only constants are read from the kernel's module):
+This is what a researcher would write instead of `sweep`'s hybrid integrator (issues #3, #8): the
+same equations (`sweep.core.model.rhs`, numba-compiled, or its plain-Python/NumPy `py_func` for the
+"plain NumPy" peer) and the same plastic impulse (`sweep.core.impulse.project_velocity`). The
+discrete rules are written here again from the physics in docs/model.md, in plain Python and
+independently of `sweep.core.contact` (only constants are read from the kernel):
 
-* contact modes ROLL, SLIDE (|u| > slip_tol, friction along -u/|u|) and SLAVED (a slip starting
-  from rest or slower than slip_tol: its direction nu is solved at every right-hand-side call as
-  the root of cross(nu) = 0 near the previous one, i.e. slip acceleration parallel to the slip, and
-  du/dtau = (s.a) s);
-* ROLL -> SLAVED where mu_s Phi - |F| reaches 0, in the onset direction (the consistent growing root
-  of cross(nu) at u = 0 nearest -F/|F|, 64-angle scan + refinement);
-* SLAVED -> SLIDE where |u| grows to SLAVE_EXIT x the slaving speed u_s = max(slip_tol,
-  SLAVE_EPS mu_d Phi); SLAVED -> ROLL where u.s(nu) reaches 0 (no impulse);
-* SLIDE -> ROLL where |u| falls to slip_tol, by the plastic impulse (its loss added to the sliding
-  dissipation); SLIDE -> SLAVED where |u| falls to u_s and an attracting quasi-static direction
-  exists (cross slip removed plastically; a slip the impulse would reverse rolls instead);
-  (with SLAVE_EPS absent or 0 in the kernel this reduces to: SLAVED -> SLIDE at slip_tol, no
-  SLIDE -> SLAVED hand-over);
-* after every discrete update a rolling state is checked against the static cone (onset again);
-* sign switches of omega.a_i with Filippov sticking (stick if |sigma needed| < 1, else flip),
-  un-sticking where |sigma| reaches 1;
-* contact loss (Phi = 0); alpha = 0 side change (impulse to the other rim edge; line contact if
-  w1 * side <= 0 after it or two impacts within ZENO_DTAU); face (pi/2 - |alpha| = BETA_FACE):
-  the disk lies flat, a halt: every remaining level gets the face time (alpha NaN), outcome halted;
-* halt levels by energy (non-terminal events, the last one terminal; a level already passed after
-  an impulse is recorded at the restart time, as the kernel does).
+* modes ROLL (no slip; the friction that rolling needs, inside the static cone), SLIDE (friction
+  -mu_d Phi u/|u|) and SLAVED (a slow slip whose direction nu is the attracting quasi-static one:
+  the root of cross(nu) = 0, the slip acceleration at the slip |u| s(nu) parallel to s(nu), with
+  d cross/d nu < 0; the sliding equations are evaluated at the slip vector u itself with the
+  friction held on -mu_d Phi s(nu));
+* ROLL -> SLAVED where mu_s Phi - |F| reaches 0: the slip starts at u = 0 along a direction in which
+  the sliding equations make it grow (a_P parallel to s, a_P.s > 0), attracting, nearest -F/|F|;
+* SLAVED -> ROLL where u.s(nu) reaches 0 (plastic impulse removes what is left of the slip);
+  SLAVED -> SLIDE where |u| grows to SLAVE_EXIT x the slaving speed u_s = max(slip_tol,
+  SLAVE_EPS mu_d Phi), or where the attracting direction ceases to exist (a fold: d cross/d nu
+  reaches 0, or no root is left near the last one: the stepper cannot continue and the fold is the
+  last accepted point); after a fold the hand-over back to SLAVED is off for the rest of that slide;
+* SLIDE -> ROLL where |u| falls to slip_tol (plastic impulse, its loss booked to sliding); SLIDE ->
+  SLAVED where |u| falls to u_s, onto the root of cross that the direction dynamics
+  d nu/d tau = cross/|u| carry the slip to (the cross slip removed plastically; a slip that the
+  impulse would reverse stops instead); none on the whole circle: it stays in SLIDE;
+* moment signs sigma_i = sign(omega.a_i) with Filippov sticking: at omega.a_i = 0 a component
+  sticks if the moment needed to hold it is within k_i Phi (|sigma needed| < 1), else it passes;
+  a stuck component leaves where |sigma needed| reaches 1, with that sign;
+* after every discrete update (the driver's 'settle'): a slide at or below slip_tol ends; a
+  component whose omega.a_i an impulse moved takes the sign of its new omega.a_i (a stuck one is
+  released: a finite moment cannot hold it through an impulse); a free component at or past its
+  switching surface gets the stick test; a stuck component whose needed moment now exceeds k_i Phi
+  (the contact law changed under it) is released with that sign; Phi <= 0 is contact loss; a
+  rolling state outside the static cone starts to slip;
+* an event function that is <= 0 at a restart (the state sits on that surface: alpha = 0 after
+  an impact, omega.a_i = 0 after an un-stick, u.s = 0 at a slip onset) is armed from the surface:
+  if the first step ends at or past it, a point inside where it is positive is searched for (a
+  return within the step); if there is none it never left and the event happens at once;
+* alpha = 0: plastic impact of the other rim edge (loss booked to impact); line contact if no
+  rotation towards the new side is left or two impacts come within ZENO_DTAU; Phi = 0: contact
+  lost; pi/2 - |alpha| = BETA_FACE: the disk lies flat, a halt (every level not yet reached gets
+  that time); the contact law without a solution (rhs flag -1) ends the scene as `painleve`;
+* halt levels by energy (E = E_ss(level)); a level already passed after an impulse is recorded at
+  the restart time.
 No rule depends on rtol, atol or the step size.
 
-Every terminal event ends a `solve_ivp` call; the discrete state is updated and a new call starts
-from the event point (default initial step selection, as a user of solve_ivp would do).
-
-Differences from the kernel that are inherent to solve_ivp (docs/performance.md): no Hermite
-check for a double crossing inside one step; SciPy locates events with brentq to ~4 ulp and
-restarts at the root (the kernel restarts at the right end of a 1e-12 bracket); the slaved
-direction's seed follows every right-hand-side call (the kernel's follows accepted steps; the
-root is the same to ~1e-14 rad).
+The integration uses SciPy's `OdeSolver` classes (DOP853, RK45, LSODA, Radau, ...) step by step,
+as `solve_ivp` does, with the driver's own event scan (sign change at the step ends, plus the step
+midpoint for the sign, cone and side functions) and location (Illinois regula falsi on the
+stepper's dense output to a bracket of a few ulp; the restart is at the bracket's post-event end).
+A new solver (default initial step) starts at every restart. The slaved direction's root is
+continued from the last accepted step end (never from a rejected stage).
 
 Usage:
     from scipy_driver import run_scipy
@@ -49,26 +61,77 @@ import time
 import types
 
 import numpy as np
+import scipy.integrate as _si
 from numba.core.registry import CPUDispatcher
-from scipy.integrate import solve_ivp
 
 from sweep import outcomes
 from sweep.core import contact as _contact
 from sweep.core import impulse as _impulse
 from sweep.core import model
 from sweep.core.model import (N_AUX, N_CORE, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, X_F1, X_F2, X_G1,
-                              X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1, Y_U2, Y_W1)
+                              X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3)
 from sweep.scene import Scene, load_scene
 from sweep.simulate import initial_state, level_energies
 
 __all__ = ["run_scipy", "numba_backend", "numpy_backend", "Backend"]
 
+# physical constants of the rules (documented in docs/model.md)
 BETA_FACE = _contact.BETA_FACE
 ZENO_DTAU = _contact.ZENO_DTAU
-SLAVE_EPS = getattr(_contact, "SLAVE_EPS", 0.0)
-SLAVE_EXIT = getattr(_contact, "SLAVE_EXIT", 1.0)
+SLAVE_EPS = _contact.SLAVE_EPS
+SLAVE_EXIT = _contact.SLAVE_EXIT
+
 ROLL, SLIDE, SLAVED = 0, 1, 2     # driver modes; model.rhs knows ROLL (0) and SLIDE (1)
-DIR_TOL = 1e-14                   # secant tolerance of the slaved direction (rad)
+DIR_TOL = 1e-14                   # convergence of the slaved direction (rad)
+DIR_JUMP = 0.3                    # rad: a root farther than this from the last one is another root
+DCROSS_STEP = 1e-6                # rad: central difference of d cross/d nu (error ~1e-12 relative)
+
+# events in a fixed order (a tie goes to the first)
+SIGN = ("sign0", "sign1", "sign2")
+UNSTICK = ("unstick0", "unstick1", "unstick2")
+ORDER = (*SIGN, *UNSTICK, "cone", "slipslow", "slipstop", "slipfast", "slave", "contact", "side", "face",
+         "slave_lost")
+DIP_CHECKED = {*SIGN, "cone", "side"}   # also checked inside a step (a double crossing)
+
+
+def _axes_rate(i, y, f):
+    """d/dtau of omega.a_i from the state and its derivative (kinematics of the a-frame)."""
+    s, c = math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA])
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    if i == 0:
+        return f[Y_W1]
+    if i == 1:
+        return f[Y_W2] * c - f[Y_W3] * s - w1 * (w2 * s + w3 * c)
+    return f[Y_W2] * s + f[Y_W3] * c + w1 * (w2 * c - w3 * s)
+
+
+def _hermite_min(g0, d0, g1, d1):
+    """x in (0, 1) of the lowest interior minimum of the cubic Hermite interpolant (end values g,
+    end slopes d per unit x); None if it has none."""
+    a = 3.0 * (d0 + d1) + 6.0 * (g0 - g1)
+    b = -6.0 * (g0 - g1) - 4.0 * d0 - 2.0 * d1
+    c = d0
+    xs = []
+    if a == 0.0:
+        if b != 0.0:
+            xs.append(-c / b)
+    else:
+        disc = b * b - 4.0 * a * c
+        if disc >= 0.0:
+            q = -0.5 * (b + math.copysign(math.sqrt(disc), b))
+            if q != 0.0:
+                xs += [q / a, c / q]
+    best = None
+    for x in xs:
+        if 0.0 < x < 1.0 and 2.0 * a * x + b > 0.0:
+            h = ((1 + 2 * x) * (1 - x) ** 2 * g0 + x * (1 - x) ** 2 * d0 + x * x * (3 - 2 * x) * g1
+                 + x * x * (x - 1) * d1)
+            if best is None or h < best[1]:
+                best = (x, h)
+    return None if best is None else best[0]
+
+METHODS = {"RK23": _si.RK23, "RK45": _si.RK45, "DOP853": _si.DOP853, "Radau": _si.Radau, "BDF": _si.BDF,
+           "LSODA": _si.LSODA}
 
 
 # --- backends: the compiled kernels, or the same source run as plain Python/NumPy ----------------
@@ -104,161 +167,187 @@ def numpy_backend() -> Backend:
     return Backend(name="numpy", **{k: _pure(v, memo) for k, v in _NAMES.items()})
 
 
-# --- the driver ----------------------------------------------------------------------------------
+# --- the contact and its rules -------------------------------------------------------------------
 
 class _Timeout(Exception):
     pass
 
 
-class _Counter:
-    __slots__ = ("n",)
-
-    def __init__(self):
-        self.n = 0
-
-
-class _State:
+class Contact:
     """The discrete contact state."""
 
     def __init__(self, side):
         self.mode = ROLL
         self.side = side
-        self.sig = np.ones(3)
-        self.stuck = np.zeros(3)
+        self.sig = [1.0, 1.0, 1.0]
+        self.stuck = [False, False, False]
         self.nu = 0.0
         self.slave_off = False
 
     def copy(self):
-        c = _State(self.side)
+        c = Contact(self.side)
         c.mode, c.nu, c.slave_off = self.mode, self.nu, self.slave_off
-        c.sig = self.sig.copy()
-        c.stuck = self.stuck.copy()
+        c.sig = list(self.sig)
+        c.stuck = list(self.stuck)
         return c
 
+    def sig_arr(self):
+        """sigma_i as the model's array (rebuilt only when the signs changed)."""
+        key = tuple(self.sig)
+        if getattr(self, "_sk", None) != key:
+            self._sk, self._sa = key, np.array(key)
+        return self._sa
 
-class _Physics:
-    """Right-hand side per contact state and the discrete rules, in plain Python."""
+    def stuck_arr(self):
+        key = tuple(self.stuck)
+        if getattr(self, "_tk", None) != key:
+            self._tk, self._ta = key, np.array([1.0 if v else 0.0 for v in key])
+        return self._ta
 
-    def __init__(self, be, p, n, u_tol, counter):
-        self.be, self.p, self.n, self.u_tol, self.counter = be, p, n, u_tol, counter
+
+def _axes(y):
+    """omega.a_1, omega.a_2, omega.a_3."""
+    s, c = math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA])
+    return y[Y_W1], y[Y_W2] * c - y[Y_W3] * s, y[Y_W2] * s + y[Y_W3] * c
+
+
+class Disk:
+    """The model's right-hand side per contact state and the discrete rules (plain Python)."""
+
+    def __init__(self, be, p, n, u_tol, stats):
+        self.be, self.n, self.u_tol, self.stats = be, n, u_tol, stats
+        self.p = np.array(p, dtype=float)
+        self.p[P_UFREEZE] = 0.0           # the pure model: friction along u/|u| for u != 0
+        self.pf = self.p.copy()
+        self.pf[P_UFREEZE] = math.inf     # friction along the given direction whatever u
+        self.k = (self.p[P_K1], self.p[P_K2], self.p[P_K3])
         self.S = np.zeros((7, 12))
+        self.calls = 0
+        self.t_impact = -math.inf
+        self.log = None
 
-    def model(self, t, y, mmode, st, nx, ny):
+    # -- right-hand sides --
+
+    def model(self, t, y, mode, c, nx, ny, p=None):
         dy = np.empty(self.n)
         aux = np.empty(N_AUX)
-        self.be.rhs(t, y, self.p, mmode, st.side, st.sig, st.stuck, nx, ny, self.n, dy, aux)
-        self.counter.n += 1
+        self.be.rhs(t, y, self.p if p is None else p, ROLL if mode == ROLL else SLIDE, c.side, c.sig_arr(),
+                    c.stuck_arr(), nx, ny, self.n, dy, aux)
+        self.calls += 1
         return dy, aux
 
-    def slip_rates(self, nu, u, t, y, st):
-        """(cross, dot, dy, aux): slip acceleration against the direction s(nu), slip u s(nu)."""
-        c, s = math.cos(nu), math.sin(nu)
+    def cross_dot(self, nu, u, t, y, c):
+        """Slip acceleration across and along s(nu) for the slip vector u s(nu)."""
+        cs, sn = math.cos(nu), math.sin(nu)
         ys = np.array(y[:self.n], dtype=float)
-        ys[Y_U1] = u * c
-        ys[Y_U2] = u * s
-        dy, aux = self.model(t, ys, SLIDE, st, c, s)
-        return dy[Y_U2] * c - dy[Y_U1] * s, dy[Y_U1] * c + dy[Y_U2] * s, dy, aux
+        ys[Y_U1] = u * cs
+        ys[Y_U2] = u * sn
+        dy, aux = self.model(t, ys, SLIDE, c, cs, sn)
+        return dy[Y_U2] * cs - dy[Y_U1] * sn, dy[Y_U1] * cs + dy[Y_U2] * sn
 
-    def slaved_direction(self, nu0, u, t, y, st):
-        """Root of cross(nu) near nu0 (secant); (nu, dy, aux) there, aux[X_OK] = 0 if it fails."""
-        xa = nu0
-        ca, _, dy, aux = self.slip_rates(xa, u, t, y, st)
+    def dcross(self, nu, u, t, y, c):
+        return (self.cross_dot(nu + DCROSS_STEP, u, t, y, c)[0]
+                - self.cross_dot(nu - DCROSS_STEP, u, t, y, c)[0]) / (2.0 * DCROSS_STEP)
+
+    def slaved_root(self, seed, u, t, y, c):
+        """The root of cross(nu) continued from seed (secant); NaN if none within DIR_JUMP."""
+        xa, xb = seed, seed + 1e-7
+        ca = self.cross_dot(xa, u, t, y, c)[0]
         if ca == 0.0:
-            return xa, dy, aux
-        xb = nu0 + 1e-6
-        cb, _, dy, aux = self.slip_rates(xb, u, t, y, st)
-        for _ in range(50):
+            return xa
+        cb = self.cross_dot(xb, u, t, y, c)[0]
+        for _ in range(40):
             if cb == 0.0 or abs(xb - xa) < DIR_TOL:
-                return xb, dy, aux
+                return xb if abs(xb - seed) <= DIR_JUMP else math.nan
             if cb == ca:
-                break
-            xa, ca, xb = xb, cb, xb - cb * (xb - xa) / (cb - ca)
-            cb, _, dy, aux = self.slip_rates(xb, u, t, y, st)
-        aux[X_OK] = 0.0
-        return xb, dy, aux
+                return math.nan
+            dx = -cb * (xb - xa) / (cb - ca)
+            dx = max(-0.1, min(0.1, dx))
+            xa, ca = xb, cb
+            xb = xb + dx
+            if abs(xb - seed) > DIR_JUMP:
+                return math.nan
+            cb = self.cross_dot(xb, u, t, y, c)[0]
+        return math.nan
 
-    def eval(self, t, y, st, update_nu=False):
-        """dy, aux for the contact state st (SLAVED: direction solved, du = (s.a) s)."""
-        if st.mode == SLAVED:
+    def rhs(self, t, y, c, seed):
+        """(dy, aux, nu) for the contact c; SLAVED: nu is the root continued from seed (NaN: none)."""
+        if c.mode == SLAVED:
             u = math.hypot(y[Y_U1], y[Y_U2])
-            nu, dy, aux = self.slaved_direction(st.nu, u, t, y, st)
-            c, s = math.cos(nu), math.sin(nu)
-            dot = dy[Y_U1] * c + dy[Y_U2] * s
-            dy[Y_U1] = dot * c
-            dy[Y_U2] = dot * s
-            self.last_nu = nu
-            if update_nu and aux[X_OK] != 0.0:
-                st.nu = nu
-            return dy, aux
-        if st.mode == SLIDE:
+            nu = self.slaved_root(seed, u, t, y, c)
+            if math.isnan(nu):
+                dy = np.full(self.n, math.nan)
+                aux = np.full(N_AUX, math.nan)
+                aux[X_OK] = 0.0
+                return dy, aux, nu
+            dy, aux = self.model(t, y, SLIDE, c, math.cos(nu), math.sin(nu), self.pf)
+            return dy, aux, nu
+        if c.mode == SLIDE:
             un = math.hypot(y[Y_U1], y[Y_U2])
             if un > 0.0:
-                return self.model(t, y, SLIDE, st, y[Y_U1] / un, y[Y_U2] / un)
-            return self.model(t, y, SLIDE, st, math.cos(st.nu), math.sin(st.nu))
-        return self.model(t, y, ROLL, st, 1.0, 0.0)
+                dy, aux = self.model(t, y, SLIDE, c, y[Y_U1] / un, y[Y_U2] / un)
+            else:
+                dy, aux = self.model(t, y, SLIDE, c, math.cos(c.nu), math.sin(c.nu))
+            return dy, aux, c.nu
+        dy, aux = self.model(t, y, ROLL, c, 1.0, 0.0)
+        return dy, aux, c.nu
+
+    def energy(self, y, c):
+        return self.be.energy(y, self.p, c.side, ROLL if c.mode == ROLL else SLIDE)
 
     def slave_speed(self, aux):
         return max(self.u_tol, SLAVE_EPS * self.p[P_MUD] * aux[X_PHI])
 
-    def energy(self, y, st):
-        return self.be.energy(y, self.p, st.side, ROLL if st.mode == ROLL else SLIDE)
+    # -- directions --
 
-    # -- discrete rules --
+    def onset_direction(self, t, y, c):
+        """Slip onset at u = 0: a direction s with a_P parallel to s and a_P.s > 0 (the slip grows),
+        attracting (d cross/d nu < 0), nearest -F/|F|; the nearest growing root if none attracts."""
+        _, aux = self.model(t, y, ROLL, c, 1.0, 0.0)
+        guess = math.atan2(-aux[X_F2], -aux[X_F1])
+        m = 128
+        xs = [guess - math.pi + 2.0 * math.pi * j / m for j in range(m + 1)]
+        cr = [self.cross_dot(x, 0.0, t, y, c)[0] for x in xs]
+        best = (math.inf, math.inf, guess)   # (not attracting, distance, root)
+        for j in range(m):
+            if (cr[j] > 0.0) == (cr[j + 1] > 0.0):
+                continue
+            lo, hi, clo = xs[j], xs[j + 1], cr[j]
+            for _ in range(100):
+                mid = 0.5 * (lo + hi)
+                if not lo < mid < hi or hi - lo < 1e-15:
+                    break
+                cm = self.cross_dot(mid, 0.0, t, y, c)[0]
+                if (cm > 0.0) == (clo > 0.0):
+                    lo, clo = mid, cm
+                else:
+                    hi = mid
+            root = 0.5 * (lo + hi)
+            if self.cross_dot(root, 0.0, t, y, c)[1] <= 0.0:
+                continue
+            repelling = 0 if self.dcross(root, 0.0, t, y, c) < 0.0 else 1
+            d = abs(math.atan2(math.sin(root - guess), math.cos(root - guess)))
+            best = min(best, (repelling, d, root))
+        if best[0] == 1:
+            self.stats["onset_repelling"] += 1
+        return best[2]
 
-    def cone_violated(self, t, y, st):
-        _, aux = self.eval(t, y, st)
-        return aux[X_PHI] > 0.0 and self.p[P_MUS] * aux[X_PHI] < math.hypot(aux[X_F1], aux[X_F2])
-
-    def onset_direction(self, t, y, st, F1, F2):
-        """The growing root of cross(nu) at u = 0 nearest -F/|F| (the guess if there is none)."""
-        guess = math.atan2(-F2, -F1)
-        cross = lambda x: self.slip_rates(x, 0.0, t, y, st)[0]  # noqa: E731
-        xs = guess - math.pi + 2.0 * math.pi * np.arange(65) / 64
-        cs = [cross(x) for x in xs]
-        best, bestd = guess, math.inf
-        for j in range(64):
-            if (cs[j] > 0.0) != (cs[j + 1] > 0.0):
-                lo, hi, clo = xs[j], xs[j + 1], cs[j]
-                while hi - lo > 1e-14 * max(1.0, abs(lo)):
-                    mid = 0.5 * (lo + hi)
-                    if mid <= lo or mid >= hi:
-                        break
-                    cm = cross(mid)
-                    if (cm > 0.0) == (clo > 0.0):
-                        lo, clo = mid, cm
-                    else:
-                        hi = mid
-                root = 0.5 * (lo + hi)
-                _, dot, _, _ = self.slip_rates(root, 0.0, t, y, st)
-                d = abs(math.atan2(math.sin(root - guess), math.cos(root - guess)))
-                if dot > 0.0 and d < bestd:
-                    best, bestd = root, d
-        return best
-
-    def start_slip(self, t, y, st, stats):
-        _, aux = self.model(t, y, ROLL, st, 1.0, 0.0)
-        st.mode = SLAVED
-        st.nu = self.onset_direction(t, y, st, aux[X_F1], aux[X_F2])
-        y[Y_U1] = 0.0
-        y[Y_U2] = 0.0
-        stats["n_transitions"] += 1
-
-    def attracting_direction(self, nu, u, t, y, st):
-        """First root of cross met following d nu/d tau = cross/u from nu; NaN if none on the circle."""
-        c0 = self.slip_rates(nu, u, t, y, st)[0]
+    def attracting_direction(self, nu, u, t, y, c):
+        """The root of cross that d nu/d tau = cross/u carries nu to (NaN: none on the circle)."""
+        c0 = self.cross_dot(nu, u, t, y, c)[0]
         if c0 == 0.0:
             return nu
-        step = (2.0 * math.pi / 64) * (1.0 if c0 > 0.0 else -1.0)
+        step = (2.0 * math.pi / 128) * (1.0 if c0 > 0.0 else -1.0)
         xa = nu
-        for j in range(1, 65):
+        for j in range(1, 129):
             xb = nu + j * step
-            if (self.slip_rates(xb, u, t, y, st)[0] > 0.0) != (c0 > 0.0):
+            if (self.cross_dot(xb, u, t, y, c)[0] > 0.0) != (c0 > 0.0):
                 lo, hi = xa, xb
-                for _ in range(200):
-                    if abs(hi - lo) <= 1e-14 * max(1.0, abs(lo)):
-                        break
+                for _ in range(100):
                     mid = 0.5 * (lo + hi)
-                    if (self.slip_rates(mid, u, t, y, st)[0] > 0.0) == (c0 > 0.0):
+                    if abs(hi - lo) < 1e-15 or mid in (lo, hi):
+                        break
+                    if (self.cross_dot(mid, u, t, y, c)[0] > 0.0) == (c0 > 0.0):
                         lo = mid
                     else:
                         hi = mid
@@ -266,86 +355,189 @@ class _Physics:
             xa = xb
         return math.nan
 
-    def try_slave(self, t, y, st, stats):
-        """SLIDE -> SLAVED onto the attracting direction (cross slip removed plastically)."""
+    # -- discrete rules --
+
+    def to_roll(self, y, c):
+        """A slip ends: the plastic contact impulse removes it (loss booked to sliding)."""
+        y[Y_DSLIDE] += self.be.project_velocity(y, self.p, c.side, True, c.side, False, self.S)
+        c.mode = ROLL
+        self.stats["n_transitions"] += 1
+
+    def start_slip(self, t, y, c):
+        c.nu = self.onset_direction(t, y, c)
+        c.mode = SLAVED
+        c.slave_off = False
+        y[Y_U1] = 0.0
+        y[Y_U2] = 0.0
+        self.stats["n_transitions"] += 1
+
+    def cone_violated(self, t, y, c):
+        _, aux = self.model(t, y, ROLL, c, 1.0, 0.0)
+        return aux[X_PHI] > 0.0 and self.p[P_MUS] * aux[X_PHI] < math.hypot(aux[X_F1], aux[X_F2])
+
+    def try_slave(self, t, y, c):
         u = math.hypot(y[Y_U1], y[Y_U2])
-        root = self.attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, st)
+        root = self.attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, c)
         if math.isnan(root):
-            st.slave_off = True
+            c.slave_off = True
             return
         saved = y.copy()
-        loss = self.be.project_velocity(y, self.p, st.side, True, st.side, True, self.S, root)
+        loss = self.be.project_velocity(y, self.p, c.side, True, c.side, True, self.S, root)
         if y[Y_U1] * math.cos(root) + y[Y_U2] * math.sin(root) > 0.0:
             y[Y_DSLIDE] += loss
-            st.mode = SLAVED
-            st.nu = root
+            c.mode = SLAVED
+            c.nu = root
             return
         y[:] = saved
-        y[Y_DSLIDE] += self.be.project_velocity(y, self.p, st.side, True, st.side, False, self.S)
-        st.mode = ROLL
-        stats["n_transitions"] += 1
-        if self.cone_violated(t, y, st):
-            self.start_slip(t, y, st, stats)
+        self.to_roll(y, c)
 
-    def set_slip(self, t, y, st, stats):
+    def set_slip(self, t, y, c):
+        """Contact state for a given slip vector (start, or after an impact while slipping)."""
         un = math.hypot(y[Y_U1], y[Y_U2])
-        nu = math.atan2(y[Y_U2], y[Y_U1])
         if un > self.u_tol:
-            st.mode, st.nu, st.slave_off = SLIDE, nu, False
-            _, aux = self.model(t, y, SLIDE, st, 1.0, 0.0)
-            if SLAVE_EPS > 0.0 and un <= self.slave_speed(aux):
-                self.try_slave(t, y, st, stats)
+            c.mode, c.nu, c.slave_off = SLIDE, math.atan2(y[Y_U2], y[Y_U1]), False
+            _, aux = self.model(t, y, SLIDE, c, y[Y_U1] / un, y[Y_U2] / un)
+            if un <= self.slave_speed(aux):
+                self.try_slave(t, y, c)
             return
-        st.mode = SLAVED
-        st.nu = self.slaved_direction(nu, un, t, y, st)[0]
+        root = self.attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), un, t, y, c)
+        if math.isnan(root):
+            c.mode, c.nu, c.slave_off = SLIDE, math.atan2(y[Y_U2], y[Y_U1]), True
+        else:
+            c.mode, c.nu = SLAVED, root
 
-    def stick_or_flip(self, i, t, y, st, stats):
-        st.stuck[i] = 1.0
-        _, aux = self.eval(t, y, st)
-        need = aux[X_SIG1 + i]
-        if abs(need) < 1.0:
-            stats["n_stick"] += 1
-            return
-        st.stuck[i] = 0.0
-        st.sig[i] = 1.0 if need > 0.0 else -1.0
+    def needed_sigma(self, i, t, y, c):
+        """sigma_i that holds omega.a_i at 0 (component i treated as stuck)."""
+        was = c.stuck[i]
+        c.stuck[i] = True
+        _, aux, _ = self.rhs(t, y, c, c.nu)
+        c.stuck[i] = was
+        return aux[X_SIG1 + i]
 
-    def consistent_signs(self, t, y, st, active, stats):
-        _, aux = self.eval(t, y, st)
+    def stick_test(self, i, t, y, c, force=False):
+        """At omega.a_i = 0: stick if the moment can hold it, else pass with the needed sign.
+        force: the sign just taken failed at once, the other opposes the motion: stick."""
+        need = self.needed_sigma(i, t, y, c)
+        if abs(need) < 1.0 or (force and (1.0 if need > 0.0 else -1.0) == c.sig[i]):
+            c.stuck[i] = True
+            self.stats["n_stick"] += 1
+            if self.log is not None:
+                self.log.append((t, "stick", i, need))
+        else:
+            c.stuck[i] = False
+            c.sig[i] = 1.0 if need > 0.0 else -1.0
+
+    def settle(self, t, y, c, g_before, leaving=()):
+        """After a discrete update: bring the contact state in line with the state (see the module
+        docstring). `leaving`: components just released at an un-stick (on their surface, leaving)."""
+        if c.mode == SLIDE and math.hypot(y[Y_U1], y[Y_U2]) <= self.u_tol:
+            self.to_roll(y, c)
+        g = _axes(y)
         for i in range(3):
-            if active[i] and st.stuck[i] == 0.0:
-                g = aux[X_G1 + i]
-                if g > 0.0:
-                    st.sig[i] = 1.0
-                elif g < 0.0:
-                    st.sig[i] = -1.0
+            if self.k[i] > 0.0 and g[i] != g_before[i]:
+                if c.stuck[i]:
+                    self.stats["released_by_impulse"] += 1
+                c.stuck[i] = False
+                if g[i] != 0.0:
+                    c.sig[i] = 1.0 if g[i] > 0.0 else -1.0
                 else:
-                    self.stick_or_flip(i, t, y, st, stats)
+                    self.stick_test(i, t, y, c)
+        for _ in range(6):
+            changed = False
+            for i in range(3):
+                if self.k[i] == 0.0 or i in leaving:
+                    continue
+                if not c.stuck[i] and c.sig[i] * g[i] <= 0.0:
+                    before = (c.stuck[i], c.sig[i])
+                    self.stick_test(i, t, y, c)
+                    if (c.stuck[i], c.sig[i]) != before:
+                        changed = True
+                        break
+                elif c.stuck[i]:
+                    need = self.needed_sigma(i, t, y, c)
+                    if abs(need) >= 1.0:
+                        c.stuck[i] = False
+                        c.sig[i] = 1.0 if need > 0.0 else -1.0
+                        self.stats["unstick_at_restart"] += 1
+                        if self.log is not None:
+                            self.log.append((t, "unstick_at_restart", i, need, c.mode))
+                        changed = True
+                        break
+            if not changed and c.mode == ROLL and self.cone_violated(t, y, c):
+                self.start_slip(t, y, c)
+                changed = True
+            if not changed:
+                return
+
+    def side_change(self, t, y, c):
+        """alpha = 0: plastic impact of the other rim edge. Returns an outcome code or -1."""
+        slipping = c.mode != ROLL
+        self.stats["impact_loss"] += self.be.project_velocity(y, self.p, c.side, slipping, -c.side, slipping,
+                                                              self.S)
+        c.side = -c.side
+        self.stats["n_impacts"] += 1
+        y[Y_ALPHA] = 0.0
+        c.stuck = [False, False, False]
+        zeno = t - self.t_impact < ZENO_DTAU
+        self.t_impact = t
+        if y[Y_W1] * c.side <= 0.0 or zeno:
+            return outcomes.LINE_CONTACT
+        if slipping:
+            self.set_slip(t, y, c)
+        return -1
+
+
+# --- the driver ----------------------------------------------------------------------------------
+
+def _locate(g, a, ga, b, gb):
+    """Illinois regula falsi: a bracket [a, b] with g(a) > 0 >= g(b) of a few ulp; returns (a, b)."""
+    side = 0
+    while b - a > 4.0 * np.spacing(max(abs(a), abs(b), 1e-300)):
+        x = (a * gb - b * ga) / (gb - ga) if gb != ga else 0.5 * (a + b)
+        if not a < x < b:
+            x = 0.5 * (a + b)
+            if not a < x < b:
+                break
+        gx = g(x)
+        if gx > 0.0:
+            a, ga = x, gx
+            if side == 1:
+                gb *= 0.5
+            side = 1
+        else:
+            b, gb = x, gx
+            if side == -1:
+                ga *= 0.5
+            side = -1
+    return a, b
 
 
 def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | None = None,
               sample_tau=None, backend: Backend | None = None, max_segments: int = 200_000,
-              max_wall: float = math.inf) -> dict:
-    """Integrate one scene with scipy.integrate.solve_ivp and the contact rules written above.
+              max_wall: float = math.inf, log: list | None = None, clock=time.perf_counter) -> dict:
+    """Integrate one scene with a SciPy stepper and the contact rules written above.
 
     scene: a scene dict/YAML path or a validated `Scene` (its solver section is ignored except
     slip_tol; stop.levels, stop.t_max are used). Times are dimensionless (tau = t/chi).
     Returns a dict: outcome (name), outcome_code, level_tau (array, NaN if not reached),
     level_alpha, sample_tau, samples (n x N_CORE state, NaN after the end), energy_initial/final
-    (dimensionless), nfev (solve_ivp RHS calls), njev, nlu, n_rhs_events (model calls made by event
-    functions and the discrete logic), n_rhs (model calls in all; a slaved right-hand side is several),
-    n_segments (solve_ivp calls), n_events, n_transitions, n_stick, n_impacts, t_end, wall (s).
-    max_wall: give up (outcome 'step_limit') once this much wall time has been used.
+    (dimensionless), nfev (stepper RHS calls), njev, nlu, n_rhs (model calls in all; a slaved
+    right-hand side is several), n_rhs_events (those not made by the stepper), n_segments
+    (restarts), n_events, n_transitions, n_stick, n_impacts, t_end, wall (s), timed_out, and
+    diagnostics (counts of rules the kernel may not have: onset_repelling, unstick_at_restart,
+    released_by_impulse, fold_by_failure; events by kind).
+    max_wall: give up (outcome 'step_limit', timed_out True) once this much time is used, measured
+    by `clock` (wall time by default; time.process_time for CPU time).
     """
     be = backend or numba_backend()
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
     cfg = sc.config
     if atol is None:
         atol = rtol * 1e-2
+    solver_cls = METHODS[method]
     n = N_CORE
     t_max = cfg["stop"]["t_max"] / sc.chi
     u_tol = cfg["solver"]["slip_tol"] * sc.chi / cfg["disk"]["radius"]
-    p = np.array(sc.params, dtype=float)
-    p[P_UFREEZE] = u_tol          # as the kernel: below slip_tol the slip direction is given
     level_e = level_energies(sc)
     nl = level_e.size
     smp = np.zeros(0) if sample_tau is None else np.asarray(sample_tau, dtype=float)
@@ -353,245 +545,351 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
     samples = np.full((ns, n), np.nan)
     level_tau = np.full(nl, np.nan)
     level_alpha = np.full(nl, np.nan)
-
-    w0 = time.perf_counter()
-    fcount = _Counter()               # model calls inside solve_ivp's fun
-    ecount = _Counter()               # model calls of the event functions and the discrete logic
-    ph = _Physics(be, p, n, u_tol, ecount)
-    ph_f = _Physics(be, p, n, u_tol, fcount)
-    stats = dict(n_events=0, n_transitions=0, n_stick=0, n_impacts=0, nfev=0, njev=0, nlu=0,
-                 n_segments=0)
-    active = [p[P_K1] > 0.0, p[P_K2] > 0.0, p[P_K3] > 0.0]
+    stats = dict(n_events=0, n_transitions=0, n_stick=0, n_impacts=0, nfev=0, njev=0, nlu=0, n_segments=0,
+                 onset_repelling=0, unstick_at_restart=0, released_by_impulse=0, fold_by_failure=0,
+                 impact_loss=0.0)
+    kinds: dict[str, int] = {}
+    w0 = clock()
+    disk = Disk(be, sc.params, n, u_tol, stats)
+    disk.log = log
+    p = disk.p
+    k_on = [disk.k[i] > 0.0 for i in range(3)]
 
     y0, _ = initial_state(sc)
     y = np.array(y0[:n], dtype=float)
     t = 0.0
-    st = _State(1 if y[Y_ALPHA] > 0.0 else -1)
-    # --- initial discrete state (as the kernel's start) ---
+    c = Contact(1 if y[Y_ALPHA] > 0.0 else -1)
     if y[Y_U1] != 0.0 or y[Y_U2] != 0.0:
-        ph.set_slip(t, y, st, stats)
-    ph.consistent_signs(t, y, st, active, stats)
-    if st.mode == ROLL and ph.cone_violated(t, y, st):
-        ph.start_slip(t, y, st, stats)
-    _, aux = ph.eval(t, y, st)
-    e0 = ph.energy(y, st)
+        disk.set_slip(t, y, c)
+    g = _axes(y)
+    for i in range(3):
+        if k_on[i]:
+            if g[i] != 0.0:
+                c.sig[i] = 1.0 if g[i] > 0.0 else -1.0
+            else:
+                disk.stick_test(i, t, y, c)
+    if c.mode == ROLL and disk.cone_violated(t, y, c):
+        disk.start_slip(t, y, c)
+    e0 = disk.energy(y, c)
     outcome = -1
-    if aux[X_PHI] <= 0.0:
-        outcome = outcomes.CONTACT_LOST
-    if aux[X_OK] == 0.0:
-        outcome = outcomes.NUMERICAL_ERROR
+    t_end = 0.0
     isamp = 0
     while isamp < ns and smp[isamp] <= 0.0:
         samples[isamp] = y
         isamp += 1
     next_level = 0
     zero_len = 0
-    t_impact = -math.inf
+    t_last_restart = -1.0
+
+    def finish(code, tt):
+        nonlocal outcome, t_end
+        outcome, t_end = code, tt
 
     while outcome < 0:
-        # levels already passed (the energy drops at an impulse): recorded at the restart time
-        while next_level < nl and ph.energy(y, st) <= level_e[next_level]:
+        # --- restart at (t, y) with the contact c ------------------------------------------------
+        _, aux, nu = disk.rhs(t, y, c, c.nu)
+        if c.mode == SLAVED:
+            if math.isnan(nu):
+                # no attracting direction is left here: the slip direction follows its own dynamics
+                c.mode, c.slave_off = SLIDE, True
+                stats["fold_by_failure"] += 1
+                continue
+            c.nu = nu
+        if aux[X_OK] < 0.0:
+            finish(outcomes.PAINLEVE, t)
+            break
+        if aux[X_PHI] <= 0.0:
+            finish(outcomes.CONTACT_LOST, t)
+            break
+        while next_level < nl and disk.energy(y, c) <= level_e[next_level]:
             level_tau[next_level] = t
             level_alpha[next_level] = y[Y_ALPHA]
             next_level += 1
         if next_level == nl:
-            outcome = outcomes.HALTED
+            finish(outcomes.HALTED, t)
             break
-        if stats["n_segments"] >= max_segments or time.perf_counter() - w0 > max_wall:
-            outcome = outcomes.STEP_LIMIT
+        if stats["n_segments"] >= max_segments or clock() - w0 > max_wall:
+            stats["timed_out"] = True
+            finish(outcomes.STEP_LIMIT, t)
             break
+        zero_len = zero_len + 1 if t == t_last_restart else 0
+        t_last_restart = t
+        if zero_len > 200:
+            finish(outcomes.NUMERICAL_ERROR, t)   # discrete updates that never let time advance
+            break
+        stats["n_segments"] += 1
 
-        # --- one smooth segment: fixed discrete state -----------------------------------------
-        sst = st.copy()               # its slaved-direction seed follows the right-hand side
+        seg = c.copy()
+        seed = [seg.nu]
+        cache = {}
+
+        def info(tt, yy):
+            """(aux, nu, dcross) at a point of this segment (cached per time)."""
+            hit = cache.get(tt)
+            if hit is not None:
+                return hit
+            _, a, nu_ = disk.rhs(tt, yy, seg, seed[0])
+            dc = math.nan
+            if seg.mode == SLAVED and not math.isnan(nu_):
+                dc = disk.dcross(nu_, math.hypot(yy[Y_U1], yy[Y_U2]), tt, yy, seg)
+            r = (a, nu_, dc)
+            if len(cache) > 64:
+                cache.clear()
+            cache[tt] = r
+            return r
+
+        active = []
+        for i in range(3):
+            if k_on[i]:
+                active.append(UNSTICK[i] if seg.stuck[i] else SIGN[i])
+        active.append({ROLL: "cone", SLIDE: "slipslow", SLAVED: "slipstop"}[seg.mode])
+        if seg.mode == SLAVED:
+            active += ["slipfast", "slave_lost"]
+        if seg.mode == SLIDE and not seg.slave_off:
+            active.append("slave")
+        active += ["contact", "side", "face"]
+        active.sort(key=ORDER.index)
+
+        def gval(kind, tt, yy):
+            a, nu_, dc = info(tt, yy)
+            if kind[:4] == "sign":
+                i = int(kind[4])
+                return seg.sig[i] * a[X_G1 + i]
+            if kind[:7] == "unstick":
+                return 1.0 - abs(a[X_SIG1 + int(kind[7])])
+            if kind == "cone":
+                return p[P_MUS] * a[X_PHI] - math.hypot(a[X_F1], a[X_F2])
+            if kind == "slipslow":
+                return math.hypot(yy[Y_U1], yy[Y_U2]) - u_tol
+            if kind == "slave":
+                return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slave_speed(a)
+            if kind == "slipstop":
+                return yy[Y_U1] * math.cos(nu_) + yy[Y_U2] * math.sin(nu_)
+            if kind == "slipfast":
+                return SLAVE_EXIT * disk.slave_speed(a) - math.hypot(yy[Y_U1], yy[Y_U2])
+            if kind == "slave_lost":
+                return -dc
+            if kind == "contact":
+                return a[X_PHI]
+            if kind == "side":
+                return seg.side * yy[Y_ALPHA]
+            if kind == "face":
+                return (0.5 * math.pi - abs(yy[Y_ALPHA])) - BETA_FACE
+            raise KeyError(kind)
+
+        g0 = {k: gval(k, t, y) for k in active}
+        shift = {k: (-v if v <= 0.0 else 0.0) for k, v in g0.items()}
+        on_surface = {k for k, v in g0.items() if v <= 0.0}
+        at_once = [k for k in on_surface if k not in DIP_CHECKED and k not in ("slipstop", "side")
+                   and k[:4] != "sign"]
+        if at_once:
+            # on a surface that a restart cannot leave (e.g. a fold at the restart): happens now
+            kind = min(at_once, key=ORDER.index)
+            code = _apply(kind, t, y, c, disk, stats, kinds, [], True)
+            if code >= 0:
+                if code == outcomes.HALTED:
+                    level_tau[next_level:] = t
+                    next_level = nl
+                finish(code, t)
+            continue
+        g_old = {k: g0[k] + shift[k] for k in active}
+
         calls = [0]
 
         def fun(tt, yy):
             calls[0] += 1
-            if calls[0] % 2000 == 0 and time.perf_counter() - w0 > max_wall:
-                raise _Timeout   # a single solve_ivp call can grind (e.g. LSODA at rtol 1e-12)
-            return ph_f.eval(tt, yy, sst, update_nu=True)[0]
+            if calls[0] % 2000 == 0 and clock() - w0 > max_wall:
+                raise _Timeout
+            return disk.rhs(tt, yy, seg, seed[0])[0]
 
-        cache_t = [None]
-        cache_y = np.empty(n)
-        cache_aux = [None]
-        cache_nu = [sst.nu]
-
-        def aux_at(tt, yy):
-            # event functions must be functions of (t, y) alone: a slaved direction is solved here
-            # from the seed, not read from the seed (which the right-hand side moves)
-            if cache_t[0] != tt or not np.array_equal(cache_y, yy):
-                cache_aux[0] = ph.eval(tt, yy, sst)[1]
-                cache_nu[0] = ph.last_nu if sst.mode == SLAVED else sst.nu
-                cache_t[0] = tt
-                cache_y[:] = yy
-            return cache_aux[0]
-
-        def nu_at(tt, yy):
-            aux_at(tt, yy)
-            return cache_nu[0]
-
-        events, kinds = [], []
-        t0 = t
-
-        def add(fn, kind, terminal=True):
-            g0 = fn(t0, y)
-            # An event function exactly 0 at the restart point (omega.a_i after a sign flip,
-            # alpha after a side change, u.s at a slip onset) would be 'detected' again at the first
-            # step end by solve_ivp (it counts g(t0) = 0 -> g(t1) <= 0 as a crossing) and located
-            # at t0: a restart loop that never advances. Treat an exact zero at t0 as 'just after'
-            # (the kernel likewise needs g > 0 at a step's start).
-            # The value at t0 is the one of the restart state (the dense output there may differ by
-            # rounding, enough to flip the sign of an exact zero).
-            def g(tt, yy):
-                if tt == t0:
-                    return g0 if g0 != 0.0 else 1e-300
-                return fn(tt, yy)
-            g.terminal = terminal
-            g.direction = -1
-            events.append(g)
-            kinds.append(kind)
-
-        # in the kernel's event order (a tie goes to the first)
-        for i in range(3):
-            if active[i] and sst.stuck[i] == 0.0:
-                add(lambda tt, yy, i=i, s=sst.sig[i]: s * aux_at(tt, yy)[X_G1 + i], ("sign", i))
-        for i in range(3):
-            if active[i] and sst.stuck[i] == 1.0:
-                add(lambda tt, yy, i=i: 1.0 - abs(aux_at(tt, yy)[X_SIG1 + i]), ("unstick", i))
-        if sst.mode == ROLL:
-            def cone(tt, yy):
-                a = aux_at(tt, yy)
-                return p[P_MUS] * a[X_PHI] - math.hypot(a[X_F1], a[X_F2])
-            add(cone, ("cone",))
-        elif sst.mode == SLIDE:
-            add(lambda tt, yy: math.hypot(yy[Y_U1], yy[Y_U2]) - u_tol, ("slipslow",))
-        else:
-            add(lambda tt, yy: yy[Y_U1] * math.cos(nu_at(tt, yy)) + yy[Y_U2] * math.sin(nu_at(tt, yy)),
-                ("slipstop",))
-            add(lambda tt, yy: SLAVE_EXIT * ph.slave_speed(aux_at(tt, yy)) - math.hypot(yy[Y_U1], yy[Y_U2]),
-                ("slipfast",))
-        if sst.mode == SLIDE and SLAVE_EPS > 0.0 and not sst.slave_off:
-            add(lambda tt, yy: math.hypot(yy[Y_U1], yy[Y_U2]) - ph.slave_speed(aux_at(tt, yy)), ("slave",))
-        add(lambda tt, yy: aux_at(tt, yy)[X_PHI], ("contact",))
-        add(lambda tt, yy, s=sst.side: s * yy[Y_ALPHA], ("side",))
-        add(lambda tt, yy: (0.5 * math.pi - abs(yy[Y_ALPHA])) - BETA_FACE, ("face",))
-        for L in range(next_level, nl):
-            add(lambda tt, yy, L=L: ph.energy(yy, sst) - level_e[L], ("level", L), terminal=(L == nl - 1))
-
-        t_eval = smp[isamp:]
-        t_eval = t_eval[t_eval <= t_max]
+        solver = solver_cls(fun, t, y, t_max, rtol=rtol, atol=atol)
+        first_step = True
+        f_old = np.array(solver.f) if hasattr(solver, "f") else disk.rhs(t, y, seg, seed[0])[0]
+        ev = None
         try:
-            sol = solve_ivp(fun, (t, t_max), y, method=method, rtol=rtol, atol=atol, events=events,
-                            t_eval=t_eval if t_eval.size else None)
-        except _Timeout:
-            stats["nfev"] += calls[0]
-            outcome = outcomes.STEP_LIMIT
-            break
-        stats["n_segments"] += 1
-        stats["nfev"] += sol.nfev
-        stats["njev"] += sol.njev
-        stats["nlu"] += sol.nlu
-        if t_eval.size:
-            m = len(sol.t)
-            if m:
-                samples[isamp:isamp + m] = np.asarray(sol.y).T
-                isamp += m
-        # non-terminal level crossings inside the segment
-        t_stop = min((te[0] for te, ev in zip(sol.t_events, events) if ev.terminal and te.size),
-                     default=math.inf)
-        for j, kind in enumerate(kinds):
-            if kind[0] == "level" and sol.t_events[j].size and sol.t_events[j][0] <= t_stop:
-                L = kind[1]
-                level_tau[L] = sol.t_events[j][0]
-                level_alpha[L] = sol.y_events[j][0][Y_ALPHA]
-                next_level = max(next_level, L + 1)
-        if sol.status == -1:
-            outcome = outcomes.STEP_SIZE_UNDERFLOW if "step size" in sol.message else outcomes.NUMERICAL_ERROR
-            t = float(sol.t[-1]) if len(sol.t) else t
-            break
-        if sol.status == 0:
-            outcome = outcomes.T_MAX
-            t = t_max
-            y = np.array(sol.y[:, -1], dtype=float) if len(sol.t) else y
-            break
-        # terminal event: the earliest one (a tie goes to the first in the kernel's order)
-        k = min((j for j, ev in enumerate(events) if ev.terminal and sol.t_events[j].size),
-                key=lambda j: sol.t_events[j][0])
-        t_new = float(sol.t_events[k][0])
-        zero_len = zero_len + 1 if t_new <= t else 0
-        if zero_len > 1000:
-            outcome = outcomes.STEP_SIZE_UNDERFLOW
-            break
-        t = t_new
-        y = np.array(sol.y_events[k][0], dtype=float)
-        stats["n_events"] += 1
-        st.nu = sst.nu
-        kind = kinds[k]
-        if kind[0] == "level":
-            next_level = nl
-            continue
-        if kind[0] == "sign":
-            ph.stick_or_flip(kind[1], t, y, st, stats)
-        elif kind[0] == "unstick":
-            i = kind[1]
-            _, a = ph.eval(t, y, st)
-            st.sig[i] = 1.0 if a[X_SIG1 + i] > 0.0 else -1.0
-            st.stuck[i] = 0.0
-        elif kind[0] == "cone":
-            ph.start_slip(t, y, st, stats)
-            st.slave_off = False
-        elif kind[0] == "slipslow":
-            # the slip ends at slip_tol by a plastic contact impulse (its energy goes to sliding)
-            y[Y_DSLIDE] += be.project_velocity(y, p, st.side, True, st.side, False, ph.S)
-            st.mode = ROLL
-            stats["n_transitions"] += 1
-        elif kind[0] == "slipstop":
-            y[Y_U1] = 0.0
-            y[Y_U2] = 0.0
-            st.mode = ROLL
-            stats["n_transitions"] += 1
-        elif kind[0] == "slipfast":
-            st.mode = SLIDE
-            st.slave_off = False
-        elif kind[0] == "slave":
-            ph.try_slave(t, y, st, stats)
-        elif kind[0] == "contact":
-            outcome = outcomes.CONTACT_LOST
-            break
-        elif kind[0] == "face":
-            # the disk lies flat: a halt; the levels not yet crossed are crossed now
-            level_tau[next_level:] = t
-            next_level = nl
-            outcome = outcomes.HALTED
-            break
-        elif kind[0] == "side":
-            mode_old = st.mode
-            be.project_velocity(y, p, st.side, mode_old != ROLL, -st.side, mode_old != ROLL, ph.S)
-            st.side = -st.side
-            stats["n_impacts"] += 1
-            y[Y_ALPHA] = 0.0
-            st.stuck[:] = 0.0
-            zeno = t - t_impact < ZENO_DTAU
-            t_impact = t
-            if y[Y_W1] * st.side <= 0.0 or zeno:
-                outcome = outcomes.LINE_CONTACT
-                break
-            if mode_old != ROLL:
-                ph.set_slip(t, y, st, stats)
-            ph.consistent_signs(t, y, st, active, stats)
-            if mode_old == ROLL and ph.cone_violated(t, y, st):
-                ph.start_slip(t, y, st, stats)
-        if kind[0] != "side" and st.mode == ROLL and ph.cone_violated(t, y, st):
-            ph.start_slip(t, y, st, stats)
-        _, a = ph.eval(t, y, st)
-        if a[X_OK] == 0.0:
-            outcome = outcomes.NUMERICAL_ERROR
-            break
+            while ev is None and outcome < 0:
+                msg = solver.step()
+                if solver.status == "failed":
+                    if seg.mode == SLAVED:
+                        # the attracting direction ceased to exist (a fold): the stepper cannot
+                        # pass it; hand over to SLIDE at the last accepted point
+                        t, y = solver.t, np.array(solver.y)
+                        info_nu = info(t, y)[1]
+                        c.nu = info_nu if not math.isnan(info_nu) else seed[0]
+                        c.mode, c.slave_off = SLIDE, True
+                        stats["fold_by_failure"] += 1
+                        stats["n_events"] += 1
+                        ev = ("fold", t)
+                        break
+                    finish(outcomes.STEP_SIZE_UNDERFLOW if "step size" in str(msg) else outcomes.NUMERICAL_ERROR,
+                           solver.t)
+                    t = solver.t
+                    break
+                t_old, t_new = solver.t_old, solver.t
+                y_new = np.array(solver.y)
+                f_new = np.array(solver.f) if hasattr(solver, "f") else disk.rhs(t_new, y_new, seg, seed[0])[0]
+                cache.clear()   # a time maps to one state within one step's dense output
+                a_new, nu_new, _ = info(t_new, y_new)
+                if a_new[X_OK] < 0.0:
+                    finish(outcomes.PAINLEVE, t_old)
+                    t = t_old
+                    break
+                if seg.mode == SLAVED and not math.isnan(nu_new):
+                    seed[0] = nu_new
+                dense_box = []
 
-    wall = time.perf_counter() - w0
-    n_rhs = fcount.n + ecount.n
+                def dense(tt):
+                    if not dense_box:
+                        dense_box.append(solver.dense_output())
+                    return dense_box[0](tt)
+
+                def gd(kind, tt):
+                    return gval(kind, tt, dense(tt)) + shift[kind]
+
+                g_new = {k: gval(k, t_new, y_new) + shift[k] for k in active}
+                best = None   # (restart time, order, kind, at once)
+                for k in active:
+                    br = None
+                    if g_old[k] > 0.0 and g_new[k] <= 0.0:
+                        br = (t_old, g_old[k], t_new, g_new[k])
+                    elif first_step and k in on_surface and g_new[k] <= 0.0:
+                        # armed from the surface: a return within the first step, or it never left
+                        x = 0.5
+                        for _ in range(60):
+                            tm = t_old + x * (t_new - t_old)
+                            gm = gd(k, tm)
+                            if gm > 0.0:
+                                br = (tm, gm, t_new, g_new[k])
+                                break
+                            x *= 0.5
+                        if br is None:
+                            cand = (t_old, ORDER.index(k), k, True)
+                            best = cand if best is None or cand[:2] < best[:2] else best
+                            continue
+                    elif k in DIP_CHECKED and g_old[k] > 0.0 and g_new[k] > 0.0:
+                        # a double crossing inside the step: the signs and side by the minimum of
+                        # the cubic Hermite interpolant (exact end slopes), the cone at the midpoint;
+                        # confirmed on the dense output
+                        hstep = t_new - t_old
+                        if k == "side":
+                            x = _hermite_min(g_old[k], seg.side * y[Y_W1] * hstep, g_new[k],
+                                             seg.side * y_new[Y_W1] * hstep)
+                        elif k[:4] == "sign":
+                            i = int(k[4])
+                            x = _hermite_min(g_old[k], seg.sig[i] * _axes_rate(i, y, f_old) * hstep, g_new[k],
+                                             seg.sig[i] * _axes_rate(i, y_new, f_new) * hstep)
+                        else:
+                            x = 0.5
+                        if x is not None:
+                            tm = t_old + x * hstep
+                            gm = gd(k, tm)
+                            if gm <= 0.0:
+                                br = (t_old, g_old[k], tm, gm)
+                    if br is not None:
+                        _, tb = _locate(lambda tt, k=k: gd(k, tt), *br)
+                        cand = (tb, ORDER.index(k), k, False)
+                        best = cand if best is None or cand[:2] < best[:2] else best
+                t_seg = best[0] if best is not None else t_new
+                y_seg = np.array(dense(t_seg)) if best is not None else y_new
+                # halt levels on [t_old, t_seg] (the energy never increases: one root each)
+                while next_level < nl:
+                    e_end = disk.energy(y_seg, seg) - level_e[next_level]
+                    if e_end > 0.0:
+                        break
+                    e_start = disk.energy(np.array(dense(t_old)), seg) - level_e[next_level]
+                    if e_start <= 0.0:
+                        tl = t_old
+                    else:
+                        la, lb = _locate(lambda tt: disk.energy(dense(tt), seg) - level_e[next_level],
+                                         t_old, e_start, t_seg, e_end)
+                        tl = 0.5 * (la + lb)
+                    level_tau[next_level] = tl
+                    level_alpha[next_level] = dense(tl)[Y_ALPHA]
+                    next_level += 1
+                    if next_level == nl:
+                        finish(outcomes.HALTED, tl)
+                t_stop = t_end if outcome >= 0 else t_seg
+                while isamp < ns and smp[isamp] <= t_stop:
+                    if smp[isamp] > t_old:
+                        samples[isamp] = dense(smp[isamp])
+                    isamp += 1
+                if outcome >= 0:
+                    break
+                if best is not None:
+                    ev = best
+                    t, y = t_seg, y_seg
+                    break
+                g_old = g_new
+                f_old = f_new
+                first_step = False
+                t, y = t_new, y_new
+                if solver.status == "finished":
+                    finish(outcomes.T_MAX, t_new)
+                    break
+        except _Timeout:
+            stats["timed_out"] = True
+            finish(outcomes.STEP_LIMIT, t)
+        stats["nfev"] += solver.nfev
+        stats["njev"] += solver.njev
+        stats["nlu"] += solver.nlu
+        if outcome >= 0 or ev is None or ev[0] == "fold":
+            continue
+        # --- the discrete update at the event -----------------------------------------------------
+        _, kind, now = ev[0], ev[2], ev[3]
+        a_ev, nu_ev, _ = info(t, y)
+        if seg.mode == SLAVED and not math.isnan(nu_ev):
+            c.nu = nu_ev
+        code = _apply(kind, t, y, c, disk, stats, kinds, [], now)
+        if code >= 0:
+            if code == outcomes.HALTED:
+                level_tau[next_level:] = t
+                next_level = nl
+            finish(code, t)
+
+    wall = clock() - w0
+    n_rhs = disk.calls
     return dict(outcome=outcomes.NAMES[outcome], outcome_code=outcome, level_tau=level_tau,
-                level_alpha=level_alpha, sample_tau=smp, samples=samples, t_end=t,
-                energy_initial=float(e0), energy_final=float(ph.energy(y, st)),
-                n_rhs_events=ecount.n, n_rhs=n_rhs, wall=wall, method=method,
-                rtol=rtol, atol=atol, backend=be.name, **stats)
+                level_alpha=level_alpha, sample_tau=smp, samples=samples, t_end=t_end,
+                energy_initial=float(e0), energy_final=float(disk.energy(y, c)),
+                n_rhs_events=n_rhs - stats["nfev"], n_rhs=n_rhs, wall=wall, method=method,
+                rtol=rtol, atol=atol, backend=be.name, timed_out=stats.pop("timed_out", False),
+                event_kinds=kinds, **stats)
+
+
+def _apply(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
+    """The discrete update for event `kind` at (t, y); returns an outcome code or -1.
+    now: the event happened at the restart itself (the state never left that surface)."""
+    stats["n_events"] += 1
+    kinds[kind] = kinds.get(kind, 0) + 1
+    if disk.log is not None:
+        disk.log.append((t, kind, c.mode, tuple(c.stuck), tuple(c.sig)))
+    g_before = _axes(y)
+    if kind[:4] == "sign":
+        disk.stick_test(int(kind[4]), t, y, c, force=now)
+    elif kind[:7] == "unstick":
+        i = int(kind[7])
+        need = disk.needed_sigma(i, t, y, c)
+        c.stuck[i] = False
+        c.sig[i] = 1.0 if need > 0.0 else -1.0
+        leaving_out.append(i)
+    elif kind == "cone":
+        disk.start_slip(t, y, c)
+    elif kind in ("slipslow", "slipstop"):
+        disk.to_roll(y, c)
+    elif kind == "slipfast":
+        c.mode, c.slave_off = SLIDE, False
+    elif kind == "slave":
+        disk.try_slave(t, y, c)
+    elif kind == "slave_lost":
+        c.mode, c.slave_off = SLIDE, True
+    elif kind == "contact":
+        return outcomes.CONTACT_LOST
+    elif kind == "face":
+        return outcomes.HALTED
+    elif kind == "side":
+        code = disk.side_change(t, y, c)
+        if code >= 0:
+            return code
+        g_before = (math.nan, math.nan, math.nan)   # every component was moved by the impact
+    disk.settle(t, y, c, g_before, tuple(leaving_out))
+    return -1

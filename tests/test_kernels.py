@@ -113,11 +113,14 @@ def test_dense_output_interpolates_the_step_at_seventh_order(setup):
 
 
 def test_hermite_dip_finds_the_minimum_exactly():
-    # g(x) = (x - 0.5)^2 - c is its own Hermite cubic: dips below 0 exactly when c > 0
-    for c, want in ((0.01, 0.5), (1e-12, 0.5), (-1e-12, -1.0)):
+    # g(x) = (x - 0.5)^2 - c is its own Hermite cubic: its minimum is at 0.5 whatever its value (the
+    # caller checks the dense output there, since a cubic above 0 may hide a shallow dip)
+    for c in (0.01, 1e-12, -1e-12, -0.2):
         g0 = g1 = 0.25 - c
-        assert R.hermite_dip(g0, -1.0, g1, 1.0) == pytest.approx(want, abs=1e-12)
-    assert R.hermite_dip(1.0, 1.0, 2.0, 1.0) == -1.0          # monotone: no dip
+        assert R.hermite_dip(g0, -1.0, g1, 1.0) == pytest.approx(0.5, abs=1e-12)
+    # g(x) = (x - 0.3)^2 + 0.1: minimum at 0.3
+    assert R.hermite_dip(0.19, -0.6, 0.59, 1.4) == pytest.approx(0.3, abs=1e-12)
+    assert R.hermite_dip(1.0, 1.0, 2.0, 1.0) == -1.0          # monotone: no interior minimum
 
 
 def _dense_step(p, y, cs, h, n=M.N_CORE):

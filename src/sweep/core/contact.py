@@ -499,6 +499,8 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     # sticks changes the friction that rolling needs, and it may jump outside the static cone
     if cs[CS_MODE] == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
         start_slip(t, y, p, cs, n, wk, istats)
+        # the slip changes the moments the stuck components need
+        settle_signs(t, y, p, cs, n, wk, istats, -1)
     return -1
 
 

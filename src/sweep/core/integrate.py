@@ -19,7 +19,7 @@ from .contact import (EV_AGAINST1, EV_CONE, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_E
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start, lattice_step
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
-from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
+from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
@@ -217,6 +217,9 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
 
     p[P_UFREEZE] = u_tol
     fstats[F_TIMPACT] = -math.inf
+    # event counts at the halt: steps after it only resolve Phi maxima, and what happens there
+    # must not depend on whether the frequency outputs are on
+    halt_trans, halt_stick, halt_impacts = -1, -1, -1
     t = 0.0
     start(y, p, cs, n, u_tol, wk, istats)
     eval_rhs(t, y, p, cs, n, f, aux, wk, istats)
@@ -285,6 +288,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                                    u_tol, wk, istats, fq)
             if t_halt >= 0.0:
                 outcome = oc.HALTED
+                halt_trans, halt_stick, halt_impacts = istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
                 dense_eval(F, 0, y, t, h, t_halt, n, wk[W_YBUF])
                 mark_halt(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end)
             elif int(trk[T_NEXT_LEVEL]) < nl:
@@ -364,6 +368,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
 
     if outcome < 0:
         outcome = oc.STEP_LIMIT
+    if outcome == oc.HALTED and halt_trans >= 0:
+        istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS] = halt_trans, halt_stick, halt_impacts
     if peaks_on:
         finish_levels(fq, level_out)
     if outcome == oc.HALTED:
