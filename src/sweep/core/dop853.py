@@ -124,17 +124,23 @@ def dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats):
 @njit(cache=True)
 def dense_eval(F, row0, y_old, t_old, h, t, n, out):
     """7th-order continuous extension (coefficients F[row0:row0+7]) at t in [t_old, t_old + h]."""
+    for i in range(n):
+        out[i] = dense_component(F, row0, y_old, t_old, h, t, i)
+
+
+@njit(cache=True)
+def dense_component(F, row0, y_old, t_old, h, t, i):
+    """Component i of the continuous extension at t (dense_eval for one component)."""
     x = (t - t_old) / h
     x1 = 1.0 - x
-    for i in range(n):
-        v = F[row0 + 6, i]
-        v = F[row0 + 5, i] + x * v
-        v = F[row0 + 4, i] + x1 * v
-        v = F[row0 + 3, i] + x * v
-        v = F[row0 + 2, i] + x1 * v
-        v = F[row0 + 1, i] + x * v
-        v = F[row0, i] + x1 * v
-        out[i] = y_old[i] + x * v
+    v = F[row0 + 6, i]
+    v = F[row0 + 5, i] + x * v
+    v = F[row0 + 4, i] + x1 * v
+    v = F[row0 + 3, i] + x * v
+    v = F[row0 + 2, i] + x1 * v
+    v = F[row0 + 1, i] + x * v
+    v = F[row0, i] + x1 * v
+    return y_old[i] + x * v
 
 
 @njit(cache=True)

@@ -38,7 +38,7 @@ import math
 from numba import njit
 
 from .contact import eval_rhs
-from .dop853 import dense_eval
+from .dop853 import dense_component, dense_eval
 from .layout import T_PENDING, W_AUXBUF, W_DYBUF, W_YBUF
 from .model import X_PHI, Y_THETA
 
@@ -102,21 +102,6 @@ def open_level(L, tl, fq, trk):
     fq[row, LW_STATE] = 1.0
     fq[row, LW_TL] = tl
     trk[T_PENDING] += 1.0
-
-
-@njit(cache=True)
-def dense_component(F, row0, y_old, t_old, h, t, i):
-    """Component i of dop853.dense_eval (same arithmetic)."""
-    x = (t - t_old) / h
-    x1 = 1.0 - x
-    v = F[row0 + 6, i]
-    v = F[row0 + 5, i] + x * v
-    v = F[row0 + 4, i] + x1 * v
-    v = F[row0 + 3, i] + x * v
-    v = F[row0 + 2, i] + x1 * v
-    v = F[row0 + 1, i] + x * v
-    v = F[row0, i] + x1 * v
-    return y_old[i] + x * v
 
 
 @njit(cache=True)
