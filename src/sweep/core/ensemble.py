@@ -164,6 +164,14 @@ def summary_fits(level_t, prec_hz, levels, nl, lay_flat, t_end_tau, chi, out):
 
 # --- one scene on fixed buffers -----------------------------------------------------------------
 @njit(cache=True)
+def zero_rows(a, rows):
+    """a[:rows, :] = 0 (a loop: the same source compiles as a CUDA device function)."""
+    for r in range(rows):
+        for c in range(a.shape[1]):
+            a[r, c] = 0.0
+
+
+@njit(cache=True)
 def solve_scene(y0, p0, settings, level_e, levels, chi, y, p, cs, wk, K, F, trk, lev, samples, traj, peaks,
                 y_end, fq, scratch, istats, fstats, derived):
     """Integrate one scene (inputs y0, p0, settings, level_e, levels: nl = level_e.shape[0]) on the
@@ -180,21 +188,11 @@ def solve_scene(y0, p0, settings, level_e, levels, chi, y, p, cs, wk, K, F, trk,
         p[i] = p0[i]
     for i in range(N_CS):
         cs[i] = 0.0
-    for r in range(wk.shape[0]):
-        for c in range(wk.shape[1]):
-            wk[r, c] = 0.0
-    for r in range(K.shape[0]):
-        for c in range(K.shape[1]):
-            K[r, c] = 0.0
-    for r in range(F.shape[0]):
-        for c in range(F.shape[1]):
-            F[r, c] = 0.0
-    for r in range(peaks.shape[0]):
-        for c in range(peaks.shape[1]):
-            peaks[r, c] = 0.0
-    for r in range(FQ_LEVEL0 + nl):
-        for c in range(FQ_COLS):
-            fq[r, c] = 0.0
+    zero_rows(wk, wk.shape[0])
+    zero_rows(K, K.shape[0])
+    zero_rows(F, F.shape[0])
+    zero_rows(peaks, peaks.shape[0])
+    zero_rows(fq, FQ_LEVEL0 + nl)
     for i in range(N_TRACK):
         trk[i] = 0.0
     trk[T_PEAK_RING] = 1.0
