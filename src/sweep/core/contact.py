@@ -18,9 +18,8 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from .impulse import project_velocity
+from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
 from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
@@ -66,13 +65,13 @@ DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
 DIR_MAXIT = 30
 
 
-@njit(cache=True)
+@kernel
 def slave_speed(aux, p, u_tol):
     """Slip speed (u_hat) below which the slip direction is slaved: max(slip_tol, SLAVE_EPS mu_d Phi)."""
     return max(u_tol, SLAVE_EPS * p[P_MUD] * aux[X_PHI])
 
 
-@njit(cache=True)
+@kernel
 def mode_energy(y, p, cs):
     """Energy of the state in the contact state cs (eq. 6.1 corrected; the slip counts when sliding)."""
     side = int(cs[CS_SIDE])
@@ -82,7 +81,7 @@ def mode_energy(y, p, cs):
     return energy_with_slip(y, p, side, y[Y_U1], y[Y_U2])
 
 
-@njit(cache=True)
+@kernel
 def _model(t, y, p, cs, n, dy, aux, n0x, n0y, istats):
     """The model's right-hand side for the contact state cs (SLAVED evaluates as sliding)."""
     mode = SLIDE if cs[CS_MODE] != ROLL else ROLL
@@ -91,7 +90,7 @@ def _model(t, y, p, cs, n, dy, aux, n0x, n0y, istats):
     istats[I_RHS] += 1
 
 
-@njit(cache=True)
+@kernel
 def slip_rates(nu, u, t, y, p, cs, n, dy, aux, ys, istats):
     """(cross, dot) of the slip acceleration with the slip direction s = (cos nu, sin nu), for the
     slip vector u s; the full right-hand side is left in dy, aux."""
@@ -105,7 +104,7 @@ def slip_rates(nu, u, t, y, p, cs, n, dy, aux, ys, istats):
     return dy[Y_U2] * c - dy[Y_U1] * s, dy[Y_U1] * c + dy[Y_U2] * s
 
 
-@njit(cache=True)
+@kernel
 def slaved_direction(nu0, u, t, y, p, cs, n, dy, aux, ys, istats):
     """Slip direction near nu0 at which the slip acceleration is parallel to the slip (secant).
 
@@ -134,7 +133,7 @@ def slaved_direction(nu0, u, t, y, p, cs, n, dy, aux, ys, istats):
     return xb
 
 
-@njit(cache=True)
+@kernel
 def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
     """d y/d tau and contact quantities (aux) for the contact state cs; counts its model calls."""
     mode = cs[CS_MODE]
@@ -171,7 +170,7 @@ def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
         _model(t, y, p, cs, n, dy, aux, 1.0, 0.0, istats)
 
 
-@njit(cache=True)
+@kernel
 def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
     """Slip direction at the onset of sliding (u = 0), consistent with the sliding that follows.
 
@@ -214,7 +213,7 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
     return best
 
 
-@njit(cache=True)
+@kernel
 def start_slip(t, y, p, cs, n, wk, istats):
     """ROLL -> SLAVED at zero slip speed, in the onset direction. Counts the transition."""
     _model(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0, istats)
@@ -227,7 +226,7 @@ def start_slip(t, y, p, cs, n, wk, istats):
     istats[I_TRANS] += 1
 
 
-@njit(cache=True)
+@kernel
 def set_slip(t, y, p, cs, n, u_tol, wk, istats):
     """Contact state for a Cartesian slip vector y[U1:U3]: SLIDE above the slaving speed (or where
     no quasi-static direction is near), else SLAVED with the quasi-static direction nearest the
@@ -246,7 +245,7 @@ def set_slip(t, y, p, cs, n, u_tol, wk, istats):
     cs[CS_NU] = slaved_direction(nu, un, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP], istats)
 
 
-@njit(cache=True)
+@kernel
 def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
     """The quasi-static slip direction that the direction dynamics d nu/d tau = cross(nu)/u carry nu
     to: followed from nu in the direction of sign(cross) to the first sign change (64 steps on the
@@ -279,7 +278,7 @@ def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
     return math.nan
 
 
-@njit(cache=True)
+@kernel
 def try_slave(t, y, p, cs, n, wk, istats):
     """SLIDE -> SLAVED onto the attracting quasi-static direction of the slip; where there is none
     (a spiralling slip) it stays in SLIDE, and this hand-over is off until the slip is fast again."""
@@ -310,7 +309,7 @@ def try_slave(t, y, p, cs, n, wk, istats):
         start_slip(t, y, p, cs, n, wk, istats)
 
 
-@njit(cache=True)
+@kernel
 def cone_violated(t, y, p, cs, n, wk, istats):
     """Rolling: the friction needed lies outside the static cone |F| <= mu_s Phi."""
     eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
@@ -318,7 +317,7 @@ def cone_violated(t, y, p, cs, n, wk, istats):
     return aux[X_PHI] > 0.0 and p[P_MUS] * aux[X_PHI] < math.hypot(aux[X_F1], aux[X_F2])
 
 
-@njit(cache=True)
+@kernel
 def stick_or_flip(i, t, y, p, cs, n, wk, istats):
     """At omega.a_i = 0: stick if the moment can hold it (|sigma needed| <= 1), else flip its sign
     to the one the motion will take."""
@@ -332,7 +331,7 @@ def stick_or_flip(i, t, y, p, cs, n, wk, istats):
     cs[CS_SIG + i] = 1.0 if need > 0.0 else -1.0
 
 
-@njit(cache=True)
+@kernel
 def release_moved(y, cs, g_before):
     """A stuck moment component whose omega.a_i an impulse has moved off its held value is free:
     the dry-friction moment is finite and cannot hold it through an impulse (sign of the new
@@ -345,7 +344,7 @@ def release_moved(y, cs, g_before):
                 cs[CS_SIG + i] = 1.0 if g[i] > 0.0 else -1.0
 
 
-@njit(cache=True)
+@kernel
 def settle_signs(t, y, p, cs, n, wk, istats, held):
     """After a discrete update, every moment component is made consistent with the new state.
 
@@ -378,7 +377,7 @@ def settle_signs(t, y, p, cs, n, wk, istats, held):
         stick_or_flip(found, t, y, p, cs, n, wk, istats)
 
 
-@njit(cache=True)
+@kernel
 def consistent_signs(t, y, p, cs, n, wk, istats):
     """Every free moment sign agrees with omega.a_i; an exact zero gets the stick test."""
     eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
@@ -394,7 +393,7 @@ def consistent_signs(t, y, p, cs, n, wk, istats):
                 stick_or_flip(i, t, y, p, cs, n, wk, istats)
 
 
-@njit(cache=True)
+@kernel
 def event_values(y, aux, p, cs, u_tol, level_e, g):
     """g[k] for every event k (inf where not active). `aux` must belong to `y`."""
     for k in range(N_EVENTS):
@@ -426,7 +425,7 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
         g[EV_LEVEL] = mode_energy(y, p, cs) - level_e
 
 
-@njit(cache=True)
+@kernel
 def end_slip(y, p, cs, wk, istats):
     """SLIDE -> ROLL at slip_tol: a plastic contact impulse removes the slip (its energy goes to
     sliding)."""
@@ -436,7 +435,7 @@ def end_slip(y, p, cs, wk, istats):
     istats[I_TRANS] += 1
 
 
-@njit(cache=True)
+@kernel
 def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     """Discrete update at a located event k (state y at the event, changed in place).
 
@@ -504,7 +503,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     return -1
 
 
-@njit(cache=True)
+@kernel
 def side_change(t, y, p, cs, n, u_tol, wk, istats, fstats):
     """alpha = 0: plastic impact of the other rim edge. Ends the scene (line contact, outcome 4)
     when no rotation towards the new side is left, or when two impacts come within ZENO_DTAU (the

@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from .contact import eval_rhs
+from .jit import kernel
 from .layout import W_AUXTMP, W_DYTMP, W_YTMP
 from .model import N_CORE, Y_ALPHA
 from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
@@ -24,7 +23,7 @@ ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8)
 N_DENSE = 7                 # rows of dense-output coefficients
 
 
-@njit(cache=True)
+@kernel
 def stages(first, last, t, y, h, n, p, cs, K, wk, istats):
     """Evaluate RK stages first..last-1 into K (stage s uses K[0:s] and row s of the tableau)."""
     ytmp = wk[W_YTMP]
@@ -37,7 +36,7 @@ def stages(first, last, t, y, h, n, p, cs, K, wk, istats):
         eval_rhs(t + RK_C[s] * h, ytmp, p, cs, n, K[s], wk[W_AUXTMP], wk, istats)
 
 
-@njit(cache=True)
+@kernel
 def rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats):
     """One DOP853 step from (t, y, f): y_new, and f_new = K[12] = f(t + h, y_new)."""
     for i in range(n):
@@ -53,7 +52,7 @@ def rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats):
         K[N_STAGES, i] = f_new[i]
 
 
-@njit(cache=True)
+@kernel
 def error_norm(K, h, y, y_new, n, rtol, atol):
     """Hairer's dop853 error norm over the dynamic state and the dissipation quadratures only.
 
@@ -87,7 +86,7 @@ def error_norm(K, h, y, y_new, n, rtol, atol):
     return abs(h) * e5 / math.sqrt(den * n)
 
 
-@njit(cache=True)
+@kernel
 def step_factor(err):
     """Step-size factor after an error norm `err` (accepted if err <= 1)."""
     if err == 0.0:
@@ -97,7 +96,7 @@ def step_factor(err):
     return min(MAX_FACTOR, max(MIN_FACTOR, SAFETY * err ** ERR_EXPONENT))
 
 
-@njit(cache=True)
+@kernel
 def accepted_step_factor(err, after_reject):
     """Step-size factor after an accepted step (err <= 1); no growth right after a rejection (as
     in Hairer's DOP853): 6 % fewer steps at the median harness scene."""
@@ -105,7 +104,7 @@ def accepted_step_factor(err, after_reject):
     return min(fac, 1.0) if after_reject else fac
 
 
-@njit(cache=True)
+@kernel
 def dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats):
     """Coefficients F[0:7] of the continuous extension (3 extra RHS calls: stages 13..15)."""
     stages(N_STAGES + 1, N_STAGES_EXTENDED, t, y, h, n, p, cs, K, wk, istats)
@@ -121,14 +120,14 @@ def dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats):
             F[3 + r, i] = h * acc
 
 
-@njit(cache=True)
+@kernel
 def dense_eval(F, row0, y_old, t_old, h, t, n, out):
     """7th-order continuous extension (coefficients F[row0:row0+7]) at t in [t_old, t_old + h]."""
     for i in range(n):
         out[i] = dense_component(F, row0, y_old, t_old, h, t, i)
 
 
-@njit(cache=True)
+@kernel
 def dense_component(F, row0, y_old, t_old, h, t, i):
     """Component i of the continuous extension at t (dense_eval for one component)."""
     x = (t - t_old) / h
@@ -143,7 +142,7 @@ def dense_component(F, row0, y_old, t_old, h, t, i):
     return y_old[i] + x * v
 
 
-@njit(cache=True)
+@kernel
 def initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats):
     """Starting step size (Hairer & Wanner II.4, 'starting step size'), on the dynamic state."""
     nc = min(n, N_CORE)

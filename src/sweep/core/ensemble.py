@@ -6,7 +6,7 @@ with `summary_fits`, which `sweep.simulate` calls too. Every buffer has a size f
 and MAX_LEVELS / PEAK_RING, so the same functions run
 
   * on the CPU: `solve_index` on buffers each thread allocates once (sweep.ensemble, threads);
-  * on CUDA: numba-cuda compiles these @njit functions, and everything they call, as device
+  * on CUDA: numba-cuda compiles these @kernel (numba njit) functions, and everything they call, as device
     functions of the persistent-thread kernel (sweep.ensemble.cuda_kernel) with the buffers in
     `cuda.local.array`s. There is no second copy of the physics or of the event logic.
 
@@ -20,10 +20,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from .frequency import FQ_COLS, FQ_LEVEL0
 from .integrate import run
+from .jit import kernel
 from .layout import (F_TEND, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
                      N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS)
 from .model import N_FULL, N_PARAMS
@@ -46,12 +46,12 @@ TWO_PI = 2.0 * math.pi
 
 
 # --- halt time and exponents (diagnostics.py explains the method) -------------------------------
-@njit(cache=True)
+@kernel
 def _halt_residual(x, t1, t2, t3, rho):
     return math.log((x - t1) / (x - t2)) / math.log((x - t2) / (x - t3)) - rho
 
 
-@njit(cache=True)
+@kernel
 def halt_from_three(t1, t2, t3, b1, b2, b3):
     """(t_halt, p) from three level times t1 < t2 < t3 and inclinations b1 > b2 > b3, or NaNs."""
     d1 = t2 - t1
@@ -80,7 +80,7 @@ def halt_from_three(t1, t2, t3, b1, b2, b3):
     return x, math.log(b2 / b3) / math.log((x - t2) / (x - t3))
 
 
-@njit(cache=True)
+@kernel
 def halt_fit(level_t, levels, nl, out):
     """out[D_THALT, D_THALT_ERR, D_HALT_FINITE, D_APPROACH] from the last reached levels
     (diagnostics.halt_time: the fit on the last three; its error bar is the extrapolated remainder
@@ -106,7 +106,7 @@ def halt_fit(level_t, levels, nl, out):
     out[D_THALT_ERR] = th - level_t[i1]
 
 
-@njit(cache=True)
+@kernel
 def ramp_fit(level_t, precession, nl, t_halt):
     """(n, standard error of n), n in Omega ~ (t_halt - t)^(-n): least squares of ln|Omega| on
     ln(t_halt - t) over the levels with finite values before t_halt; NaN if fewer than two (the
@@ -148,7 +148,7 @@ def ramp_fit(level_t, precession, nl, t_halt):
     return -slope, math.sqrt(ssr / (m - 2) / sxx)
 
 
-@njit(cache=True)
+@kernel
 def summary_fits(level_t, prec_hz, levels, nl, lay_flat, t_end_tau, chi, out):
     """The summary's fitted numbers into out (D_*). level_t (s), prec_hz (Hz), levels (rad): the
     first nl entries. A disk that lay flat halted at the located event t_end_tau."""
@@ -163,7 +163,7 @@ def summary_fits(level_t, prec_hz, levels, nl, lay_flat, t_end_tau, chi, out):
 
 
 # --- one scene on fixed buffers -----------------------------------------------------------------
-@njit(cache=True)
+@kernel
 def zero_rows(a, rows):
     """a[:rows, :] = 0 (a loop: the same source compiles as a CUDA device function)."""
     for r in range(rows):
@@ -171,7 +171,7 @@ def zero_rows(a, rows):
             a[r, c] = 0.0
 
 
-@njit(cache=True)
+@kernel
 def solve_scene(y0, p0, settings, level_e, levels, chi, y, p, cs, wk, K, F, trk, lev, samples, traj, peaks,
                 y_end, fq, scratch, istats, fstats, derived):
     """Integrate one scene (inputs y0, p0, settings, level_e, levels: nl = level_e.shape[0]) on the
@@ -229,7 +229,7 @@ def work_buffers():
             np.zeros(N_ISTATS, np.int64), np.zeros(N_FSTATS), np.zeros(N_DERIVED))
 
 
-@njit(cache=True)
+@kernel
 def load_inputs(i, Y0, P, S, LE, LV, y0, p0, s, le, lv):
     """Copy scene i's inputs into a worker's buffers."""
     for j in range(N_FULL):
@@ -243,7 +243,7 @@ def load_inputs(i, Y0, P, S, LE, LV, y0, p0, s, le, lv):
         lv[j] = LV[i, j]
 
 
-@njit(cache=True)
+@kernel
 def store_outputs(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER):
     """Copy a worker's results for scene i into the batch's output arrays."""
     for j in range(N_ISTATS):
@@ -259,7 +259,7 @@ def store_outputs(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LE
         DER[i, j] = derived[j]
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def solve_index(i, Y0, P, S, LE, LV, NL, CHI, y0, p0, s, le, lv, y, p, cs, wk, K, F, trk, lev, samples, traj,
                 peaks, y_end, fq, scratch, istats, fstats, derived, ISTATS, FSTATS, LEV, YEND, DER):
     """Scene i of the batch on one CPU worker's buffers (releases the GIL: threads run in parallel)."""

@@ -35,10 +35,9 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from .contact import eval_rhs
 from .dop853 import dense_component, dense_eval
+from .jit import kernel
 from .layout import T_PENDING, W_AUXBUF, W_DYBUF, W_YBUF
 from .model import X_PHI, Y_THETA
 
@@ -80,7 +79,7 @@ LO_RINGING = 4
 LO_CYCLES = 5
 
 
-@njit(cache=True)
+@kernel
 def freq_start(theta0, phi0, fq):
     """Lattice origin at theta(0), both rings holding index 0 at tau = 0, no maximum pending."""
     for r in range(fq.shape[0]):
@@ -95,7 +94,7 @@ def freq_start(theta0, phi0, fq):
     fq[0, Q_AMP] = abs(phi0)
 
 
-@njit(cache=True)
+@kernel
 def open_level(L, tl, fq, trk):
     """Level L was crossed at tl: its window waits for the first lattice point after tl."""
     row = FQ_LEVEL0 + L
@@ -104,7 +103,7 @@ def open_level(L, tl, fq, trk):
     trk[T_PENDING] += 1.0
 
 
-@njit(cache=True)
+@kernel
 def theta_crossing(F, y, t, h, ta, tb, target, sgn):
     """A time where sgn (theta - target) turns >= 0 in [ta, tb] (negative at ta, >= 0 at tb), to
     round-off (Illinois regula falsi on the dense output)."""
@@ -133,7 +132,7 @@ def theta_crossing(F, y, t, h, ta, tb, target, sgn):
     return tb
 
 
-@njit(cache=True)
+@kernel
 def _next_crossing(r, t_lo, t, y, h, seg_end, theta_end, F, fq):
     """Time of the next new lattice point in direction r on [t_lo, seg_end], or inf."""
     sgn = 1.0 - 2.0 * r
@@ -143,7 +142,7 @@ def _next_crossing(r, t_lo, t, y, h, seg_end, theta_end, F, fq):
     return theta_crossing(F, y, t, h, t_lo, seg_end, target, sgn)
 
 
-@njit(cache=True)
+@kernel
 def lattice_step(t, y, h, seg_end, theta_end, F, n, p, cs, fq, level_out, trk, wk, istats):
     """The new lattice points on [t, seg_end] in time order: Phi there (dense output, this
     segment's contact state), the rings, and the level windows they open, fill or complete."""
@@ -161,7 +160,7 @@ def lattice_step(t, y, h, seg_end, theta_end, F, n, p, cs, fq, level_out, trk, w
             td = _next_crossing(1, tc, t, y, h, seg_end, theta_end, F, fq)
 
 
-@njit(cache=True)
+@kernel
 def push_lattice(r, tc, phi, fq, level_out, trk):
     """Lattice point J + 1 of direction r reached at tc with Phi = phi: open the windows of levels
     crossed before tc (their past from the ring), append it to the open windows of direction r,
@@ -203,7 +202,7 @@ def push_lattice(r, tc, phi, fq, level_out, trk):
     fq[0, Q_J + r] += 1.0
 
 
-@njit(cache=True)
+@kernel
 def window_values(L, m, fq, level_out):
     """Mean precession rate and ringing ratio of level L over its m whole cycles each side."""
     row = FQ_LEVEL0 + L
@@ -219,7 +218,7 @@ def window_values(L, m, fq, level_out):
     fq[row, LW_STATE] = 3.0
 
 
-@njit(cache=True)
+@kernel
 def finish_levels(fq, level_out):
     """At the end of the scene: windows still open get the largest symmetric window they have."""
     for L in range(fq.shape[0] - FQ_LEVEL0):
@@ -231,7 +230,7 @@ def finish_levels(fq, level_out):
         fq[row, LW_STATE] = 3.0
 
 
-@njit(cache=True)
+@kernel
 def _tone_fit(v, i0, i1, S, nu, e2s):
     """Weighted least squares of the detrended samples v[i0..i1] (already weighted-orthogonal to
     1 and k, weights: Blackman-Harris) on cos and sin of 2 pi nu k/S, with those two also
@@ -280,14 +279,14 @@ def _tone_fit(v, i0, i1, S, nu, e2s):
     return a * pc + b * ps, math.sqrt(a * a + b * b)
 
 
-@njit(cache=True)
+@kernel
 def _bh(k, N):
     """4-term Blackman-Harris window at sample k of N."""
     x = 2.0 * math.pi * k / (N - 1)
     return BH[0] - BH[1] * math.cos(x) + BH[2] * math.cos(2.0 * x) - BH[3] * math.cos(3.0 * x)
 
 
-@njit(cache=True)
+@kernel
 def ringing_ratio(v, i0, i1, S):
     """Dominant frequency of the samples v[i0..i1] (uniform, S per cycle) in cycles per cycle: the
     frequency of the sinusoid that, with a straight line, fits them best by least squares weighted
@@ -356,7 +355,7 @@ def ringing_ratio(v, i0, i1, S):
     return nu_star
 
 
-@njit(cache=True)
+@kernel
 def peak_candidate(tpk, pvk, thk, fq):
     """A located maximum of Phi: it becomes the candidate if it rose PEAK_HYSTERESIS A above the
     lowest Phi since the last counted maximum, or replaces a lower candidate."""
@@ -373,7 +372,7 @@ def peak_candidate(tpk, pvk, thk, fq):
     fq[0, Q_CAND_RISE] = rise
 
 
-@njit(cache=True)
+@kernel
 def peak_confirmed(phi_c, fq):
     """Phi at a step end: True if it confirms the candidate maximum (a fall of PEAK_HYSTERESIS A
     below it; its rise becomes A); otherwise it lowers the running minimum."""

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
+from .jit import kernel
 from .model import P_A, P_C, P_H, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, physical_velocity
 
 # scratch layout: rows 0..5 hold J (6 x 5) in columns 0..4 and the augmented normal matrix
@@ -18,7 +17,7 @@ from .model import P_A, P_C, P_H, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, physica
 _M0, _VROW, _WT = 5, 6, 6
 
 
-@njit(cache=True)
+@kernel
 def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S, slip_dir=math.nan):
     """Project y's velocity onto the contact on `side_new` in place; returns the energy lost.
 

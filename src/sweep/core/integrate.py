@@ -12,13 +12,13 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from .. import outcomes as oc
 from .contact import (EV_AGAINST1, EV_CONE, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
                       cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start, lattice_step
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
+from .jit import kernel
 from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
@@ -39,14 +39,14 @@ ENERGY_GUARD = 10.0
 KernelOutput = namedtuple("KernelOutput", "istats fstats levels samples trajectory peaks y_end")
 
 
-@njit(cache=True)
+@kernel
 def failure_outcome(ok):
     """Outcome for a right-hand side that failed: the model's Painleve flag (-1) or a slaved
     direction that did not converge (0)."""
     return oc.PAINLEVE if ok < 0.0 else oc.NUMERICAL_ERROR
 
 
-@njit(cache=True)
+@kernel
 def start(y, p, cs, n, u_tol, wk, istats):
     """Initial discrete state: moment signs, slip mode, and slip onset if rolling cannot hold."""
     cs[CS_SIDE] = 1.0 if y[Y_ALPHA] > 0.0 else -1.0
@@ -61,7 +61,7 @@ def start(y, p, cs, n, u_tol, wk, istats):
         start_slip(0.0, y, p, cs, n, wk, istats)
 
 
-@njit(cache=True)
+@kernel
 def lift_off(k, t, y, h, g0, d0, g1, d1, F, n, p, cs, u_tol, lev, wk, istats):
     """On a step that starts on event k's surface (g0 <= 0, just after a discrete update put the
     state there) and ends with g1 <= 0: a time where g_k > 0 and its value, to bracket a return to
@@ -83,7 +83,7 @@ def lift_off(k, t, y, h, g0, d0, g1, d1, F, n, p, cs, u_tol, lev, wk, istats):
     return -1.0, 0.0
 
 
-@njit(cache=True)
+@kernel
 def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats):
     """Earliest event on the accepted step [t, t + h]: (k, restart time, dense output made?).
 
@@ -157,7 +157,7 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats
     return first_k, first_t, have_dense
 
 
-@njit(cache=True)
+@kernel
 def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard):
     """One DOP853 step into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for
     a non-finite step or one that raises the energy by more than e_guard) and counts it."""
@@ -182,7 +182,7 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard):
     return err
 
 
-@njit(cache=True)
+@kernel
 def mark_halt(t_halt, y_halt, n, p, cs, fstats, trk, y_end):
     """The scene halted at t_halt in state y_halt: its end state, energy and impact losses."""
     fstats[F_TEND] = t_halt
@@ -192,7 +192,7 @@ def mark_halt(t_halt, y_halt, n, p, cs, fstats, trk, y_end):
     trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
 
 
-@njit(cache=True)
+@kernel
 def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, level_out, samples, traj,
         peaks, y_end, fq):
     """Integrate one scene in place of the given buffers (see integrate for their shapes)."""

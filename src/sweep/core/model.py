@@ -18,7 +18,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from .jit import kernel
 
 # --- state vector layout -------------------------------------------------------------------
 Y_ALPHA, Y_W1, Y_W2, Y_W3, Y_U1, Y_U2 = 0, 1, 2, 3, 4, 5
@@ -66,7 +67,7 @@ def make_params(k2_shape: float, radius: float, thickness: float, gravity: float
     return p, chi
 
 
-@njit(cache=True)
+@kernel
 def moment_axes_rates(y):
     """omega.a_i for i = 1, 2, 3 (the arguments of the sign terms of M_f, eq. 3.3)."""
     s = math.sin(y[Y_ALPHA])
@@ -75,7 +76,7 @@ def moment_axes_rates(y):
     return w1, w2 * c - w3 * s, w2 * s + w3 * c
 
 
-@njit(cache=True)
+@kernel
 def height_above_flat(alpha, habs):
     """e - |h|: centre height above its flat-lying value, in R, without cancellation near pi/2.
 
@@ -86,7 +87,7 @@ def height_above_flat(alpha, habs):
     return c - habs * c * c / (1.0 + abs(math.sin(alpha)))
 
 
-@njit(cache=True)
+@kernel
 def energy(y, p, side, mode):
     """Total energy chi^2 E/(m R^2), zero for the disk lying flat at rest (eq. 6.1, corrected).
 
@@ -98,7 +99,7 @@ def energy(y, p, side, mode):
     return energy_with_slip(y, p, side, 0.0, 0.0)
 
 
-@njit(cache=True)
+@kernel
 def energy_with_slip(y, p, side, u1, u2):
     """energy() with the slip components on a1, a2 given explicitly."""
     h = side * p[P_H]
@@ -115,13 +116,13 @@ def energy_with_slip(y, p, side, u1, u2):
     return kin + p[P_G] * height_above_flat(a, p[P_H])
 
 
-@njit(cache=True)
+@kernel
 def _solve2(m11, m12, m21, m22, b1, b2):
     det = m11 * m22 - m12 * m21
     return (m22 * b1 - m12 * b2) / det, (m11 * b2 - m21 * b1) / det
 
 
-@njit(cache=True)
+@kernel
 def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     """Time derivatives d y/d tau of the state, and contact quantities in `aux`.
 
@@ -275,7 +276,7 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     aux[X_OK] = ok
 
 
-@njit(cache=True)
+@kernel
 def physical_velocity(y, p, side, mode, out):
     """Centre velocity (on e1, e2, e3) and angular velocity (on e1, e2, e3) of the reduced state."""
     h = side * p[P_H]
@@ -296,7 +297,7 @@ def physical_velocity(y, p, side, mode, out):
     out[5] = w3
 
 
-@njit(cache=True)
+@kernel
 def steady_rolling_w3sq(beta, p):
     """omega_3^2 of the steady centre-fixed rolling motion at inclination beta = pi/2 - |alpha|.
 
@@ -310,7 +311,7 @@ def steady_rolling_w3sq(beta, p):
     return p[P_G] * (h * c - s) * c / (p[P_C] * h * c - p[P_A] * s)
 
 
-@njit(cache=True)
+@kernel
 def steady_rolling_energy(beta, p):
     """Energy of the steady centre-fixed rolling motion at inclination beta (dimensionless).
 
@@ -323,7 +324,7 @@ def steady_rolling_energy(beta, p):
     return 0.5 * (p[P_A] + p[P_C] * h * h) * w3sq + p[P_G] * height_above_flat(0.5 * math.pi - beta, h)
 
 
-@njit(cache=True)
+@kernel
 def steady_rolling_max_level(p, step):
     """Largest inclination (rad, on a grid of `step`) below which the steady centre-fixed rolling
     motion exists and its energy increases with beta: where the energy-equivalent inclination is

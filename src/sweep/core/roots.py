@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from .contact import eval_rhs, event_values
 from .dop853 import dense_eval
+from .jit import kernel
 from .layout import W_AUXBUF, W_DYBUF, W_GBUF, W_YBUF
 from .model import X_PHI, Y_ALPHA, Y_W1, Y_W2, Y_W3
 
@@ -23,7 +22,7 @@ EVENT_TOL_TAU = 1e-12
 RATE_STEP = 1e-7
 
 
-@njit(cache=True)
+@kernel
 def sign_rate(k, y, dy):
     """d/dtau of omega.a_k (k = 0, 1, 2) from the state and its derivative."""
     a = y[Y_ALPHA]
@@ -37,7 +36,7 @@ def sign_rate(k, y, dy):
     return dy[Y_W2] * s + dy[Y_W3] * c + w1 * (w2 * c - w3 * s)
 
 
-@njit(cache=True)
+@kernel
 def _hermite(x, g0, d0, g1, d1):
     h00 = (1.0 + 2.0 * x) * (1.0 - x) ** 2
     h10 = x * (1.0 - x) ** 2
@@ -46,7 +45,7 @@ def _hermite(x, g0, d0, g1, d1):
     return h00 * g0 + h10 * d0 + h01 * g1 + h11 * d1
 
 
-@njit(cache=True)
+@kernel
 def _hermite_extremum(g0, d0, g1, d1, sgn):
     """x in (0, 1) of the interior extremum of the cubic Hermite interpolant (values g0, g1 and
     derivatives d0, d1 per unit x at the step ends) with the smallest sgn * H (sgn = 1: lowest
@@ -80,7 +79,7 @@ def _hermite_extremum(g0, d0, g1, d1, sgn):
     return best
 
 
-@njit(cache=True)
+@kernel
 def hermite_dip(g0, d0, g1, d1):
     """Where in (0, 1) the cubic Hermite interpolant of g (values g0, g1 > 0 and derivatives d0, d1
     per unit x at the step ends) has an interior minimum: that x, else -1. The caller checks g on
@@ -89,20 +88,20 @@ def hermite_dip(g0, d0, g1, d1):
     return _hermite_extremum(g0, d0, g1, d1, 1.0)
 
 
-@njit(cache=True)
+@kernel
 def hermite_peak(g0, d0, g1, d1):
     """x in (0, 1) of the interpolant's highest interior maximum, else -1 (see _hermite_extremum)."""
     return _hermite_extremum(g0, d0, g1, d1, -1.0)
 
 
-@njit(cache=True)
+@kernel
 def hermite_interior_root(k, sgn, y0, f0, y1, f1, g0, g1, h):
     """Interior dip of sgn * omega.a_k on a step whose end values are both positive (see hermite_dip);
     its derivatives follow from the state and its derivative, so it costs no RHS evaluation."""
     return hermite_dip(g0, sgn * sign_rate(k, y0, f0) * h, g1, sgn * sign_rate(k, y1, f1) * h)
 
 
-@njit(cache=True)
+@kernel
 def event_rate(k, g_here, t, y, f, p, cs, n, u_tol, level_e, wk, istats):
     """d g_k/d tau along the solution at (t, y) (where g_k = g_here, derivative f), by a forward
     difference of step RATE_STEP along f (one RHS evaluation)."""
@@ -114,7 +113,7 @@ def event_rate(k, g_here, t, y, f, p, cs, n, u_tol, level_e, wk, istats):
     return (wk[W_GBUF, k] - g_here) / RATE_STEP
 
 
-@njit(cache=True)
+@kernel
 def event_value_at(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
     """g_k at time t on a step's dense output (coefficients F[row0:row0+7]): one RHS evaluation."""
     dense_eval(F, row0, y_old, t_old, h, t, n, wk[W_YBUF])
@@ -123,7 +122,7 @@ def event_value_at(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk,
     return wk[W_GBUF, k]
 
 
-@njit(cache=True)
+@kernel
 def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
     """Illinois regula falsi for g_k on [ta, tb] with g(ta) > 0 >= g(tb). Returns (ta, tb) bracket.
 
@@ -160,14 +159,14 @@ def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, 
     return ta, tb
 
 
-@njit(cache=True)
+@kernel
 def _phi_at(t, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
     dense_eval(F, row0, y_old, t_old, h, t, n, wk[W_YBUF])
     eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
     return wk[W_AUXBUF, X_PHI]
 
 
-@njit(cache=True)
+@kernel
 def brent_max_phi(ta, tb, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
     """Time of the maximum of Phi on [ta, tb] by Brent's parabolic/golden-section search.
 

@@ -6,11 +6,10 @@ over three counted Phi maxima), ringing ratio, cycles in the window (frequency.p
 """
 from __future__ import annotations
 
-from numba import njit
-
 from .contact import EV_LEVEL, eval_rhs, mode_energy
 from .dop853 import dense_eval
 from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, open_level, peak_candidate, peak_confirmed
+from .jit import kernel
 from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, N_CS, T_NEXT_LEVEL,
                      T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
                      T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
@@ -21,7 +20,7 @@ from .roots import brent_max_phi, locate
 PEAK_PROMINENCE = 1e-6
 
 
-@njit(cache=True)
+@kernel
 def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk, track_peaks, u_tol, wk, istats,
                   fq):
     """Record the halt levels crossed on [t, seg_end] (energy is monotone: one root each).
@@ -56,7 +55,7 @@ def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk,
     return -1.0
 
 
-@njit(cache=True)
+@kernel
 def halt_flat(t, level_out, trk, level_e):
     """The disk lies flat at t: the levels not yet crossed are crossed now (the face impact
     dissipates what is left); levels recorded without frequencies."""
@@ -66,7 +65,7 @@ def halt_flat(t, level_out, trk, level_e):
     trk[T_NEXT_LEVEL] = nl
 
 
-@njit(cache=True)
+@kernel
 def record_sample(y, aux, p, cs, n, row):
     """One sample row: state, energy, Phi, mode."""
     for i in range(n):
@@ -76,7 +75,7 @@ def record_sample(y, aux, p, cs, n, row):
     row[N_FULL + 2] = cs[CS_MODE]
 
 
-@njit(cache=True)
+@kernel
 def record_samples(t, y, h, seg_end, t_stop, F, n, p, cs, sample_tau, samples, trk, wk, istats):
     """Samples with tau in (t, seg_end] (and <= t_stop) from the dense output."""
     ns = sample_tau.shape[0]
@@ -91,7 +90,7 @@ def record_samples(t, y, h, seg_end, t_stop, F, n, p, cs, sample_tau, samples, t
         trk[T_NEXT_SAMPLE] = j + 1
 
 
-@njit(cache=True)
+@kernel
 def record_traj(t, y, phi, cs, n, traj, istats):
     """Append one trajectory row (flags an overflow instead of growing the buffer)."""
     i = istats[I_TRAJ]
@@ -106,7 +105,7 @@ def record_traj(t, y, phi, cs, n, traj, istats):
     istats[I_TRAJ] = i + 1
 
 
-@njit(cache=True)
+@kernel
 def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running, fq):
     """Phi at the last three segment ends a < b >= c brackets a maximum: locate it (Brent) on the
     two steps' dense outputs; if it stands out of its bracket it passes the hysteresis filter
@@ -144,7 +143,7 @@ def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk,
     istats[I_PEAKS] = npk
 
 
-@njit(cache=True)
+@kernel
 def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats):
     cap = peaks.shape[0]   # row of peak j: j, or j % cap where the buffer is a ring (trk[T_PEAK_RING])
     peaks[npk % cap, 0] = tpk
@@ -168,7 +167,7 @@ def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats
             trk[T_PENDING] -= 1.0
 
 
-@njit(cache=True)
+@kernel
 def shift_peak_window(t, y, h, seg_end, phi_c, F, n, cs, trk, wk):
     """Keep this segment's Phi, dense output and contact state for the next bracket."""
     trk[T_PHI_A] = trk[T_PHI_B]
