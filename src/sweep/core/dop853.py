@@ -14,7 +14,7 @@ from .jit import kernel
 from .layout import W_AUXTMP, W_DYTMP, W_YTMP
 from .model import N_CORE, Y_ALPHA
 from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
-from .tableau import N_STAGES, N_STAGES_EXTENDED
+from .tableau import A_COLS, A_COUNT, B_COLS, D_COLS, E_COLS, N_STAGES, N_STAGES_EXTENDED
 
 SAFETY = 0.9
 MIN_FACTOR = 0.2
@@ -25,14 +25,22 @@ N_DENSE = 7                 # rows of dense-output coefficients
 
 @kernel
 def stages(first, last, t, y, h, n, p, cs, K, wk, istats):
-    """Evaluate RK stages first..last-1 into K (stage s uses K[0:s] and row s of the tableau)."""
+    """Evaluate RK stages first..last-1 into K (stage s uses K[0:s] and row s of the tableau).
+
+    The sums run stage by stage over whole rows of K (contiguous, vectorisable) and skip the
+    tableau's zeros; per component they add the same terms in the same order as a plain dot product.
+    """
     ytmp = wk[W_YTMP]
     for s in range(first, last):
         for i in range(n):
-            acc = 0.0
-            for j in range(s):
-                acc += RK_A[s, j] * K[j, i]
-            ytmp[i] = y[i] + h * acc
+            ytmp[i] = 0.0
+        for jj in range(A_COUNT[s]):
+            j = A_COLS[s, jj]
+            a = RK_A[s, j]
+            for i in range(n):
+                ytmp[i] += a * K[j, i]
+        for i in range(n):
+            ytmp[i] = y[i] + h * ytmp[i]
         eval_rhs(t + RK_C[s] * h, ytmp, p, cs, n, K[s], wk[W_AUXTMP], wk, istats)
 
 
@@ -43,10 +51,13 @@ def rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats):
         K[0, i] = f[i]
     stages(1, N_STAGES, t, y, h, n, p, cs, K, wk, istats)
     for i in range(n):
-        acc = 0.0
-        for j in range(N_STAGES):
-            acc += RK_B[j] * K[j, i]
-        y_new[i] = y[i] + h * acc
+        y_new[i] = 0.0
+    for j in B_COLS:
+        b = RK_B[j]
+        for i in range(n):
+            y_new[i] += b * K[j, i]
+    for i in range(n):
+        y_new[i] = y[i] + h * y_new[i]
     eval_rhs(t + h, y_new, p, cs, n, f_new, aux_new, wk, istats)
     for i in range(n):
         K[N_STAGES, i] = f_new[i]
@@ -75,7 +86,7 @@ def error_norm(K, h, y, y_new, n, rtol, atol):
         sc = atol + rtol * mag
         a5 = 0.0
         a3 = 0.0
-        for j in range(N_STAGES + 1):
+        for j in E_COLS:
             a5 += RK_E5[j] * K[j, i]
             a3 += RK_E3[j] * K[j, i]
         e5 += (a5 / sc) ** 2
@@ -113,11 +124,16 @@ def dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats):
         F[0, i] = dyv
         F[1, i] = h * K[0, i] - dyv
         F[2, i] = 2.0 * dyv - h * (f_new[i] + K[0, i])
-        for r in range(4):
-            acc = 0.0
-            for j in range(N_STAGES_EXTENDED):
-                acc += RK_D[r, j] * K[j, i]
-            F[3 + r, i] = h * acc
+    for r in range(4):
+        row = F[3 + r]
+        for i in range(n):
+            row[i] = 0.0
+        for j in D_COLS:
+            d = RK_D[r, j]
+            for i in range(n):
+                row[i] += d * K[j, i]
+        for i in range(n):
+            row[i] = h * row[i]
 
 
 @kernel

@@ -105,3 +105,23 @@ D = np.array([
     [19.985053242002433, 0.0, 0.0, 0.0, 0.0, -387.0373087493518, -189.17813819516758, 527.8081592054236, -11.57390253995963, 6.8812326946963, -1.0006050966910838, 0.7777137798053443, -2.778205752353508, -60.19669523126412, 84.32040550667716, 11.99229113618279],
     [-25.69393346270375, 0.0, 0.0, 0.0, 0.0, -154.18974869023643, -231.5293791760455, 357.6391179106141, 93.40532418362432, -37.45832313645163, 104.0996495089623, 29.8402934266605, -43.53345659001114, 96.32455395918828, -39.17726167561544, -149.72683625798564],
 ])
+
+
+def _nonzero_columns(M):
+    """Per row of M (2-D): the column indices of its nonzero entries, padded with -1, and how many."""
+    cols = np.full(M.shape, -1, dtype=np.int64)
+    counts = np.zeros(M.shape[0], dtype=np.int64)
+    for r in range(M.shape[0]):
+        nz = np.nonzero(M[r])[0]
+        cols[r, :nz.size] = nz
+        counts[r] = nz.size
+    return cols, counts
+
+
+# The stages each combination reads (a third of A's lower triangle, and stages 1-4 of B, E3, E5 and
+# D, are zero): the kernels loop over these only, in increasing stage order, so every sum is the
+# same floating-point sum as over all stages.
+A_COLS, A_COUNT = _nonzero_columns(A)
+B_COLS = np.nonzero(B)[0]
+E_COLS = np.nonzero((E3 != 0.0) | (E5 != 0.0))[0]
+D_COLS = np.nonzero(np.any(D != 0.0, axis=0))[0]
