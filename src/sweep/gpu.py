@@ -24,10 +24,9 @@ from .core.dop853 import N_DENSE
 from .core.frequency import FQ_COLS, FQ_LEVEL0
 from .core.ensemble import (MAX_LEVELS, N_DERIVED, N_SCRATCH, PEAK_RING, load_inputs, solve_scene,
                             store_outputs)
-from .core.layout import (LEVEL_COLS, N_CS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK, N_WCOLS, N_WORK,
+from .core.layout import (LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK, N_WCOLS, N_WORK,
                           PEAK_COLS, SAMPLE_COLS, TRAJ_COLS)
 from .core.model import N_FULL, N_PARAMS
-from .core.tableau import N_STAGES_EXTENDED
 
 # numba-cuda release the lock pins (requirements.lock); named in the error message
 NUMBA_CUDA_PIN = "numba-cuda==0.30.4"
@@ -110,7 +109,7 @@ def _build_kernel(cuda_module):
         p = cuda.local.array(N_PARAMS, float64)
         cs = cuda.local.array(N_CS, float64)
         wk = cuda.local.array((N_WORK, N_WCOLS), float64)
-        K = cuda.local.array((N_STAGES_EXTENDED, N_FULL), float64)
+        K = cuda.local.array((N_KROWS, N_FULL), float64)
         F = cuda.local.array((F_ROWS, N_FULL), float64)
         trk = cuda.local.array(N_TRACK, float64)
         lev = cuda.local.array((MAX_LEVELS, LEV_COLS), float64)

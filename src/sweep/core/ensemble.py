@@ -24,12 +24,11 @@ import numpy as np
 from .frequency import FQ_COLS, FQ_LEVEL0
 from .integrate import run
 from .jit import kernel
-from .layout import (F_TEND, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
+from .layout import (F_TEND, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
                      N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS)
 from .model import N_FULL, N_PARAMS
 from .roots import EVENT_TOL_TAU
 from .dop853 import N_DENSE
-from .tableau import N_STAGES_EXTENDED
 
 # Levels per scene on the batch path (the per-thread buffers have a fixed size on CUDA).
 MAX_LEVELS = 16
@@ -222,7 +221,7 @@ def solve_scene(y0, p0, settings, level_e, levels, chi, y, p, cs, wk, K, F, trk,
 def work_buffers():
     """One worker's buffers (CPU): the shapes the CUDA kernel gives its local arrays."""
     return (np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
-            np.zeros((N_STAGES_EXTENDED, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK),
+            np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK),
             np.zeros((MAX_LEVELS, LEVEL_COLS + 1)), np.zeros((1, SAMPLE_COLS)), np.zeros((1, TRAJ_COLS)),
             np.zeros((PEAK_RING, PEAK_COLS)), np.zeros(N_FULL), np.zeros((FQ_LEVEL0 + MAX_LEVELS, FQ_COLS)),
             np.zeros((N_SCRATCH, MAX_LEVELS)),

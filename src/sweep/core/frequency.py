@@ -133,10 +133,27 @@ def theta_crossing(F, y, t, h, ta, tb, target, sgn):
 
 
 @kernel
+def _next_target(r, fq):
+    """theta of the next new lattice point in direction r (0 upwards, 1 downwards), and the sign."""
+    sgn = 1.0 - 2.0 * r
+    return fq[0, Q_TH0] + sgn * (fq[0, Q_J + r] + 1.0) * (2.0 * math.pi / SAMPLES_PER_CYCLE), sgn
+
+
+@kernel
+def lattice_due(theta_end, fq):
+    """Whether a segment ending at theta_end reaches a new lattice point (lattice_step reads the
+    dense output only then)."""
+    for r in range(2):
+        target, sgn = _next_target(r, fq)
+        if not sgn * (theta_end - target) < 0.0:   # as _next_crossing decides
+            return True
+    return False
+
+
+@kernel
 def _next_crossing(r, t_lo, t, y, h, seg_end, theta_end, F, fq):
     """Time of the next new lattice point in direction r on [t_lo, seg_end], or inf."""
-    sgn = 1.0 - 2.0 * r
-    target = fq[0, Q_TH0] + sgn * (fq[0, Q_J + r] + 1.0) * (2.0 * math.pi / SAMPLES_PER_CYCLE)
+    target, sgn = _next_target(r, fq)
     if sgn * (theta_end - target) < 0.0:
         return math.inf
     return theta_crossing(F, y, t, h, t_lo, seg_end, target, sgn)

@@ -21,15 +21,14 @@ from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, err
 from .jit import kernel
 from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
-                     N_CS, N_FSTATS, N_ISTATS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
+                     N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_W1
 from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, hermite_peak, locate, sign_rate
-from .tableau import N_STAGES_EXTENDED
-from .tracking import (halt_flat, record_levels, record_sample, record_samples, record_traj, shift_peak_window,
-                       track_peaks)
+from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
+                       record_samples, record_traj, shift_peak_window, track_peaks)
 
 EPS = 2.220446049250313e-16
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
@@ -275,14 +274,23 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         event_values(y_new, aux_new, p, cs, u_tol, lev, g_new)
         first_k, first_t, have_dense = first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats)
         seg_end = first_t if first_k >= 0 else t + h
-        if not have_dense:
-            dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
         y_seg = wk[W_YSEG]
         if first_k >= 0:
             dense_eval(F, 0, y, t, h, seg_end, n, y_seg)
         else:
             for i in range(n):
                 y_seg[i] = y_new[i]
+        phi_c = 0.0
+        if peaks_on:
+            if first_k >= 0:
+                eval_rhs(seg_end, y_seg, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+                phi_c = wk[W_AUXBUF, X_PHI]
+            else:
+                phi_c = aux_new[X_PHI]
+        if not have_dense and dense_wanted(running, seg_end, y_seg, p, cs, level_e, sample_tau, trk, fq, phi_c,
+                                           peaks_on):
+            dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
+            have_dense = True
         if running:
             t_halt = record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk, peaks_on,
                                    u_tol, wk, istats, fq)
@@ -297,14 +305,11 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                        samples, trk, wk, istats)
         if peaks_on:
             lattice_step(t, y, h, seg_end, y_seg[Y_THETA], F, n, p, cs, fq, level_out, trk, wk, istats)
-            if first_k >= 0:
-                eval_rhs(seg_end, y_seg, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
-                phi_c = wk[W_AUXBUF, X_PHI]
-            else:
-                phi_c = aux_new[X_PHI]
+            if peak_bracketed(phi_c, trk):
+                previous_dense(y, n, p, K, F, trk, wk, istats)
             track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running,
                         fq)
-            shift_peak_window(t, y, h, seg_end, phi_c, F, n, cs, trk, wk)
+            shift_peak_window(t, y, h, seg_end, phi_c, K, F, have_dense, n, cs, trk, wk)
 
         # --- advance ------------------------------------------------------------------------------
         if cs[CS_MODE] != ROLL and running:
@@ -404,7 +409,7 @@ def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
         y_end = np.zeros(N_FULL)
         fq = np.zeros((FQ_LEVEL0 + level_e.shape[0], FQ_COLS))
         run(y, p.copy(), settings, level_e, sample_tau, np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
-            np.zeros((N_STAGES_EXTENDED, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK), istats, fstats, levels, samples,
+            np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK), istats, fstats, levels, samples,
             traj, peaks, y_end, fq)
         over = istats[I_OVERFLOW]
         if over == 0:

@@ -8,13 +8,17 @@ Contact state `cs` (float64, N_CS): the discrete state of the hybrid system.
     CS_STUCK   3 slots: 1 where omega.a_i is held at 0 by the dry-friction moment (Filippov)
     CS_NU      slip direction angle on (a1, a2) (rad): the slaved friction direction
     CS_SLAVE_OFF  1 while a slip that found no quasi-static direction stays in SLIDE
-Work buffer `wk` (float64, N_WORK x N_FULL): rows used as vectors; `K` (16 x N_FULL) holds the RK
-stages, `F` (14 x N_FULL) the dense-output coefficients of this step (rows 0..6) and of the
-previous step (rows 7..13, for Phi maxima that straddle a step end).
+Work buffer `wk` (float64, N_WORK x N_FULL): rows used as vectors; `K` (N_KROWS x N_FULL) holds the
+RK stages of this step (rows 0..15) and of the previous step (rows K_PREV.., kept while its dense
+output was not built), `F` (14 x N_FULL) the dense-output coefficients of this step (rows 0..6) and
+of the previous step (rows 7..13, for Phi maxima that straddle a step end). A step builds its
+dense output (3 more stages) only where something reads it: an event, a level, a sample, a point of
+the precession lattice, a Phi maximum.
 """
 from __future__ import annotations
 
 from .model import N_AUX, N_FULL  # noqa: F401  (re-exported sizes)
+from .tableau import N_STAGES_EXTENDED
 
 # --- modes -------------------------------------------------------------------------------------
 ROLL, SLIDE, SLAVED = 0, 1, 2
@@ -74,7 +78,12 @@ T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PHI_A, T_PHI_B, T_TA, T_TB, T_PREV_OK, T_TPREV, T
 T_PENDING, T_AFTER_HALT, T_NPK = 9, 10, 11
 T_DIMPACT_HALT = 12   # impact dissipation up to the halt (steps after it only resolve Phi maxima)
 T_PEAK_RING = 13  # 1: the peak buffer is a ring of its last rows (batch path; only the summary is kept)
-N_TRACK = 14
+T_PREV_DENSE = 14  # 1: F[7:14] holds the previous step's dense output; 0: K[K_PREV:] holds its stages
+N_TRACK = 15
+
+# --- RK stage buffer ----------------------------------------------------------------------------
+K_PREV = N_STAGES_EXTENDED      # first row of the previous step's stages
+N_KROWS = 2 * N_STAGES_EXTENDED
 
 # --- output buffers -----------------------------------------------------------------------------
 TRAJ_COLS = 2 + N_FULL + 1     # tau, y[0:N_FULL], Phi, mode

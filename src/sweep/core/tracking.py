@@ -7,17 +7,47 @@ over three counted Phi maxima), ringing ratio, cycles in the window (frequency.p
 from __future__ import annotations
 
 from .contact import EV_LEVEL, eval_rhs, mode_energy
-from .dop853 import dense_eval
-from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, open_level, peak_candidate, peak_confirmed
+from .dop853 import N_DENSE, dense_coeffs, dense_eval
+from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, open_level, peak_candidate, peak_confirmed
 from .jit import kernel
-from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, N_CS, T_NEXT_LEVEL,
+from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_CS, T_NEXT_LEVEL, T_PREV_DENSE,
                      T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
                      T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
 from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA
 from .roots import brent_max_phi, locate
+from .tableau import N_STAGES
 
 # Minimum prominence of a located maximum of Phi over its bracket ends, relative to Phi.
 PEAK_PROMINENCE = 1e-6
+
+
+@kernel
+def dense_wanted(running, seg_end, y_seg, p, cs, level_e, sample_tau, trk, fq, phi_c, peaks_on):
+    """Whether a recorder reads this segment's dense output (the tests they make): a level crossed
+    (while running), a sample due, a new point of the precession lattice, a bracketed Phi maximum."""
+    L = int(trk[T_NEXT_LEVEL])
+    if running and L < level_e.shape[0] and mode_energy(y_seg, p, cs) - level_e[L] <= 0.0:
+        return True
+    j = int(trk[T_NEXT_SAMPLE])
+    if j < sample_tau.shape[0] and sample_tau[j] <= seg_end:
+        return True
+    return peaks_on and (lattice_due(y_seg[Y_THETA], fq) or peak_bracketed(phi_c, trk))
+
+
+@kernel
+def peak_bracketed(phi_c, trk):
+    """Phi at the last three segment ends a < b >= c: a maximum lies in the last two segments."""
+    return trk[T_PHI_B] > trk[T_PHI_A] and trk[T_PHI_B] >= phi_c and trk[T_PREV_OK] > 0.0
+
+
+@kernel
+def previous_dense(y, n, p, K, F, trk, wk, istats):
+    """The previous step's dense output into F[7:14], from its stages kept in K[K_PREV:] (a step
+    without an event: it ended in y, the current step's start, with f = its last stage)."""
+    if trk[T_PREV_DENSE] == 0.0:
+        dense_coeffs(trk[T_TPREV], wk[W_YPREV], trk[T_HPREV], y, K[K_PREV + N_STAGES], n, p, wk[W_CSPREV, :N_CS],
+                     K[K_PREV:], F[N_DENSE:], wk, istats)
+        trk[T_PREV_DENSE] = 1.0
 
 
 @kernel
@@ -113,8 +143,7 @@ def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk,
     counted and resolves pending levels' f_hat."""
     npk = int(trk[T_NPK])
     pa = trk[T_PHI_A]
-    pb = trk[T_PHI_B]
-    if pb > pa and pb >= phi_c and trk[T_PREV_OK] > 0.0:
+    if peak_bracketed(phi_c, trk):
         cprev = wk[W_CSPREV, :N_CS]
         tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], F, 7, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], n, p,
                                  cprev, wk, istats)
@@ -168,15 +197,23 @@ def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats
 
 
 @kernel
-def shift_peak_window(t, y, h, seg_end, phi_c, F, n, cs, trk, wk):
-    """Keep this segment's Phi, dense output and contact state for the next bracket."""
+def shift_peak_window(t, y, h, seg_end, phi_c, K, F, have_dense, n, cs, trk, wk):
+    """Keep this segment's Phi, contact state and dense output (or, where it was not built, the
+    stages it is built from: previous_dense) for the next bracket."""
     trk[T_PHI_A] = trk[T_PHI_B]
     trk[T_TA] = trk[T_TB]
     trk[T_PHI_B] = phi_c
     trk[T_TB] = seg_end
-    for r in range(7):
-        for i in range(n):
-            F[7 + r, i] = F[r, i]
+    if have_dense:
+        for r in range(N_DENSE):
+            for i in range(n):
+                F[N_DENSE + r, i] = F[r, i]
+        trk[T_PREV_DENSE] = 1.0
+    else:
+        for r in range(N_STAGES + 1):
+            for i in range(n):
+                K[K_PREV + r, i] = K[r, i]
+        trk[T_PREV_DENSE] = 0.0
     for i in range(n):
         wk[W_YPREV, i] = y[i]
     for i in range(N_CS):
