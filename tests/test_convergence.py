@@ -125,3 +125,20 @@ def test_paper_case_with_its_exact_spin_keeps_its_branch():
     assert abs(t0[0] - t1[0]) < 1e-9 * t1[0]          # 0.1 level: well conditioned
     assert abs(t0[1] - t1[1]) < 1e-5 * t1[1]          # 0.01 level: sensitive (docs/model.md)
     assert abs(res[0]["t_halt"] - res[1]["t_halt"]) < 1e-2
+
+
+def test_slaved_slip_losing_its_direction_inside_a_step_is_rejected_not_accepted():
+    """Harness scene 12 (seed 20261122) at rtol 1e-13: a slaved slip's direction loses its root
+    inside a step and the model returns NaN at the last stage (f_new), whose weight in y_new and
+    in the error estimate is zero. Accepted, that NaN poisoned every later step (step_size_underflow
+    at 5.73 s); rejected, steps shrink onto the located event and the scene halts where rtol 1e-12
+    puts it."""
+    rng = np.random.default_rng(20261122)   # the harness's default seed
+    cfg = [harness.draw_scene(rng) for _ in range(13)][12]
+    cfg = harness._valid_levels(cfg)
+    halts = {}
+    for rtol in (1e-12, 1e-13):
+        r = harness._one_run(cfg, rtol)
+        assert r["outcome"] == "halted", (rtol, r["outcome"], r["t_end"])
+        halts[rtol] = r["q"]["t_halt"]
+    assert abs(halts[1e-13] - halts[1e-12]) < 1e-8 * halts[1e-12]

@@ -27,6 +27,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      W_FNEW, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_W1
 from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, hermite_peak, locate, sign_rate
+from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
                        record_samples, record_traj, shift_peak_window, track_peaks)
 
@@ -159,7 +160,13 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats
 @kernel
 def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard):
     """One DOP853 step into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for
-    a non-finite step or one that raises the energy by more than e_guard) and counts it."""
+    a step with a non-finite stage or end state, or one that raises the energy by more than e_guard)
+    and counts it.
+
+    Every stage is checked, also those whose tableau weight in y_new or the error estimate is zero
+    (stages 1-4, and f_new): a right-hand side that failed there (a slaved direction that lost its
+    root returns NaN) makes the step fail, so steps shrink until the event that ends the mode is
+    located; accepted, its NaN f_new would poison every later step."""
     y_new = wk[W_YNEW]
     e_cur = mode_energy(y, p, cs)
     rk_step(t, y, f, h, n, p, cs, K, y_new, wk[W_FNEW], wk[W_AUXNEW], wk, istats)
@@ -167,6 +174,9 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard):
     for i in range(n):
         if not math.isfinite(y_new[i]):
             err = math.inf
+        for j in range(N_STAGES + 1):
+            if not math.isfinite(K[j, i]):
+                err = math.inf
     if err == 0.0 and mode_energy(y_new, p, cs) > e_cur + e_guard:
         err = math.inf
     if err == 0.0:

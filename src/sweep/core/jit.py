@@ -5,7 +5,7 @@ counting runtime (NRT). The kernels never allocate (every buffer comes from the 
 return arrays, so nothing in them needs a reference count; with the runtime on, every row view
 (`wk[W_YTMP]`, `K[s]`, `cs[CS_SIG:CS_SIG + 3]`) cost a pair of out-of-line incref/decref calls,
 and those calls made a right-hand-side evaluation cost three times its arithmetic (docs/
-performance.md, 'Cost per step'). An allocation added to a kernel now fails to compile instead of
+performance.md, 'Cost of the core'). An allocation added to a kernel now fails to compile instead of
 slowing it; tests/test_jit.py checks that no kernel returns an array.
 
 numba-cuda compiles the same Python functions as device code (sweep.gpu); it ignores these CPU
