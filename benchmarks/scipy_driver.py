@@ -83,6 +83,7 @@ SLAVE_EXIT = _contact.SLAVE_EXIT
 
 ROLL, SLIDE, SLAVED = 0, 1, 2     # driver modes; model.rhs knows ROLL (0) and SLIDE (1)
 DIR_TOL = 1e-14                   # convergence of the slaved direction (rad)
+ROUNDOFF = 1e-14                  # ... or |cross| below this fraction of the slip acceleration
 DIR_JUMP = 0.3                    # rad: a root farther than this from the last one is another root
 DCROSS_STEP = 1e-6                # rad: central difference of d cross/d nu (error ~1e-12 relative)
 
@@ -252,12 +253,14 @@ class Disk:
     def slaved_root(self, seed, u, t, y, c):
         """The root of cross(nu) continued from seed (secant); NaN if none within DIR_JUMP."""
         xa, xb = seed, seed + 1e-7
-        ca = self.cross_dot(xa, u, t, y, c)[0]
-        if ca == 0.0:
+        ca, da = self.cross_dot(xa, u, t, y, c)
+        if abs(ca) <= ROUNDOFF * math.hypot(ca, da):
             return xa
-        cb = self.cross_dot(xb, u, t, y, c)[0]
+        cb, db = self.cross_dot(xb, u, t, y, c)
         for _ in range(40):
-            if cb == 0.0 or abs(xb - xa) < DIR_TOL:
+            # converged: the update is below DIR_TOL, or cross is at its round-off floor (near a fold
+            # the iterates can stall there, two of them giving the same rounded value)
+            if abs(xb - xa) < DIR_TOL or abs(cb) <= ROUNDOFF * math.hypot(cb, db):
                 return xb if abs(xb - seed) <= DIR_JUMP else math.nan
             if cb == ca:
                 return math.nan
@@ -267,7 +270,7 @@ class Disk:
             xb = xb + dx
             if abs(xb - seed) > DIR_JUMP:
                 return math.nan
-            cb = self.cross_dot(xb, u, t, y, c)[0]
+            cb, db = self.cross_dot(xb, u, t, y, c)
         return math.nan
 
     def rhs(self, t, y, c, seed):

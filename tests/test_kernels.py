@@ -192,6 +192,41 @@ def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
         assert abs(math.remainder(nu2 - nu, 2 * math.pi)) < 1e-12
 
 
+def test_slaved_direction_near_a_fold_converges_at_the_round_off_floor():
+    """500-scene harness scene 112 (seed 20261122) at rtol 1e-11, 36.17 s: a slide near flat hands
+    over to the slaved direction of a weakly attracting root (d cross/d nu ~ -2e-3, a fold nearby).
+    From that root the secant's iterates give cross values at the round-off floor (|cross| ~ 1e-16
+    against a slip acceleration of 0.08), two of them equal, before the angle update falls below
+    DIR_TOL: the root was declared lost, the right-hand side NaN, and the scene ended as
+    step_size_underflow. A root found to machine precision must be accepted from any start near it."""
+    y = np.zeros(M.N_FULL)
+    y[:10] = [-1.5673133196188795, -0.017820889609631227, 0.07771254845175782, -0.12143037310535122,
+              3.8996640035269233e-10, 2.1236463939109588e-09, 0.2996915475916652, 0.00011133469101795674,
+              0.049821969536914465, 0.22653401920898733]
+    cs = np.array([L.SLIDE, -1.0, -1.0, -1.0, -1.0, 0.0, 0.0, 0.0, -1.5431398827001483, 0.0])
+    p = np.array([1.25, 0.7147500458389359, 0.42028920934225367, 0.5, 5.2941088582301325e-06,
+                  0.0003773901681763095, 0.0024557175535302304, 0.06604195186843453, 0.013401783317111789,
+                  9.988368229478843e-10])
+    n, t = M.N_FULL, 283.5429130271587
+    wk, ist = _work()
+    C.try_slave(t, y, p, cs, n, wk, ist)
+    assert cs[L.CS_MODE] == L.SLAVED
+    u = math.hypot(y[M.Y_U1], y[M.Y_U2])
+    dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
+    root = C.slaved_direction(cs[L.CS_NU], u, t, y, p, cs, n, dy, aux, ys, ist)
+    assert aux[M.X_OK] == 1.0
+    for k in range(-40, 41):
+        start = root + k * 4e-16
+        nu = C.slaved_direction(start, u, t, y, p, cs, n, dy, aux, ys, ist)
+        c, d = C.slip_rates(nu, u, t, y, p, cs, n, dy, aux, ys, ist)
+        assert aux[M.X_OK] == 1.0, (k, nu)
+        assert abs(c) <= C.DIR_NOISE * math.hypot(c, d) and abs(nu - root) < 1e-12, (k, nu, c)
+    # and the slaved right-hand side there is finite (it was NaN with X_OK 1 left by the model)
+    cs[L.CS_NU] = root
+    C.eval_rhs(t, y, p, cs, n, dy, aux, wk, ist)
+    assert aux[M.X_OK] == 1.0 and np.isfinite(dy[:n]).all() and aux[M.X_DCROSS] < 0.0
+
+
 def test_hermite_peak_is_the_interpolants_maximum():
     # g(x) = x (1 - x) - 0.1 x: H(0) = 0, H'(0) = 0.9, H(1) = -0.1, H'(1) = -1.1; maximum at x = 0.45
     x = R.hermite_peak(0.0, 0.9, -0.1, -1.1)

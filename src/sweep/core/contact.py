@@ -60,6 +60,10 @@ SLAVE_EPS = 1e-7
 SLAVE_EXIT = 4.0
 # Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
 DIR_TOL = 1e-14
+# ... or when cross is at its round-off floor: |cross| <= DIR_NOISE |slip acceleration|. Near a fold
+# (d cross/d nu small) the secant can stall there, two iterates giving the same rounded cross, before
+# its angle update gets below DIR_TOL: the root is then found to machine precision, not lost.
+DIR_NOISE = 64.0 * 2.220446049250313e-16
 DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
 DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
 DIR_MAXIT = 30
@@ -112,12 +116,12 @@ def slaved_direction(nu0, u, t, y, p, cs, n, dy, aux, ys, istats):
     """
     xa = nu0
     ca, da = slip_rates(xa, u, t, y, p, cs, n, dy, aux, ys, istats)
-    if ca == 0.0:
+    if abs(ca) <= DIR_NOISE * math.hypot(ca, da):
         return xa
     xb = nu0 + 1e-6
     cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
     for _ in range(DIR_MAXIT):
-        if cb == 0.0 or abs(xb - xa) < DIR_TOL:
+        if abs(cb) <= DIR_NOISE * math.hypot(cb, db) or abs(xb - xa) < DIR_TOL:
             return xb
         if cb == ca:
             break
