@@ -44,8 +44,9 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
 No rule depends on rtol, atol or the step size.
 
 The integration uses SciPy's `OdeSolver` classes (DOP853, RK45, LSODA, Radau, ...) step by step,
-as `solve_ivp` does, with the driver's own event scan (sign change at the step ends, plus the step
-midpoint for the sign, cone and side functions) and location (Illinois regula falsi on the
+as `solve_ivp` does, with the driver's own event scan (sign change at the step ends; inside a step,
+the minimum of a cubic Hermite interpolant for the sign and side functions, and for the cone margin
+that minimum, with end slopes by differences on the dense output, plus 7 interior samples) and location (Illinois regula falsi on the
 stepper's dense output to a bracket of a few ulp; the restart is at the bracket's post-event end).
 A new solver (default initial step) starts at every restart. The slaved direction's root is
 continued from the last accepted step end (never from a rejected stage).
@@ -83,6 +84,7 @@ SLAVE_EXIT = _contact.SLAVE_EXIT
 
 ROLL, SLIDE, SLAVED = 0, 1, 2     # driver modes; model.rhs knows ROLL (0) and SLIDE (1)
 DIR_TOL = 1e-14                   # convergence of the slaved direction (rad)
+CONE_SAMPLES = 7                  # interior points at which a step's cone margin is checked for a dip
 ROUNDOFF = 1e-14                  # ... or |cross| below this fraction of the slip acceleration
 DIR_JUMP = 0.3                    # rad: a root farther than this from the last one is another root
 DCROSS_STEP = 1e-6                # rad: central difference of d cross/d nu (error ~1e-12 relative)
@@ -771,8 +773,8 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             continue
                     elif k in DIP_CHECKED and g_old[k] > 0.0 and g_new[k] > 0.0:
                         # a double crossing inside the step: the signs and side by the minimum of
-                        # the cubic Hermite interpolant (exact end slopes), the cone at the midpoint;
-                        # confirmed on the dense output
+                        # the cubic Hermite interpolant (exact end slopes), the cone sampled at
+                        # interior points; confirmed on the dense output
                         hstep = t_new - t_old
                         if k == "side":
                             x = _hermite_min(g_old[k], seg.side * y[Y_W1] * hstep, g_new[k],
@@ -782,7 +784,21 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             x = _hermite_min(g_old[k], seg.sig[i] * _axes_rate(i, y, f_old) * hstep, g_new[k],
                                              seg.sig[i] * _axes_rate(i, y_new, f_new) * hstep)
                         else:
-                            x = 0.5
+                            # the cone margin: at the minimum of its cubic Hermite interpolant (end
+                            # slopes by differences on the dense output) and at CONE_SAMPLES interior
+                            # points; the first point at or below 0 brackets the dip
+                            dt = 1e-6 * hstep
+                            d0 = (gd(k, t_old + dt) - g_old[k]) / dt * hstep
+                            d1 = (g_new[k] - gd(k, t_new - dt)) / dt * hstep
+                            xh = _hermite_min(g_old[k], d0, g_new[k], d1)
+                            xs = [j / (CONE_SAMPLES + 1) for j in range(1, CONE_SAMPLES + 1)]
+                            x = None
+                            for xj in sorted(xs + ([xh] if xh is not None else [])):
+                                tm = t_old + xj * hstep
+                                gm = gd(k, tm)
+                                if gm <= 0.0:
+                                    br = (t_old, g_old[k], tm, gm)
+                                    break
                         if x is not None:
                             tm = t_old + x * hstep
                             gm = gd(k, tm)
