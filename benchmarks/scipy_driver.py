@@ -46,9 +46,9 @@ No rule depends on rtol, atol or the step size.
 The integration uses SciPy's `OdeSolver` classes (DOP853, RK45, LSODA, Radau, ...) step by step,
 as `solve_ivp` does, with the driver's own event scan (sign change at the step ends; inside a step,
 the minimum of a cubic Hermite interpolant for the sign and side functions, and for the cone margin
-that minimum, with end slopes by differences on the dense output, plus 7 interior samples) and location (Illinois regula falsi on the
-stepper's dense output to a bracket of a few ulp; the restart is at the bracket's post-event end).
-A new solver (default initial step) starts at every restart. The slaved direction's root is
+that minimum, end slopes by differences on the dense output, plus 7 interior samples) and location
+(Illinois regula falsi on the stepper's dense output to a bracket of a few ulp; the restart is at
+the bracket's post-event end). A new solver (default initial step) starts at every restart. The slaved direction's root is
 continued from the last accepted step end (never from a rejected stage).
 
 Usage:
@@ -773,37 +773,34 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             continue
                     elif k in DIP_CHECKED and g_old[k] > 0.0 and g_new[k] > 0.0:
                         # a double crossing inside the step: the signs and side by the minimum of
-                        # the cubic Hermite interpolant (exact end slopes), the cone sampled at
-                        # interior points; confirmed on the dense output
+                        # the cubic Hermite interpolant (exact end slopes), the cone below;
+                        # confirmed on the dense output
                         hstep = t_new - t_old
                         if k == "side":
                             x = _hermite_min(g_old[k], seg.side * y[Y_W1] * hstep, g_new[k],
                                              seg.side * y_new[Y_W1] * hstep)
+                            xs = [] if x is None else [x]
                         elif k[:4] == "sign":
                             i = int(k[4])
                             x = _hermite_min(g_old[k], seg.sig[i] * _axes_rate(i, y, f_old) * hstep, g_new[k],
                                              seg.sig[i] * _axes_rate(i, y_new, f_new) * hstep)
+                            xs = [] if x is None else [x]
                         else:
-                            # the cone margin: at the minimum of its cubic Hermite interpolant (end
-                            # slopes by differences on the dense output) and at CONE_SAMPLES interior
-                            # points; the first point at or below 0 brackets the dip
+                            # the cone margin has no exact slope: its Hermite minimum with end slopes
+                            # by differences on the dense output, and CONE_SAMPLES interior points
                             dt = 1e-6 * hstep
                             d0 = (gd(k, t_old + dt) - g_old[k]) / dt * hstep
                             d1 = (g_new[k] - gd(k, t_new - dt)) / dt * hstep
-                            xh = _hermite_min(g_old[k], d0, g_new[k], d1)
-                            xs = [j / (CONE_SAMPLES + 1) for j in range(1, CONE_SAMPLES + 1)]
-                            x = None
-                            for xj in sorted(xs + ([xh] if xh is not None else [])):
-                                tm = t_old + xj * hstep
-                                gm = gd(k, tm)
-                                if gm <= 0.0:
-                                    br = (t_old, g_old[k], tm, gm)
-                                    break
-                        if x is not None:
-                            tm = t_old + x * hstep
+                            x = _hermite_min(g_old[k], d0, g_new[k], d1)
+                            xs = sorted([j / (CONE_SAMPLES + 1) for j in range(1, CONE_SAMPLES + 1)]
+                                        + ([] if x is None else [x]))
+                        # the first candidate at or below 0 brackets the dip
+                        for xj in xs:
+                            tm = t_old + xj * hstep
                             gm = gd(k, tm)
                             if gm <= 0.0:
                                 br = (t_old, g_old[k], tm, gm)
+                                break
                     if br is not None:
                         _, tb = _locate(lambda tt, k=k: gd(k, tt), *br)
                         cand = (tb, ORDER.index(k), k, False)
