@@ -142,3 +142,21 @@ def test_slaved_slip_losing_its_direction_inside_a_step_is_rejected_not_accepted
         assert r["outcome"] == "halted", (rtol, r["outcome"], r["t_end"])
         halts[rtol] = r["q"]["t_halt"]
     assert abs(halts[1e-13] - halts[1e-12]) < 1e-8 * halts[1e-12]
+
+
+def test_a_needed_moment_touching_its_limit_inside_a_step_unsticks():
+    """Harness scene 435 (seed 20261122): a thin shell whose spin component omega.a_3 is held by
+    the dry-friction moment; near tau 108.55 the moment it needs touches its limit (|sigma_3|
+    reaches 1.004) and falls back, all within one step at rtol 1e-10 (sigma_3 = 0.985 and 0.9997
+    at the step ends). The scan once looked for such interior dips only in the sign functions and
+    the cone margin: the un-stick was missed at rtol 1e-10 and 1e-13 but not at 1e-11 and 1e-12
+    (162, 161, 164, 163 stick phases; t_halt off by 7.8e-6 relative at the default rtol). Every
+    event function now gets the interior-dip check, so the event counts agree and t_halt with them."""
+    rng = np.random.default_rng(20261122)
+    cfg = [harness.draw_scene(rng) for _ in range(436)][435]
+    cfg = harness._valid_levels(cfg)
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-10, 1e-12)}
+    assert res[1e-10]["events"] == res[1e-12]["events"]
+    assert res[1e-10]["outcome"] == res[1e-12]["outcome"] == "halted"
+    t0, t1 = res[1e-10]["q"]["t_halt"], res[1e-12]["q"]["t_halt"]
+    assert abs(t0 - t1) < 1e-8 * t1

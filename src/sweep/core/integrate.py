@@ -23,10 +23,10 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
-                     T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
-                     W_FNEW, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
+                     T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
+                     W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_W1
-from .roots import event_rate, event_value_at, hermite_dip, hermite_interior_root, hermite_peak, locate, sign_rate
+from .roots import event_rates, event_value_at, hermite_dip, hermite_interior_root, hermite_peak, locate, sign_rate
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
                        record_samples, record_traj, shift_peak_window, track_peaks)
@@ -84,16 +84,19 @@ def lift_off(k, t, y, h, g0, d0, g1, d1, F, n, p, cs, u_tol, lev, wk, istats):
 
 
 @kernel
-def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats):
+def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, istats):
     """Earliest event on the accepted step [t, t + h]: (k, restart time, dense output made?).
 
-    A sign function or the cone margin that is positive at both ends can still cross zero twice
-    inside the step: the cubic Hermite interpolant of g (its end derivatives from the state for the
-    signs, by a difference along f for the cone) flags it, the dense output confirms it.
+    An event function that is positive at both ends can still cross zero twice inside the step: the
+    cubic Hermite interpolant of g (its end derivatives from the state for the signs and the side,
+    by a forward difference along f for every other event: roots.event_rates) flags an interior
+    minimum, the dense output there confirms it. The rates at the step end are kept for the next
+    step's start (trk[T_RATES_OLD]), so a step costs one RHS evaluation for them.
     """
     g_old = wk[W_GOLD]
     g_new = wk[W_GNEW]
     have_dense = False
+    trk[T_RATES_NEW] = 0.0
     first_k = -1
     first_t = t + h
     for k in range(N_DYN_EVENTS):
@@ -125,18 +128,23 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats
                 ta, tb = t, t
                 if k <= EV_SIGN3:
                     k_event = EV_AGAINST1 + k
-        elif (k <= EV_SIGN3 or k == EV_CONE or k == EV_SIDE) and g_old[k] > 0.0 and g_new[k] > 0.0 \
-                and g_old[k] != math.inf:
+        elif g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf and g_new[k] != math.inf:
+            # positive at both ends, g_k can still reach 0 and come back within the step: a
+            # bounce off alpha = 0, a brief slip demand, a needed moment that touches its limit, a
+            # dip of the normal force. The cubic Hermite interpolant of g_k flags the dip.
             if k == EV_SIDE:
-                # g = side alpha, dg/dtau = side omega_1 (eq. 2.3): a bounce off alpha = 0 and back
+                # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
                 dip = hermite_dip(g_old[k], cs[CS_SIDE] * y[Y_W1] * h, g_new[k], cs[CS_SIDE] * y_new[Y_W1] * h)
-            elif k == EV_CONE:
-                # the cone margin can dip below 0 and back within a step (a brief slip demand)
-                d0 = event_rate(k, g_old[k], t, y, f, p, cs, n, u_tol, lev, wk, istats) * h
-                d1 = event_rate(k, g_new[k], t + h, y_new, f_new, p, cs, n, u_tol, lev, wk, istats) * h
-                dip = hermite_dip(g_old[k], d0, g_new[k], d1)
-            else:
+            elif k <= EV_SIGN3:
                 dip = hermite_interior_root(k, cs[CS_SIG + k], y, f, y_new, f_new, g_old[k], g_new[k], h)
+            else:
+                if trk[T_RATES_OLD] == 0.0:
+                    event_rates(t, y, f, g_old, p, cs, n, u_tol, lev, wk, istats, wk[W_RATEOLD])
+                    trk[T_RATES_OLD] = 1.0
+                if trk[T_RATES_NEW] == 0.0:
+                    event_rates(t + h, y_new, f_new, g_new, p, cs, n, u_tol, lev, wk, istats, wk[W_RATENEW])
+                    trk[T_RATES_NEW] = 1.0
+                dip = hermite_dip(g_old[k], wk[W_RATEOLD, k] * h, g_new[k], wk[W_RATENEW, k] * h)
             if dip > 0.0:
                 # confirm on the dense output at the interpolant's minimum
                 if not have_dense:
@@ -248,6 +256,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     if want_traj:
         record_traj(t, y, aux[X_PHI], cs, n, traj, istats)
     trk[T_PHI_B] = aux[X_PHI]
+    trk[T_RATES_OLD] = 0.0
     if peaks_on:
         freq_start(y[Y_THETA], aux[X_PHI], fq)
     h = initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats)
@@ -282,7 +291,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
 
         # --- events, levels, samples, peaks on [t, seg_end] -------------------------------------
         event_values(y_new, aux_new, p, cs, u_tol, lev, g_new)
-        first_k, first_t, have_dense = first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, istats)
+        first_k, first_t, have_dense = first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, istats)
         seg_end = first_t if first_k >= 0 else t + h
         y_seg = wk[W_YSEG]
         if first_k >= 0:
@@ -330,6 +339,11 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         if first_k < 0:
             for i in range(n):
                 f[i] = f_new[i]
+        # the event rates at the new start are this step's end rates, unless an event restarts here
+        trk[T_RATES_OLD] = 1.0 if first_k < 0 and trk[T_RATES_NEW] == 1.0 else 0.0
+        if trk[T_RATES_OLD] == 1.0:
+            for k in range(N_DYN_EVENTS):
+                wk[W_RATEOLD, k] = wk[W_RATENEW, k]
         if want_traj and outcome < 0:
             record_traj(t, y, aux_new[X_PHI] if first_k < 0 else math.nan, cs, n, traj, istats)
 

@@ -56,7 +56,9 @@ W_YSEG = 25      # state at the end of the current segment (step end or event)
 W_PFRICTION = 26  # SLAVED: the parameters with the friction direction held at the slaved one
 W_DYSLOPE = 27    # SLAVED: right-hand side beside the slaved direction (d cross/d nu)
 W_AUXSLOPE = 28
-N_WORK = 29
+W_RATEOLD = 29    # d g_k/d tau at the step start (forward difference; roots.event_rates)
+W_RATENEW = 30    # ... at the step end
+N_WORK = 31
 N_WCOLS = 16     # columns of the work buffer: >= N_FULL and >= the number of events
 
 # --- settings vector ----------------------------------------------------------------------------
@@ -79,7 +81,9 @@ T_PENDING, T_AFTER_HALT, T_NPK = 9, 10, 11
 T_DIMPACT_HALT = 12   # impact dissipation up to the halt (steps after it only resolve Phi maxima)
 T_PEAK_RING = 13  # 1: the peak buffer is a ring of its last rows (batch path; only the summary is kept)
 T_PREV_DENSE = 14  # 1: F[7:14] holds the previous step's dense output; 0: K[K_PREV:] holds its stages
-N_TRACK = 15
+T_RATES_OLD = 15  # 1: wk[W_RATEOLD] holds the event rates at the current step start (the last step end's)
+T_RATES_NEW = 16  # 1: this step's scan computed wk[W_RATENEW] (the rates at its end)
+N_TRACK = 17
 
 # --- RK stage buffer ----------------------------------------------------------------------------
 K_PREV = N_STAGES_EXTENDED      # first row of the previous step's stages

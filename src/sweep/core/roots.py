@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from .contact import eval_rhs, event_values
+from .contact import N_EVENTS, eval_rhs, event_values
 from .dop853 import dense_eval
 from .jit import kernel
 from .layout import W_AUXBUF, W_DYBUF, W_GBUF, W_YBUF
@@ -102,15 +102,21 @@ def hermite_interior_root(k, sgn, y0, f0, y1, f1, g0, g1, h):
 
 
 @kernel
-def event_rate(k, g_here, t, y, f, p, cs, n, u_tol, level_e, wk, istats):
-    """d g_k/d tau along the solution at (t, y) (where g_k = g_here, derivative f), by a forward
-    difference of step RATE_STEP along f (one RHS evaluation)."""
+def event_rates(t, y, f, g_here, p, cs, n, u_tol, level_e, wk, istats, rates):
+    """d g_k/d tau along the solution at (t, y) for every event k (g_here: the values there,
+    derivative f), by a forward difference of step RATE_STEP along f: one RHS evaluation for all.
+    0 where g_k is inactive (inf)."""
     ys = wk[W_YBUF]
     for i in range(n):
         ys[i] = y[i] + RATE_STEP * f[i]
     eval_rhs(t + RATE_STEP, ys, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
     event_values(ys, wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
-    return (wk[W_GBUF, k] - g_here) / RATE_STEP
+    for k in range(N_EVENTS):
+        gk = wk[W_GBUF, k]
+        if g_here[k] == math.inf or gk == math.inf:
+            rates[k] = 0.0
+        else:
+            rates[k] = (gk - g_here[k]) / RATE_STEP
 
 
 @kernel
