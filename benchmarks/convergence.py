@@ -1,6 +1,6 @@
 """Random-scene convergence harness (issue #8): does the integrator converge everywhere?
 
-    python benchmarks/convergence.py [--quick] [--scenes N] [--seed S] [--jobs J] [--tag NAME]
+    python benchmarks/convergence.py [--quick] [--scenes N] [--seed S] [--jobs J] [--tag NAME] [--atol-ratio R]
 
 Draws scenes over wide physical ranges (radius 3 mm..30 cm, thickness/radius 0.01..2, solid or
 shell, mu_s 0.05..1.6, mu_d/mu_s 0..1, each k_i/R 0 or 1e-6..5e-2, |alpha0| 0.03..1.5 rad with both
@@ -41,6 +41,8 @@ LEVELS = [0.1, 0.01, 0.001]
 SAMPLE_TAU = [10.0, 30.0, 100.0, 300.0]
 T_MAX = 300.0
 PERTURB = 1e-10
+# atol = ATOL_RATIO * rtol: the product's default (solver rtol 1e-10, atol 1e-12) scaled with rtol
+ATOL_RATIO = 1e-2
 WELL_CONDITIONED = 1e-8
 AGREE = 1e-6
 DENSITY = 7800.0
@@ -92,11 +94,11 @@ def _valid_levels(cfg: dict) -> dict:
     return cfg
 
 
-def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0) -> dict:
+def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0, atol_ratio: float = ATOL_RATIO) -> dict:
     import sweep
 
     c = json.loads(json.dumps(cfg))
-    c["solver"] = {"rtol": rtol, "atol": rtol * 1e-2}
+    c["solver"] = {"rtol": rtol, "atol": rtol * atol_ratio}
     c["initial"]["alpha"] += d_alpha
     chi = math.sqrt((({"solid": 1.0, "shell": 2.0}[c["disk"]["shape"]]) + 4.0) / 4.0
                     * c["disk"]["radius"] / c["gravity"])
@@ -126,10 +128,10 @@ def _has_bad(s: dict) -> bool:
 
 
 def run_scene(args) -> dict:
-    idx, cfg = args
+    idx, cfg, atol_ratio = args
     cfg = _valid_levels(cfg)
-    rec = {"index": idx, "scene": cfg, "runs": [_one_run(cfg, rt) for rt in RTOLS]}
-    rec["perturbed"] = _one_run(cfg, REF_RTOL, PERTURB * math.copysign(1.0, cfg["initial"]["alpha"]))
+    rec = {"index": idx, "scene": cfg, "runs": [_one_run(cfg, rt, 0.0, atol_ratio) for rt in RTOLS]}
+    rec["perturbed"] = _one_run(cfg, REF_RTOL, PERTURB * math.copysign(1.0, cfg["initial"]["alpha"]), atol_ratio)
     return rec
 
 
@@ -240,6 +242,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=20261122)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--tag", default=None)
+    ap.add_argument("--atol-ratio", type=float, default=ATOL_RATIO,
+                    help=f"atol = this x rtol in every run (default {ATOL_RATIO:g}, the product's default scaled)")
     ap.add_argument("--analyse", metavar="JSONL", help="only analyse an existing record file")
     a = ap.parse_args(argv)
     OUT.mkdir(exist_ok=True)
@@ -250,7 +254,7 @@ def main(argv=None) -> int:
     n = a.scenes or (100 if a.quick else 500)
     tag = a.tag or f"n{n}-seed{a.seed}"
     rng = np.random.default_rng(a.seed)
-    scenes = [(i, draw_scene(rng)) for i in range(n)]
+    scenes = [(i, draw_scene(rng), a.atol_ratio) for i in range(n)]
     path = OUT / f"convergence-{tag}.jsonl"
     t0 = time.time()
     recs = []

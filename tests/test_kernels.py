@@ -258,3 +258,40 @@ def test_settle_signs_releases_a_stuck_component_the_moment_cannot_hold(setup, k
             assert cs[L.CS_STUCK] == 1.0
         else:
             assert cs[L.CS_STUCK] == 0.0 and cs[L.CS_SIG] == math.copysign(1.0, need)
+
+
+def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(setup):
+    """roots.event_rates (one forward difference for every event) against the exact slopes of the
+    sign functions (sign_rate: from the state and its derivative) and of side * alpha (omega_1), and
+    against a central difference of step 1e-5 (error O(1e-10)) for the others."""
+    p, y, cs = setup
+    n = M.N_CORE
+    wk, ist = _work()
+    f = np.zeros(M.N_FULL)
+    aux = np.zeros(M.N_AUX)
+    C.eval_rhs(0.0, y, p, cs, n, f, aux, wk, ist)
+    g = np.zeros(L.N_WCOLS)
+    C.event_values(y, aux, p, cs, 1e-9, math.nan, g)
+    rates = np.zeros(L.N_WCOLS)
+    R.event_rates(0.0, y, f, g, p, cs, n, 1e-9, math.nan, wk, ist, rates)
+    for k in range(3):
+        exact = cs[L.CS_SIG + k] * R.sign_rate(k, y, f)
+        assert rates[C.EV_SIGN1 + k] == pytest.approx(exact, rel=1e-6, abs=1e-7)
+    assert rates[C.EV_SIDE] == pytest.approx(cs[L.CS_SIDE] * y[M.Y_W1], rel=1e-6, abs=1e-7)
+
+    def g_at(eps):
+        ys = y.copy()
+        ys[:n] += eps * f[:n]
+        dy, ax, gg = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
+        C.eval_rhs(eps, ys, p, cs, n, dy, ax, wk, ist)
+        C.event_values(ys, ax, p, cs, 1e-9, math.nan, gg)
+        return gg
+
+    g_plus, g_minus = g_at(1e-5), g_at(-1e-5)
+    for k in (C.EV_CONE, C.EV_CONTACT, C.EV_FACE):
+        assert math.isfinite(g[k])
+        central = (g_plus[k] - g_minus[k]) / 2e-5
+        assert rates[k] == pytest.approx(central, rel=1e-6, abs=1e-7), k
+    for k in range(C.N_DYN_EVENTS):
+        if g[k] == math.inf:
+            assert rates[k] == 0.0      # inactive in this mode: no slope
