@@ -160,3 +160,20 @@ def test_a_needed_moment_touching_its_limit_inside_a_step_unsticks():
     assert res[1e-10]["outcome"] == res[1e-12]["outcome"] == "halted"
     t0, t1 = res[1e-10]["q"]["t_halt"], res[1e-12]["q"]["t_halt"]
     assert abs(t0 - t1) < 1e-8 * t1
+
+
+def test_a_slaved_slip_whose_moment_state_changes_at_the_hand_over_keeps_a_direction():
+    """Harness scene 64 (seed 20261122) at rtol 1e-11, atol 1e-14: a slide with omega.a_1 held by the
+    dry-friction moment falls to the slaving speed (tau 37.2785) and is handed to its attracting
+    quasi-static direction; the plastic impulse of the hand-over moves the held omega.a_1, which
+    releases it, and the released component changes the slip dynamics so that the direction found
+    before is no root any more. The slaved right-hand side then had no root near the restart and
+    every step failed (step_size_underflow at 4.23 s). contact.confirm_slaved now finds the
+    direction of the state the update left (or hands the slip to SLIDE)."""
+    rng = np.random.default_rng(20261122)
+    cfg = [harness.draw_scene(rng) for _ in range(65)][64]
+    cfg = harness._valid_levels(cfg)
+    low_atol = harness._one_run(cfg, 1e-11, 0.0, 1e-3)
+    tight = harness._one_run(cfg, 1e-12)
+    assert low_atol["outcome"] == tight["outcome"] == "halted", (low_atol["outcome"], low_atol["t_end"])
+    assert abs(low_atol["q"]["t_halt"] - tight["q"]["t_halt"]) < 1e-9 * tight["q"]["t_halt"]

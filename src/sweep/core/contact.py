@@ -314,6 +314,31 @@ def try_slave(t, y, p, cs, n, wk, istats):
 
 
 @kernel
+def confirm_slaved(t, y, p, cs, n, wk, istats):
+    """SLAVED after a discrete update: the slaved direction of the contact state the update left.
+
+    A moment component that the update stuck or released (an impulse moves a held omega.a_i; a
+    sign flips) changes the slip dynamics, so the direction found before it (the hand-over's
+    attracting root, the onset direction, the continued one) may no longer be a root: it is
+    continued for the new state, else the attracting root is looked for from it; where the slip has
+    none (it spirals), it is integrated in SLIDE and the hand-over stays off until it is fast
+    again. Without this, the slaved right-hand side had no root near the restart and every step
+    failed (step_size_underflow).
+    """
+    u = math.hypot(y[Y_U1], y[Y_U2])
+    nu = slaved_direction(cs[CS_NU], u, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP], istats)
+    if wk[W_AUXTMP, X_OK] != 0.0:
+        cs[CS_NU] = nu
+        return
+    root = attracting_direction(cs[CS_NU], u, t, y, p, cs, n, wk, istats)
+    if math.isnan(root):
+        cs[CS_MODE] = SLIDE
+        cs[CS_SLAVE_OFF] = 1.0
+        return
+    cs[CS_NU] = root
+
+
+@kernel
 def cone_violated(t, y, p, cs, n, wk, istats):
     """Rolling: the friction needed lies outside the static cone |F| <= mu_s Phi."""
     eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
@@ -504,6 +529,8 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         start_slip(t, y, p, cs, n, wk, istats)
         # the slip changes the moments the stuck components need
         settle_signs(t, y, p, cs, n, wk, istats, -1)
+    if cs[CS_MODE] == SLAVED:
+        confirm_slaved(t, y, p, cs, n, wk, istats)
     return -1
 
 
