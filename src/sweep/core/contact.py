@@ -315,7 +315,8 @@ def try_slave(t, y, p, cs, n, wk, istats):
 
 @kernel
 def confirm_slaved(t, y, p, cs, n, wk, istats):
-    """SLAVED after a discrete update: the slaved direction of the contact state the update left.
+    """SLAVED after a discrete update (integrate.run calls it after every event): the slaved
+    direction of the contact state the update left.
 
     A moment component that the update stuck or released (an impulse moves a held omega.a_i; a
     sign flips) changes the slip dynamics, so the direction found before it (the hand-over's
@@ -529,8 +530,6 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         start_slip(t, y, p, cs, n, wk, istats)
         # the slip changes the moments the stuck components need
         settle_signs(t, y, p, cs, n, wk, istats, -1)
-    if cs[CS_MODE] == SLAVED:
-        confirm_slaved(t, y, p, cs, n, wk, istats)
     return -1
 
 

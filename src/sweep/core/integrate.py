@@ -14,8 +14,8 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
-from .contact import (EV_AGAINST1, EV_CONE, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_EVENTS, apply_event, consistent_signs,
-                      cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
+from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_EVENTS, apply_event, confirm_slaved,
+                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start, lattice_step
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
@@ -364,10 +364,9 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if code >= 0:
                 break
             if cs[CS_MODE] == SLAVED:
-                # continuation of the slaved direction across the event (steps that end in events
-                # would otherwise leave it behind the moving root)
-                cs[CS_NU] = slaved_direction(cs[CS_NU], math.hypot(y[Y_U1], y[Y_U1 + 1]), t, y, p, cs, n,
-                                             wk[W_DYBUF], wk[W_AUXBUF], wk[W_YBUF], istats)
+                # the slaved direction of the contact state the update left, continued across the
+                # event (steps that end in events would otherwise leave it behind the moving root)
+                confirm_slaved(t, y, p, cs, n, wk, istats)
             eval_rhs(t, y, p, cs, n, f, aux_new, wk, istats)
             if aux_new[X_OK] != 1.0:
                 if running:
