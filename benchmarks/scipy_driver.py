@@ -24,7 +24,10 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   impulse would reverse stops instead); none on the whole circle: it stays in SLIDE;
 * moment signs sigma_i = sign(omega.a_i) with Filippov sticking: at omega.a_i = 0 a component
   sticks if the moment needed to hold it is within k_i Phi (|sigma needed| < 1), else it passes;
-  a stuck component leaves where |sigma needed| reaches 1, with that sign;
+  a stuck component leaves where |sigma needed| reaches 1, with that sign; a free component that
+  slows to |omega.a_i| = spin_tol (from above) sticks there if the moment can hold it, and the
+  rate left is stopped by the least (kinetic-energy) change of the velocity that keeps the contact
+  and the stuck components at rest (loss booked to k_i), else it stays free;
 * after every discrete update (the driver's 'settle'): a slide at or below slip_tol ends; a
   component whose omega.a_i an impulse moved takes the sign of its new omega.a_i (a stuck one is
   released: a finite moment cannot hold it through an impulse); a free component at or past its
@@ -69,8 +72,8 @@ from sweep import outcomes
 from sweep.core import contact as _contact
 from sweep.core import impulse as _impulse
 from sweep.core import model
-from sweep.core.model import (N_AUX, N_CORE, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, X_F1, X_F2, X_G1,
-                              X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3)
+from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, X_F1, X_F2, X_G1,
+                              X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DK1, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3)
 from sweep.scene import Scene, load_scene
 from sweep.simulate import initial_state, level_energies
 
@@ -92,9 +95,10 @@ DCROSS_STEP = 1e-6                # rad: central difference of d cross/d nu (err
 # events in a fixed order (a tie goes to the first)
 SIGN = ("sign0", "sign1", "sign2")
 UNSTICK = ("unstick0", "unstick1", "unstick2")
+SPIN = ("spin0", "spin1", "spin2")
 ORDER = (*SIGN, *UNSTICK, "cone", "slipslow", "slipstop", "slipfast", "slave", "contact", "side", "face",
-         "slave_lost")
-DIP_CHECKED = {*SIGN, "cone", "side"}   # also checked inside a step (a double crossing)
+         "slave_lost", *SPIN)
+DIP_CHECKED = {*SIGN, *SPIN, "cone", "side"}   # also checked inside a step (a double crossing)
 
 
 def _axes_rate(i, y, f):
@@ -432,6 +436,50 @@ class Disk:
             c.stuck[i] = False
             c.sig[i] = 1.0 if need > 0.0 else -1.0
 
+    def spin_stop(self, i, t, y, c):
+        """|omega.a_i| has slowed to spin_tol: it sticks if the moment can hold it, and the rate left
+        is stopped by the least change of the velocity in the kinetic-energy metric that keeps the
+        contact (rolling, or sliding with the slip free) and the stuck components at rest
+        (Lagrange multipliers on all of (w1, w2, w3, u1, u2)); the loss is booked to k_i."""
+        need = self.needed_sigma(i, t, y, c)
+        if abs(need) >= 1.0:
+            return False
+        p, h = self.p, c.side * self.p[P_H]
+        sa, ca = math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA])
+        # V = J q: centre velocity and omega on e1, e2, e3 for q = (w1, w2, w3, u1, u2)
+        J = np.array([[0.0, 1.0, -h, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0, ca], [h, 0.0, 0.0, 0.0, -sa],
+                      [1.0, 0.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0, 0.0]])
+        M = np.diag([1.0, 1.0, 1.0, p[P_A], p[P_C], p[P_A]])
+        axes = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
+        q0 = np.array([y[Y_W1], y[Y_W2], y[Y_W3], y[Y_U1], y[Y_U2]])
+        if c.mode == ROLL:
+            q0[3:] = 0.0
+        rows, rhs = [], []
+        if c.mode == ROLL:
+            rows += [[0.0, 0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0]]
+            rhs += [0.0, 0.0]
+        for j in range(3):
+            if j == i or c.stuck[j]:
+                rows.append([*axes[j], 0.0, 0.0])
+                rhs.append(0.0)
+        C = np.array(rows)
+        V0 = J @ q0
+        A = J.T @ M @ J
+        m = C.shape[0]
+        kkt = np.block([[A, C.T], [C, np.zeros((m, m))]])
+        sol = np.linalg.solve(kkt, np.concatenate([J.T @ M @ V0, rhs]))
+        q = sol[:5]
+        dv = V0 - J @ q
+        y[Y_W1], y[Y_W2], y[Y_W3] = q[0], q[1], q[2]
+        if c.mode != ROLL:
+            y[Y_U1], y[Y_U2] = q[3], q[4]
+        y[Y_DK1 + i] += 0.5 * float(dv @ M @ dv)
+        c.stuck[i] = True
+        self.stats["n_stick"] += 1
+        if self.log is not None:
+            self.log.append((t, "stick_spin", i, need))
+        return True
+
     def settle(self, t, y, c, g_before, leaving=()):
         """After a discrete update: bring the contact state in line with the state (see the module
         docstring). `leaving`: components just released at an un-stick (on their surface, leaving)."""
@@ -543,6 +591,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
     n = N_CORE
     t_max = cfg["stop"]["t_max"] / sc.chi
     u_tol = cfg["solver"]["slip_tol"] * sc.chi / cfg["disk"]["radius"]
+    w_tol = cfg["solver"]["spin_tol"] * sc.chi
     level_e = level_energies(sc)
     nl = level_e.size
     smp = np.zeros(0) if sample_tau is None else np.asarray(sample_tau, dtype=float)
@@ -647,6 +696,8 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
         for i in range(3):
             if k_on[i]:
                 active.append(UNSTICK[i] if seg.stuck[i] else SIGN[i])
+                if not seg.stuck[i] and w_tol > 0.0:
+                    active.append(SPIN[i])
         active.append({ROLL: "cone", SLIDE: "slipslow", SLAVED: "slipstop"}[seg.mode])
         if seg.mode == SLAVED:
             active += ["slipfast", "slave_lost"]
@@ -660,6 +711,9 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             if kind[:4] == "sign":
                 i = int(kind[4])
                 return seg.sig[i] * a[X_G1 + i]
+            if kind[:4] == "spin":
+                i = int(kind[4])
+                return seg.sig[i] * a[X_G1 + i] - w_tol
             if kind[:7] == "unstick":
                 return 1.0 - abs(a[X_SIG1 + int(kind[7])])
             if kind == "cone":
@@ -683,8 +737,9 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             raise KeyError(kind)
 
         g0 = {k: gval(k, t, y) for k in active}
-        shift = {k: (-v if v <= 0.0 else 0.0) for k, v in g0.items()}
-        on_surface = {k for k, v in g0.items() if v <= 0.0}
+        # a spin event below spin_tol at the restart is armed once the rate exceeds spin_tol
+        shift = {k: (-v if v <= 0.0 and k not in SPIN else 0.0) for k, v in g0.items()}
+        on_surface = {k for k, v in g0.items() if v <= 0.0 and k not in SPIN}
         at_once = [k for k in on_surface if k not in DIP_CHECKED and k not in ("slipstop", "side")
                    and k[:4] != "sign"]
         if at_once:
@@ -771,6 +826,17 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             cand = (t_old, ORDER.index(k), k, True)
                             best = cand if best is None or cand[:2] < best[:2] else best
                             continue
+                    elif k in SPIN and g_old[k] <= 0.0 and g_new[k] <= 0.0:
+                        # below spin_tol at both ends: a rise past it and back within the step, by
+                        # the maximum of the cubic Hermite interpolant, confirmed on the dense output
+                        i, hstep = int(k[4]), t_new - t_old
+                        x = _hermite_min(-g_old[k], -seg.sig[i] * _axes_rate(i, y, f_old) * hstep, -g_new[k],
+                                         -seg.sig[i] * _axes_rate(i, y_new, f_new) * hstep)
+                        if x is not None:
+                            tm = t_old + x * hstep
+                            gm = gd(k, tm)
+                            if gm > 0.0:
+                                br = (tm, gm, t_new, g_new[k])
                     elif k in DIP_CHECKED and g_old[k] > 0.0 and g_new[k] > 0.0:
                         # a double crossing inside the step: the signs and side by the minimum of
                         # the cubic Hermite interpolant (exact end slopes), the cone below;
@@ -780,7 +846,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             x = _hermite_min(g_old[k], seg.side * y[Y_W1] * hstep, g_new[k],
                                              seg.side * y_new[Y_W1] * hstep)
                             xs = [] if x is None else [x]
-                        elif k[:4] == "sign":
+                        elif k[:4] in ("sign", "spin"):
                             i = int(k[4])
                             x = _hermite_min(g_old[k], seg.sig[i] * _axes_rate(i, y, f_old) * hstep, g_new[k],
                                              seg.sig[i] * _axes_rate(i, y_new, f_new) * hstep)
@@ -882,6 +948,9 @@ def _apply(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
     g_before = _axes(y)
     if kind[:4] == "sign":
         disk.stick_test(int(kind[4]), t, y, c, force=now)
+    elif kind[:4] == "spin":
+        if disk.spin_stop(int(kind[4]), t, y, c):
+            g_before = _axes(y)   # the stop keeps the stuck components stuck
     elif kind[:7] == "unstick":
         i = int(kind[7])
         need = disk.needed_sigma(i, t, y, c)

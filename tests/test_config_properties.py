@@ -102,6 +102,8 @@ def valid_configs(draw, levels_max: float = HALF_PI, ordinary_disk: bool = False
         solver["atol"] = draw(st.floats(1e-16, 1e-2, **FINITE))
     if draw(st.booleans()):
         solver["slip_tol"] = draw(st.floats(0.0, 1e-2, exclude_min=True, **FINITE))
+    if draw(st.booleans()):
+        solver["spin_tol"] = draw(st.floats(0.0, 1e-2, **FINITE))
     if solver or draw(st.booleans()):
         cfg["solver"] = solver
     stop = {}
@@ -170,6 +172,7 @@ SCALARS = [
     (("solver", "atol"), 1e-16, 1e-2, False, False, False),
     (("solver", "dt"), 0.0, 1.0, True, False, False),
     (("solver", "slip_tol"), 0.0, 1e-2, True, False, False),
+    (("solver", "spin_tol"), 0.0, 1e-2, False, False, False),
     (("stop", "t_max"), 0.0, 1e5, True, False, False),
     (("stop", "max_steps"), 1, 10**9, False, False, True),
     (("chunk_size",), 1, 100_000, False, False, True),

@@ -33,7 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from reference import newton_euler as ne  # noqa: E402
 
 from sweep import model as M  # noqa: E402
-from sweep.core.impulse import project_velocity  # noqa: E402
+from sweep.core import layout as L  # noqa: E402
+from sweep.core.impulse import project_velocity, stop_axis_rate  # noqa: E402
 
 RTOL = 1e-12
 N_VALID = 1000          # valid (den > 0, Phi > 0) states per mode / stuck combination
@@ -468,3 +469,85 @@ if __name__ == "__main__":
             print("roll " if rolling else "slide", st, stats)
             print("   ", ", ".join(f"{k}={v:.1e}" for k, v in err.items()))
     print(f"{time.time() - t0:.1f} s")
+
+
+def _axis_rates(y):
+    sa, ca = math.sin(y[M.Y_ALPHA]), math.cos(y[M.Y_ALPHA])
+    return np.array([y[M.Y_W1], y[M.Y_W2] * ca - y[M.Y_W3] * sa, y[M.Y_W2] * sa + y[M.Y_W3] * ca])
+
+
+def _with_axis_rates(y, g):
+    """y with omega set from its rates on a1, a2, a3."""
+    sa, ca = math.sin(y[M.Y_ALPHA]), math.cos(y[M.Y_ALPHA])
+    out = y.copy()
+    out[M.Y_W1], out[M.Y_W2], out[M.Y_W3] = g[0], ca * g[1] + sa * g[2], -sa * g[1] + ca * g[2]
+    return out
+
+
+def test_stop_axis_rate_is_the_least_change_that_stops_one_moment_axis():
+    """A moment component sticking at spin_tol (impulse.stop_axis_rate): after it omega.a_i = 0,
+    every stuck component is at rest (held there up to round-off; here given a small drift), the
+    slip stays zero rolling), the energy drops by exactly the returned loss, and the new velocity
+    is the closest admissible one in the kinetic-energy metric of the reference Newton-Euler world
+    state (Pythagoras against random admissible velocities)."""
+    rng = np.random.default_rng(11)
+    worst = dict(stopped=0.0, held=0.0, energy_drop=0.0, pythagoras=0.0)
+    count = 0
+    for rolling in (True, False):
+        for i in range(3):
+            for stuckset in STUCK_SETS:
+                for _ in range(25):
+                    disk, p, chi = random_disk(rng)
+                    alpha = random_alpha(rng)
+                    side = math.copysign(1.0, alpha)
+                    y = random_state(rng, rolling, alpha)
+                    g0 = _axis_rates(y)
+                    g0[i] = rng.normal(0.0, 1e-3)          # a slow component
+                    y = _with_axis_rates(y, g0)
+                    y0 = y.copy()
+                    cs = np.zeros(L.N_CS)
+                    cs[L.CS_SIDE] = side
+                    cs[L.CS_MODE] = L.ROLL if rolling else L.SLIDE
+                    for j in stuckset:
+                        if j != i:
+                            cs[L.CS_STUCK + j] = 1.0
+                            g0[j] = rng.normal(0.0, 1e-12)   # a held component's drift
+                    y = _with_axis_rates(y, g0)
+                    y0 = y.copy()
+                    mode = M.ROLL if rolling else M.SLIDE
+                    E_old = M.energy(y0, p, side, mode)
+                    loss = stop_axis_rate(y, p, cs, i, np.zeros((7, 12)))
+                    E_new = M.energy(y, p, side, mode)
+                    count += 1
+                    g1 = _axis_rates(y)
+                    scale = 1.0 + np.max(np.abs(g0))
+                    worst["stopped"] = max(worst["stopped"], abs(g1[i]) / scale)
+                    for j in range(3):
+                        if cs[L.CS_STUCK + j] == 1.0:
+                            worst["held"] = max(worst["held"], abs(g1[j]) / scale)
+                    assert np.all(y[M.Y_ALPHA] == y0[M.Y_ALPHA]) and np.all(y[6:] == y0[6:])
+                    assert loss >= 0.0
+                    worst["energy_drop"] = max(worst["energy_drop"], abs((E_old - E_new) - loss) / (1 + abs(E_old)))
+                    if rolling:
+                        assert y[M.Y_U1] == 0.0 and y[M.Y_U2] == 0.0
+                    # closest admissible velocity: Pythagoras against random admissible ones
+                    ws = ne.from_reduced(disk, y, side, rolling, y0[M.Y_THETA], y0[M.Y_PSI])
+                    ws0 = ne.from_reduced(disk, y0, side, rolling, y0[M.Y_THETA], y0[M.Y_PSI])
+                    d_plus = _ke_dist2(disk, ws0.Iw, ws0.v, ws0.omega, ws.v, ws.omega)
+                    for _ in range(3):
+                        y3 = random_state(rng, rolling, alpha)
+                        g3 = _axis_rates(y3)
+                        g3[i] = 0.0
+                        for j in range(3):
+                            if cs[L.CS_STUCK + j] == 1.0:
+                                g3[j] = 0.0
+                        y3 = _with_axis_rates(y3, g3)
+                        ws3 = ne.from_reduced(disk, y3, side, rolling, y0[M.Y_THETA], y0[M.Y_PSI])
+                        d3 = _ke_dist2(disk, ws0.Iw, ws0.v, ws0.omega, ws3.v, ws3.omega)
+                        d23 = _ke_dist2(disk, ws0.Iw, ws.v, ws.omega, ws3.v, ws3.omega)
+                        assert d3 >= d_plus * (1 - 1e-12)
+                        worst["pythagoras"] = max(worst["pythagoras"], abs(d3 - d_plus - d23) / (d3 + d23 + 1e-300))
+    print("\nstop_axis_rate:", count, "stops;", ", ".join(f"{k}={v:.1e}" for k, v in worst.items()))
+    assert count >= 1000
+    bad = {k: v for k, v in worst.items() if not v <= RTOL}
+    assert not bad, bad

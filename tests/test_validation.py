@@ -68,6 +68,7 @@ BAD_VALUES = {
     "solver.atol": [0.0, 1.0],
     "solver.dt": [0.0, -1e-3],
     "solver.slip_tol": [0.0, 1.0],
+    "solver.spin_tol": [-1e-9, 1.0, float("nan"), "off"],
     "outputs.kinematics": ["yes", 1],
 }
 CASES = [(f, v) for f, vals in BAD_VALUES.items() for v in vals]

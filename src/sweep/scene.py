@@ -39,8 +39,10 @@ DEFAULTS: dict[str, Any] = {
     # scene to a few seconds of CPU while leaving 100x headroom for slow, slip-heavy scenes.
     "stop": {"levels": [1.0e-1, 1.0e-2, 1.0e-3, 1.0e-4], "t_max": 120.0, "max_steps": 2_000_000},
     # rtol 1e-10: halt times converge to ~1e-9 relative there (docs/performance.md), at a cost of a
-    # few ms per scene; slip_tol: slip speed (m/s) at which sliding ends, see docs/model.md.
-    "solver": {"method": "adaptive", "rtol": 1.0e-10, "atol": 1.0e-12, "dt": 1.0e-3, "slip_tol": 1.0e-9},
+    # few ms per scene; slip_tol: slip speed (m/s) at which sliding ends; spin_tol: rate (rad/s) of a
+    # moment component at which it sticks when the moment can hold it; see docs/model.md.
+    "solver": {"method": "adaptive", "rtol": 1.0e-10, "atol": 1.0e-12, "dt": 1.0e-3, "slip_tol": 1.0e-9,
+               "spin_tol": 1.0e-7},
     "outputs": {"normal_force_frequency": True, "kinematics": False},
     # The disk's elastic material, used only by the sound synthesis (sweep.audio, sweep.plate), never by
     # the integrator or the summary: E (Pa), density (kg/m^3), poisson (-), damping (modal damping
@@ -192,6 +194,7 @@ def load_scene(src) -> Scene:
     so["atol"] = _num("solver.atol", so["atol"], 1e-16, 1e-2)
     so["dt"] = _num("solver.dt", so["dt"], 0.0, 10.0, lo_open=True)
     so["slip_tol"] = _num("solver.slip_tol", so["slip_tol"], 0.0, 1e-2, lo_open=True)
+    so["spin_tol"] = _num("solver.spin_tol", so["spin_tol"], 0.0, 1e-2)
     out = cfg["outputs"]
     for k in out:
         if not isinstance(out[k], bool):
@@ -207,6 +210,7 @@ def load_scene(src) -> Scene:
 
     params, chi = model.make_params(SHAPES[d["shape"]], d["radius"], d["thickness"], cfg["gravity"],
                                     c["mu_s"], c["mu_d"], c["k1"], c["k2"], c["k3"])
+    params[model.P_WTOL] = so["spin_tol"] * chi
     bmax = max_level(params)
     if st["levels"][0] > bmax:
         raise ConfigError("stop.levels", st["levels"][0],

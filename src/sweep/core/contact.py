@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import math
 
-from .impulse import project_velocity
+from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
-from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
+from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DSLIDE, Y_U1,
                     Y_U2, Y_W1, energy_with_slip, moment_axes_rates, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
@@ -37,12 +37,13 @@ EV_CONTACT = 11    # Phi = 0: contact lost
 EV_SIDE = 12       # alpha = 0: the other rim edge takes the contact
 EV_FACE = 13       # pi/2 - |alpha| = BETA_FACE: the face reaches the table
 EV_SLAVE_LOST = 14  # SLAVED: the slaved direction stops attracting (d cross/d nu -> 0, a fold) -> SLIDE
-N_DYN_EVENTS = 15
-EV_LEVEL = 15      # energy reaches the next halt level (recorded, no restart)
-N_EVENTS = 16
+EV_SPIN1, EV_SPIN2, EV_SPIN3 = 15, 16, 17  # a free component slows to spin_tol: sticks if it can be held
+N_DYN_EVENTS = 18
+EV_LEVEL = 18      # energy reaches the next halt level (recorded, no restart)
+N_EVENTS = 19
 # not event functions: EV_AGAINST1 + i is the sign event of component i found at the restart itself
 # (omega.a_i moves against its new moment sign at once: the un-stick only grazed |sigma| = 1)
-EV_AGAINST1 = 16
+EV_AGAINST1 = 19
 
 # Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
 # is then 1e-6 R above the table (38 nm for the paper's disk), below any real table's flatness. A disk
@@ -362,6 +363,22 @@ def stick_or_flip(i, t, y, p, cs, n, wk, istats):
 
 
 @kernel
+def stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
+    """A free component has slowed to |omega.a_i| = spin_tol: if the moment can hold it (|sigma
+    needed| < 1, the stick test of stick_or_flip), it sticks, and the rate left is stopped by an
+    impulsive contact moment (impulse.stop_axis_rate, its energy booked to k_i). Else it stays free
+    with its sign (it will cross 0 or speed up again). Returns whether it stuck."""
+    cs[CS_STUCK + i] = 1.0
+    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+    if abs(wk[W_AUXTMP, X_SIG1 + i]) < 1.0:
+        y[Y_DK1 + i] += stop_axis_rate(y, p, cs, i, wk[W_SCRATCH:W_SCRATCH + 7])
+        istats[I_STICK] += 1
+        return True
+    cs[CS_STUCK + i] = 0.0
+    return False
+
+
+@kernel
 def release_moved(y, cs, g_before):
     """A stuck moment component whose omega.a_i an impulse has moved off its held value is free:
     the dry-friction moment is finite and cannot hold it through an impulse (sign of the new
@@ -435,6 +452,8 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
                 g[EV_UNSTICK1 + i] = 1.0 - abs(aux[X_SIG1 + i])
             else:
                 g[EV_SIGN1 + i] = cs[CS_SIG + i] * aux[X_G1 + i]
+                if p[P_WTOL] > 0.0:
+                    g[EV_SPIN1 + i] = g[EV_SIGN1 + i] - p[P_WTOL]
     mode = cs[CS_MODE]
     if mode == ROLL:
         g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
@@ -486,6 +505,10 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
             cs[CS_STUCK + i] = 1.0
             istats[I_STICK] += 1
             held = i
+    elif EV_SPIN1 <= k <= EV_SPIN3:
+        i = k - EV_SPIN1
+        if stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
+            g_before = moment_axes_rates(y)   # the stop holds the stuck components: they stay stuck
     elif k <= EV_UNSTICK3:
         i = k - EV_UNSTICK1
         eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)

@@ -4,12 +4,16 @@ Used where alpha crosses 0 and the other rim edge takes the contact (side change
 velocity (v, omega) of the old contact is projected, in the metric of the kinetic energy
 (diag(1, 1, 1, A, C, A) on e-frame components), onto the velocities the new contact allows. This is
 Gauss' principle for an impulsive constraint: the energy lost, 1/2 |V - V_new|^2_M >= 0, is returned.
+
+Also used where a moment component sticks at spin_tol (`stop_axis_rate`): the same least change of
+the velocity, with omega.a_i stopped and the contact kept.
 """
 from __future__ import annotations
 
 import math
 
 from .jit import kernel
+from .layout import CS_MODE, CS_SIDE, CS_STUCK, ROLL
 from .model import P_A, P_C, P_H, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, physical_velocity
 
 # scratch layout: rows 0..5 hold J (6 x 5) in columns 0..4 and the augmented normal matrix
@@ -18,25 +22,8 @@ _M0, _VROW, _WT = 5, 6, 6
 
 
 @kernel
-def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S, slip_dir=math.nan):
-    """Project y's velocity onto the contact on `side_new` in place; returns the energy lost.
-
-    slip_old/slip_new: the old/new contact slides, else it rolls. A new sliding contact has both
-    slip components free, or, with slip_dir (rad) given, only the slip along (cos, sin)(slip_dir).
-    S: scratch array with at least 7 rows and 12 columns.
-    """
-    V = S[_VROW]
-    physical_velocity(y, p, side_old, 1 if slip_old else 0, V)
-    with_slip = slip_new
-    h = side_new * p[P_H]
-    a = y[Y_ALPHA]
-    s = math.sin(a)
-    c = math.cos(a)
-    along = with_slip and not math.isnan(slip_dir)
-    nq = (4 if along else 5) if with_slip else 3
-    for k in range(6):
-        for j in range(5):
-            S[k, j] = 0.0
+def _set_metric(S, p):
+    """The kinetic-energy metric on e-frame (v, omega) components, into S's metric slots."""
     W = S[_VROW, _WT:_WT + 6]
     W[0] = 1.0
     W[1] = 1.0
@@ -44,24 +31,15 @@ def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S, slip_dir=m
     W[3] = p[P_A]
     W[4] = p[P_C]
     W[5] = p[P_A]
-    # columns: d V / d (w1, w2, w3, u1, u2) for the new contact
-    S[0, 1] = 1.0
-    S[0, 2] = -h
-    S[1, 0] = -1.0
-    S[2, 0] = h
-    S[3, 0] = 1.0
-    S[4, 1] = 1.0
-    S[5, 2] = 1.0
-    if along:
-        cd = math.cos(slip_dir)
-        sd = math.sin(slip_dir)
-        S[0, 3] = cd
-        S[1, 3] = sd * c
-        S[2, 3] = -sd * s
-    else:
-        S[0, 3] = 1.0
-        S[1, 4] = c
-        S[2, 4] = -s
+
+
+@kernel
+def _least_change(S, nq):
+    """Velocity nearest to V (S[_VROW, 0:6]) in the metric W among the combinations of the columns
+    S[0:6, 0:nq]: Gaussian elimination with partial pivoting on the normal equations. The
+    coefficients overwrite S[0:nq, _M0 + nq]; returns the energy lost, 1/2 |V - V_new|^2_W."""
+    V = S[_VROW]
+    W = S[_VROW, _WT:_WT + 6]
     for i in range(nq):
         b = 0.0
         for k in range(6):
@@ -98,6 +76,49 @@ def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S, slip_dir=m
         for j in range(nq):
             vk += S[k, j] * S[j, _M0 + nq]
         loss += 0.5 * W[k] * (V[k] - vk) ** 2
+    return loss
+
+
+@kernel
+def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S, slip_dir=math.nan):
+    """Project y's velocity onto the contact on `side_new` in place; returns the energy lost.
+
+    slip_old/slip_new: the old/new contact slides, else it rolls. A new sliding contact has both
+    slip components free, or, with slip_dir (rad) given, only the slip along (cos, sin)(slip_dir).
+    S: scratch array with at least 7 rows and 12 columns.
+    """
+    V = S[_VROW]
+    physical_velocity(y, p, side_old, 1 if slip_old else 0, V)
+    with_slip = slip_new
+    h = side_new * p[P_H]
+    a = y[Y_ALPHA]
+    s = math.sin(a)
+    c = math.cos(a)
+    along = with_slip and not math.isnan(slip_dir)
+    nq = (4 if along else 5) if with_slip else 3
+    for k in range(6):
+        for j in range(5):
+            S[k, j] = 0.0
+    _set_metric(S, p)
+    # columns: d V / d (w1, w2, w3, u1, u2) for the new contact
+    S[0, 1] = 1.0
+    S[0, 2] = -h
+    S[1, 0] = -1.0
+    S[2, 0] = h
+    S[3, 0] = 1.0
+    S[4, 1] = 1.0
+    S[5, 2] = 1.0
+    if along:
+        cd = math.cos(slip_dir)
+        sd = math.sin(slip_dir)
+        S[0, 3] = cd
+        S[1, 3] = sd * c
+        S[2, 3] = -sd * s
+    else:
+        S[0, 3] = 1.0
+        S[1, 4] = c
+        S[2, 4] = -s
+    loss = _least_change(S, nq)
     y[Y_W1] = S[0, _M0 + nq]
     y[Y_W2] = S[1, _M0 + nq]
     y[Y_W3] = S[2, _M0 + nq]
@@ -110,4 +131,65 @@ def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S, slip_dir=m
     else:
         y[Y_U1] = 0.0
         y[Y_U2] = 0.0
+    return loss
+
+
+@kernel
+def stop_axis_rate(y, p, cs, i, S):
+    """omega.a_i -> 0 where a moment component sticks at spin_tol (docs/model.md), in place.
+
+    The least change of the velocity in the kinetic-energy metric that keeps the contact (rolling,
+    or sliding with both slip components free) with omega.a_i = 0 and every stuck component at
+    rest (omega.a_j = 0; they are held there up to round-off): an impulsive contact moment with
+    the contact impulse that keeps the contact. The admissible velocities form a linear subspace,
+    so the energy drops by exactly the returned loss (second order in omega.a_i). S: >= 7 x 12.
+    """
+    slides = cs[CS_MODE] != ROLL
+    V = S[_VROW]
+    physical_velocity(y, p, cs[CS_SIDE], 1 if slides else 0, V)
+    h = cs[CS_SIDE] * p[P_H]
+    s = math.sin(y[Y_ALPHA])
+    c = math.cos(y[Y_ALPHA])
+    _set_metric(S, p)
+    for k in range(6):
+        for j in range(5):
+            S[k, j] = 0.0
+    nq = 0
+    for j in range(3):
+        if j != i and cs[CS_STUCK + j] != 1.0:
+            # a_1 = e1, a_2 = c e2 - s e3, a_3 = s e2 + c e3 on e-frame components
+            a1 = 1.0 if j == 0 else 0.0
+            a2 = 0.0 if j == 0 else (c if j == 1 else s)
+            a3 = 0.0 if j == 0 else (-s if j == 1 else c)
+            S[0, nq] = a2 - h * a3        # d V / d (omega.a_j) on this contact
+            S[1, nq] = -a1
+            S[2, nq] = h * a1
+            S[3, nq] = a1
+            S[4, nq] = a2
+            S[5, nq] = a3
+            nq += 1
+    n_rot = nq
+    if slides:
+        S[0, nq] = 1.0
+        S[1, nq + 1] = c
+        S[2, nq + 1] = -s
+        nq += 2
+    loss = _least_change(S, nq)
+    r0, r1, r2 = 0.0, 0.0, 0.0        # omega.a_j after the update
+    q = 0
+    for j in range(3):
+        if j != i and cs[CS_STUCK + j] != 1.0:
+            if j == 0:
+                r0 = S[q, _M0 + nq]
+            elif j == 1:
+                r1 = S[q, _M0 + nq]
+            else:
+                r2 = S[q, _M0 + nq]
+            q += 1
+    y[Y_W1] = r0
+    y[Y_W2] = c * r1 + s * r2
+    y[Y_W3] = -s * r1 + c * r2
+    if slides:
+        y[Y_U1] = S[n_rot, _M0 + nq]
+        y[Y_U2] = S[n_rot + 1, _M0 + nq]
     return loss

@@ -14,7 +14,7 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
-from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, N_DYN_EVENTS, apply_event, confirm_slaved,
+from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved,
                       consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start, lattice_step
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
@@ -128,6 +128,20 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
                 ta, tb = t, t
                 if k <= EV_SIGN3:
                     k_event = EV_AGAINST1 + k
+        elif EV_SPIN1 <= k <= EV_SPIN3 and g_old[k] <= 0.0 and g_new[k] <= 0.0:
+            # a free component slower than spin_tol at both ends (e.g. just released at an
+            # un-stick) can speed past spin_tol and slow to it again within the step: the peak of
+            # the Hermite interpolant of g_k (exact end slopes), confirmed on the dense output
+            i = k - EV_SPIN1
+            peak = hermite_peak(g_old[k], cs[CS_SIG + i] * sign_rate(i, y, f) * h, g_new[k],
+                                cs[CS_SIG + i] * sign_rate(i, y_new, f_new) * h)
+            if peak > 0.0:
+                if not have_dense:
+                    dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
+                    have_dense = True
+                gm = event_value_at(k, t + peak * h, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+                if gm > 0.0:
+                    ta, ga, tb, gb = t + peak * h, gm, t + h, g_new[k]
         elif g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf and g_new[k] != math.inf:
             # positive at both ends, g_k can still reach 0 and come back within the step: a
             # bounce off alpha = 0, a brief slip demand, a needed moment that touches its limit, a
@@ -137,6 +151,9 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
                 dip = hermite_dip(g_old[k], cs[CS_SIDE] * y[Y_W1] * h, g_new[k], cs[CS_SIDE] * y_new[Y_W1] * h)
             elif k <= EV_SIGN3:
                 dip = hermite_interior_root(k, cs[CS_SIG + k], y, f, y_new, f_new, g_old[k], g_new[k], h)
+            elif EV_SPIN1 <= k <= EV_SPIN3:
+                dip = hermite_interior_root(k - EV_SPIN1, cs[CS_SIG + k - EV_SPIN1], y, f, y_new, f_new,
+                                            g_old[k], g_new[k], h)
             else:
                 if trk[T_RATES_OLD] == 0.0:
                     event_rates(t, y, f, g_old, p, cs, n, u_tol, lev, wk, istats, wk[W_RATEOLD])
@@ -200,11 +217,12 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard):
 
 
 @kernel
-def mark_halt(t_halt, y_halt, n, p, cs, fstats, trk, y_end):
-    """The scene halted at t_halt in state y_halt: its end state, energy and impact losses."""
-    fstats[F_TEND] = t_halt
+def mark_end(t_end, y_at_end, n, p, cs, fstats, trk, y_end):
+    """The scene ended (halted, or reached t_max) at t_end in state y_at_end: its end state,
+    energy and impact losses. Steps after the end only resolve Phi maxima and change none of them."""
+    fstats[F_TEND] = t_end
     for i in range(n):
-        y_end[i] = y_halt[i]
+        y_end[i] = y_at_end[i]
     fstats[F_EEND] = mode_energy(y_end, p, cs)
     trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
 
@@ -234,9 +252,9 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
 
     p[P_UFREEZE] = u_tol
     fstats[F_TIMPACT] = -math.inf
-    # event counts at the halt: steps after it only resolve Phi maxima, and what happens there
-    # must not depend on whether the frequency outputs are on
-    halt_trans, halt_stick, halt_impacts = -1, -1, -1
+    # event counts at the end (halt or t_max): steps after it only resolve Phi maxima, and what
+    # happens there must not depend on whether the frequency outputs are on
+    end_trans, end_stick, end_impacts = -1, -1, -1
     t = 0.0
     start(y, p, cs, n, u_tol, wk, istats)
     eval_rhs(t, y, p, cs, n, f, aux, wk, istats)
@@ -263,10 +281,22 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     after_reject = False
     h = min(h, h_max)
 
+    h_after = math.inf
+    t_after_limit = math.inf
     while outcome < 0 or (trk[T_PENDING] > 0.0 and trk[T_AFTER_HALT] < extra_steps):
         running = outcome < 0
         if not running:
             trk[T_AFTER_HALT] += 1.0
+            if h_after == math.inf:
+                # the steps after the end only resolve the Phi maxima just after the levels: they
+                # neither grow past the last step nor run longer than the scene did (a steady
+                # motion, e.g. rolling at a tilt held by a stuck moment, has no maxima, and its
+                # steps would grow tenfold each until t overflowed)
+                h_after = h
+                t_after_limit = 2.0 * t
+            if t >= t_after_limit:
+                break
+            h = min(h, h_after)
         if istats[I_STEPS] + istats[I_REJECTED] >= max_steps:
             if running:
                 outcome = oc.STEP_LIMIT
@@ -315,9 +345,9 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                                    u_tol, wk, istats, fq)
             if t_halt >= 0.0:
                 outcome = oc.HALTED
-                halt_trans, halt_stick, halt_impacts = istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
+                end_trans, end_stick, end_impacts = istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
                 dense_eval(F, 0, y, t, h, t_halt, n, wk[W_YBUF])
-                mark_halt(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end)
+                mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end)
             elif int(trk[T_NEXT_LEVEL]) < nl:
                 lev = level_e[int(trk[T_NEXT_LEVEL])]
         record_samples(t, y, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, F, n, p, cs, sample_tau,
@@ -355,7 +385,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 halt_flat(t, level_out, trk, level_e)
                 istats[I_FLAT] = 1
                 outcome = oc.HALTED
-                mark_halt(t, y, n, p, cs, fstats, trk, y_end)
+                end_trans, end_stick, end_impacts = istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
+                mark_end(t, y, n, p, cs, fstats, trk, y_end)
             elif code >= 0:
                 if running:
                     outcome = code
@@ -391,17 +422,18 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                                              wk[W_DYBUF], wk[W_AUXBUF], wk[W_YBUF], istats)
         if hit_tmax and outcome < 0 and first_k < 0:
             outcome = oc.T_MAX
-            fstats[F_TEND] = t
+            end_trans, end_stick, end_impacts = istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
+            mark_end(t, y, n, p, cs, fstats, trk, y_end)
         h = h_next
 
     if outcome < 0:
         outcome = oc.STEP_LIMIT
-    if outcome == oc.HALTED and halt_trans >= 0:
-        istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS] = halt_trans, halt_stick, halt_impacts
+    if end_trans >= 0:
+        istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS] = end_trans, end_stick, end_impacts
     if peaks_on:
         finish_levels(fq, level_out)
-    if outcome == oc.HALTED:
-        fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the halt
+    if end_trans >= 0:
+        fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the end
     else:
         fstats[F_TEND] = t
         for i in range(n):

@@ -59,7 +59,7 @@ W_AUXSLOPE = 28
 W_RATEOLD = 29    # d g_k/d tau at the step start (forward difference; roots.event_rates)
 W_RATENEW = 30    # ... at the step end
 N_WORK = 31
-N_WCOLS = 16     # columns of the work buffer: >= N_FULL and >= the number of events
+N_WCOLS = 19     # columns of the work buffer: >= N_FULL and >= the number of events
 
 # --- settings vector ----------------------------------------------------------------------------
 S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS, S_EXTRA = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -78,7 +78,7 @@ N_FSTATS = 8
 # --- tracking state of the level/peak/sample recorders (float64) ----------------------------------
 T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PHI_A, T_PHI_B, T_TA, T_TB, T_PREV_OK, T_TPREV, T_HPREV = range(9)
 T_PENDING, T_AFTER_HALT, T_NPK = 9, 10, 11
-T_DIMPACT_HALT = 12   # impact dissipation up to the halt (steps after it only resolve Phi maxima)
+T_DIMPACT_HALT = 12   # impact dissipation up to the end (steps after it only resolve Phi maxima)
 T_PEAK_RING = 13  # 1: the peak buffer is a ring of its last rows (batch path; only the summary is kept)
 T_PREV_DENSE = 14  # 1: F[7:14] holds the previous step's dense output; 0: K[K_PREV:] holds its stages
 T_RATES_OLD = 15  # 1: wk[W_RATEOLD] holds the event rates at the current step start (the last step end's)

@@ -34,7 +34,10 @@ P_G, P_H, P_A, P_C, P_K1, P_K2, P_K3, P_MUS, P_MUD = 0, 1, 2, 3, 4, 5, 6, 7, 8
 # Slip speed at or below which the friction direction is the stored slip direction (n0x, n0y)
 # rather than u/|u|: 0 in the pure model; the integrator sets it to slip_tol (docs/model.md).
 P_UFREEZE = 9
-N_PARAMS = 10
+# Rate |omega.a_i| (dimensionless, solver.spin_tol chi) at or below which a free moment component
+# that slows down sticks, when the moment can hold it (docs/model.md); 0: only at omega.a_i = 0.
+P_WTOL = 10
+N_PARAMS = 11
 
 # --- auxiliary outputs of the right-hand side ----------------------------------------------
 X_PHI, X_F1, X_F2, X_SIG1, X_SIG2, X_SIG3, X_G1, X_G2, X_G3, X_OK = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
@@ -64,6 +67,7 @@ def make_params(k2_shape: float, radius: float, thickness: float, gravity: float
     p[P_MUS] = mu_s
     p[P_MUD] = mu_d
     p[P_UFREEZE] = 0.0
+    p[P_WTOL] = 0.0
     return p, chi
 
 
