@@ -205,3 +205,16 @@ def test_micro_sticks_at_a_moment_limit_are_counted_alike_at_every_rtol():
     pure12, t_pure = _counts(cfg, 1e-12, 0.0)
     assert pure10 != pure12                    # the pure rule's count moves with rtol (4573 vs 5427)
     assert abs(t12 - t_pure) < 1e-7 * t_pure
+
+
+def test_spin_tolerance_convergence():
+    """The sticking at spin_tol converges to the pure Filippov rule at first order in spin_tol:
+    the last level time of harness scene 252 (the micro-stick regime above) at rtol 1e-12 moves by
+    1.9e-5, 1.3e-6, 9.4e-8 s for spin_tol 1e-6, 1e-7, 1e-8 rad/s against spin_tol 0."""
+    rng = np.random.default_rng(20261122)
+    cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(253)][252])
+    t = {st: _counts(cfg, 1e-12, st)[1] for st in (1e-6, 1e-7, 1e-8, 0.0)}
+    d = [abs(t[st] - t[0.0]) for st in (1e-6, 1e-7, 1e-8)]
+    assert d[0] > d[1] > d[2]
+    assert d[0] / d[2] > 30          # two decades of spin_tol: ~100x (first order)
+    assert d[2] < 1e-8 * t[0.0]

@@ -13,6 +13,9 @@ A SLIDE ends where |u| falls to slip_tol, by a plastic contact impulse that remo
 slip (O(slip_tol), first-order convergence in slip_tol). A slaved hand-over is not used there: a
 decaying slip generally spirals into u = 0 (its direction turns at a rate ~ 1/u without a
 quasi-static direction to settle on), so there is no slow manifold to hand over to.
+Moment components (eq. 3.3, Filippov): a free component sticks where omega.a_i reaches 0, or where
+it slows to spin_tol (p[P_WTOL]), if the moment can hold it (|sigma needed| < 1); a stuck one is
+released where |sigma needed| reaches 1.
 """
 from __future__ import annotations
 

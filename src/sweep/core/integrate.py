@@ -91,7 +91,8 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
     cubic Hermite interpolant of g (its end derivatives from the state for the signs and the side,
     by a forward difference along f for every other event: roots.event_rates) flags an interior
     minimum, the dense output there confirms it. The rates at the step end are kept for the next
-    step's start (trk[T_RATES_OLD]), so a step costs one RHS evaluation for them.
+    step's start (trk[T_RATES_OLD]), so a step costs one RHS evaluation for them. A spin event
+    (free component slower than spin_tol at both ends) is searched for a rise past spin_tol and back.
     """
     g_old = wk[W_GOLD]
     g_new = wk[W_GNEW]
