@@ -14,6 +14,8 @@ import sys
 from decimal import Decimal
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "config" / "scenes" / "kessler2002.yaml"
 # table column header -> key of a level in the JSON summary
@@ -55,12 +57,36 @@ def test_readme_table_parser_finds_a_wrong_cell():
     assert abs(7.1179 - float(rows[0]["t (s)"])) > half_unit(rows[0]["t (s)"])
 
 
-def test_readme_paper_case_table_matches_scene_json():
-    rows = readme_table((ROOT / "README.md").read_text(encoding="utf-8"))
+@pytest.fixture(scope="module")
+def scene_json():
     out = subprocess.run([sys.executable, "-m", "sweep", "scene", str(SCENE), "--json"], cwd=ROOT,
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
-    levels = json.loads(out.stdout)["levels"]
+    return json.loads(out.stdout)
+
+
+def test_readme_paper_case_summary_line_matches_scene_json(scene_json):
+    """The prose under the table: halt time and its error, ramp exponent, largest normal-force
+    frequency, slip fraction to the printed digits; the event counts exactly; steps and right-hand
+    side evaluations to 2 % (they follow the floating-point details of the platform)."""
+    text = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+    m = re.search(r"t_halt = ([0-9.]+) ± ([0-9.]+) s \(finite\), ramp exponent ([0-9.]+) ± ([0-9.]+), maximum "
+                  r"normal-force frequency ([0-9]+) Hz, slip fraction ([0-9.]+), ([0-9]+) roll↔slip transitions, "
+                  r"([0-9]+) stick phases; ([0-9 ]+) steps, ([0-9 ]+) right-hand-side evaluations", text)
+    assert m, "README.md: the paper-case summary line is missing or reworded"
+    s = scene_json
+    for printed, value in zip(m.groups()[:6], (s["t_halt"], s["t_halt_error"], s["ramp_exponent"],
+                                               s["ramp_exponent_error"], s["normal_force_hz_max"],
+                                               s["slip_fraction"])):
+        assert abs(value - float(printed)) <= half_unit(printed) * (1 + 1e-9), (printed, value)
+    assert (int(m.group(7)), int(m.group(8))) == (s["n_transitions"], s["n_stick"])
+    for printed, value in ((m.group(9), s["n_steps"]), (m.group(10), s["n_rhs"])):
+        assert abs(int(printed.replace(" ", "")) - value) <= 0.02 * value, (printed, value)
+
+
+def test_readme_paper_case_table_matches_scene_json(scene_json):
+    rows = readme_table((ROOT / "README.md").read_text(encoding="utf-8"))
+    levels = scene_json["levels"]
     assert len(rows) == len(levels), (f"README.md has {len(rows)} rows, `scene --json` reports "
                                       f"{len(levels)} levels")
     wrong = []
