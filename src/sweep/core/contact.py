@@ -352,13 +352,23 @@ def cone_violated(t, y, p, cs, n, wk, istats):
 
 
 @kernel
+def needed_sigma(i, t, y, p, cs, n, dy, aux, wk, istats):
+    """sigma_i of the moment that holds omega.a_i where it is (component i treated as stuck; its
+    contact state is left as it was). The right-hand side of that state goes to dy, aux."""
+    was = cs[CS_STUCK + i]
+    cs[CS_STUCK + i] = 1.0
+    eval_rhs(t, y, p, cs, n, dy, aux, wk, istats)
+    cs[CS_STUCK + i] = was
+    return aux[X_SIG1 + i]
+
+
+@kernel
 def stick_or_flip(i, t, y, p, cs, n, wk, istats):
     """At omega.a_i = 0: stick if the moment can hold it (|sigma needed| <= 1), else flip its sign
     to the one the motion will take."""
-    cs[CS_STUCK + i] = 1.0
-    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
-    need = wk[W_AUXTMP, X_SIG1 + i]
+    need = needed_sigma(i, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
     if abs(need) < 1.0:
+        cs[CS_STUCK + i] = 1.0
         istats[I_STICK] += 1
         return
     cs[CS_STUCK + i] = 0.0
@@ -371,13 +381,11 @@ def stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
     needed| < 1, the stick test of stick_or_flip), it sticks, and the rate left is stopped by an
     impulsive contact moment (impulse.stop_axis_rate, its energy booked to k_i). Else it stays free
     with its sign (it will cross 0 or speed up again). Returns whether it stuck."""
-    cs[CS_STUCK + i] = 1.0
-    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
-    if abs(wk[W_AUXTMP, X_SIG1 + i]) < 1.0:
+    if abs(needed_sigma(i, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)) < 1.0:
+        cs[CS_STUCK + i] = 1.0
         y[Y_DK1 + i] += stop_axis_rate(y, p, cs, i, wk[W_SCRATCH:W_SCRATCH + 7])
         istats[I_STICK] += 1
         return True
-    cs[CS_STUCK + i] = 0.0
     return False
 
 

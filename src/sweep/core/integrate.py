@@ -15,17 +15,17 @@ import numpy as np
 
 from .. import outcomes as oc
 from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved,
-                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, set_slip, slaved_direction, start_slip)
+                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, needed_sigma, set_slip, slaved_direction, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start, lattice_step
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
-from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_STUCK, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
+from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
-from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_THETA, Y_U1, Y_W1
+from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_W1
 from .roots import event_rates, event_value_at, hermite_dip, hermite_interior_root, hermite_peak, locate, sign_rate
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
@@ -150,11 +150,10 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
             if k == EV_SIDE:
                 # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
                 dip = hermite_dip(g_old[k], cs[CS_SIDE] * y[Y_W1] * h, g_new[k], cs[CS_SIDE] * y_new[Y_W1] * h)
-            elif k <= EV_SIGN3:
-                dip = hermite_interior_root(k, cs[CS_SIG + k], y, f, y_new, f_new, g_old[k], g_new[k], h)
-            elif EV_SPIN1 <= k <= EV_SPIN3:
-                dip = hermite_interior_root(k - EV_SPIN1, cs[CS_SIG + k - EV_SPIN1], y, f, y_new, f_new,
-                                            g_old[k], g_new[k], h)
+            elif k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
+                # sigma_i omega.a_i (less spin_tol): exact slopes from the state
+                i = k if k <= EV_SIGN3 else k - EV_SPIN1
+                dip = hermite_interior_root(i, cs[CS_SIG + i], y, f, y_new, f_new, g_old[k], g_new[k], h)
             else:
                 if trk[T_RATES_OLD] == 0.0:
                     event_rates(t, y, f, g_old, p, cs, n, u_tol, lev, wk, istats, wk[W_RATEOLD])
@@ -190,10 +189,7 @@ def spin_holds(i, t_event, F, y, t, h, n, p, cs, wk, istats):
     test contact.stick_at_spin_tol makes)? Where it would not, the event changes nothing, and the
     step goes on instead of restarting there (the same trajectory, fewer restarts)."""
     dense_eval(F, 0, y, t, h, t_event, n, wk[W_YBUF])
-    cs[CS_STUCK + i] = 1.0
-    eval_rhs(t_event, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
-    cs[CS_STUCK + i] = 0.0
-    return abs(wk[W_AUXBUF, X_SIG1 + i]) < 1.0
+    return abs(needed_sigma(i, t_event, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)) < 1.0
 
 
 @kernel
@@ -231,14 +227,16 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard):
 
 
 @kernel
-def mark_end(t_end, y_at_end, n, p, cs, fstats, trk, y_end):
+def mark_end(t_end, y_at_end, n, p, cs, fstats, trk, y_end, istats):
     """The scene ended (halted, or reached t_max) at t_end in state y_at_end: its end state,
-    energy and impact losses. Steps after the end only resolve Phi maxima and change none of them."""
+    energy and impact losses; returns its event counts (transitions, stick phases, impacts).
+    Steps after the end only resolve Phi maxima and change none of them."""
     fstats[F_TEND] = t_end
     for i in range(n):
         y_end[i] = y_at_end[i]
     fstats[F_EEND] = mode_energy(y_end, p, cs)
     trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
+    return istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
 
 
 @kernel
@@ -359,9 +357,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                                    u_tol, wk, istats, fq)
             if t_halt >= 0.0:
                 outcome = oc.HALTED
-                end_trans, end_stick, end_impacts = istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
                 dense_eval(F, 0, y, t, h, t_halt, n, wk[W_YBUF])
-                mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end)
+                end_trans, end_stick, end_impacts = mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end, istats)
             elif int(trk[T_NEXT_LEVEL]) < nl:
                 lev = level_e[int(trk[T_NEXT_LEVEL])]
         record_samples(t, y, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, F, n, p, cs, sample_tau,
@@ -399,8 +396,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 halt_flat(t, level_out, trk, level_e)
                 istats[I_FLAT] = 1
                 outcome = oc.HALTED
-                end_trans, end_stick, end_impacts = istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
-                mark_end(t, y, n, p, cs, fstats, trk, y_end)
+                end_trans, end_stick, end_impacts = mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)
             elif code >= 0:
                 if running:
                     outcome = code
@@ -436,8 +432,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                                              wk[W_DYBUF], wk[W_AUXBUF], wk[W_YBUF], istats)
         if hit_tmax and outcome < 0 and first_k < 0:
             outcome = oc.T_MAX
-            end_trans, end_stick, end_impacts = istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
-            mark_end(t, y, n, p, cs, fstats, trk, y_end)
+            end_trans, end_stick, end_impacts = mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)
         h = h_next
 
     if outcome < 0:
