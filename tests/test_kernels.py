@@ -295,3 +295,49 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
     for k in range(C.N_DYN_EVENTS):
         if g[k] == math.inf:
             assert rates[k] == 0.0      # inactive in this mode: no slope
+
+
+@pytest.mark.parametrize("mode", [L.ROLL, L.SLIDE, L.SLAVED])
+def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
+    """roots.event_value_at skips the right-hand side for events with not reads_forces(k): their g
+    must not change when the contact quantities (aux) are garbage, over random states, moment
+    signs, stuck components and levels; and event_value_at gives them on the dense output."""
+    p0, _, _ = setup
+    rng = np.random.default_rng(11)
+    checked = set()
+    for _ in range(200):
+        p = p0.copy()
+        p[M.P_WTOL] = rng.choice([0.0, 1e-7])
+        y = np.zeros(M.N_FULL)
+        y[M.Y_ALPHA] = rng.uniform(-1.5, 1.5)
+        y[M.Y_W1:M.Y_W3 + 1] = rng.normal(size=3)
+        if mode != L.ROLL:
+            y[M.Y_U1:M.Y_U2 + 1] = rng.normal(scale=1e-3, size=2)
+        cs = np.zeros(L.N_CS)
+        cs[L.CS_MODE] = mode
+        cs[L.CS_SIDE] = 1.0 if y[M.Y_ALPHA] > 0.0 else -1.0
+        cs[L.CS_SIG:L.CS_SIG + 3] = rng.choice([-1.0, 1.0], size=3)
+        cs[L.CS_STUCK:L.CS_STUCK + 3] = rng.choice([0.0, 1.0], size=3)
+        cs[L.CS_NU] = rng.uniform(-math.pi, math.pi)
+        level = rng.uniform(0.1, 2.0)
+        wk, ist = _work()
+        dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
+        C.eval_rhs(0.0, y, p, cs, M.N_CORE, dy, aux, wk, ist)
+        g_true, g_junk = np.zeros(L.N_WCOLS), np.zeros(L.N_WCOLS)
+        C.event_values(y, aux, p, cs, 1e-9, level, g_true)
+        C.event_values(y, np.full(M.N_AUX, np.nan), p, cs, 1e-9, level, g_junk)
+        for k in range(C.N_EVENTS):
+            if C.reads_forces(k) or g_true[k] == math.inf:
+                continue
+            checked.add(k)
+            assert g_junk[k] == g_true[k], k
+            assert C.state_event_value(k, y, p, cs, 1e-9, level) == g_true[k], k
+            # on a dense output whose every coefficient is 0, the value at any t is y itself
+            rhs_before = ist[L.I_RHS]
+            F = np.zeros((14, M.N_FULL))
+            assert R.event_value_at(k, 0.3, F, 0, y, 0.0, 1.0, M.N_CORE, p, cs, 1e-9, level, wk, ist) == g_true[k]
+            assert ist[L.I_RHS] == rhs_before
+    expected = {C.EV_SIDE, C.EV_FACE, C.EV_LEVEL} | (
+        {C.EV_SIGN1, C.EV_SIGN2, C.EV_SIGN3, C.EV_SPIN1, C.EV_SPIN2, C.EV_SPIN3} if mode == L.ROLL
+        else {C.EV_SLIP_SLOW} if mode == L.SLIDE else {C.EV_SLIP_STOP})
+    assert expected <= checked

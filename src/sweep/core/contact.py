@@ -452,6 +452,35 @@ def consistent_signs(t, y, p, cs, n, wk, istats):
 
 
 @kernel
+def reads_forces(k):
+    """Does event k's function read the contact forces (the RHS's aux)? The others (moment signs
+    and spin_tol, slip speed, slaved slip, side, face, level) are functions of the state alone:
+    on a step's dense output they cost no right-hand-side evaluation (state_event_value)."""
+    return (EV_UNSTICK1 <= k <= EV_UNSTICK3 or k == EV_CONE or k == EV_SLIP_FAST or k == EV_SLAVE
+            or k == EV_CONTACT or k == EV_SLAVE_LOST)
+
+
+@kernel
+def state_event_value(k, y, p, cs, u_tol, level_e):
+    """g_k of an active event that does not read the forces (not reads_forces(k))."""
+    if k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
+        i = k if k <= EV_SIGN3 else k - EV_SPIN1
+        r1, r2, r3 = moment_axes_rates(y)
+        g = cs[CS_SIG + i] * (r1 if i == 0 else (r2 if i == 1 else r3))
+        return g if k <= EV_SIGN3 else g - p[P_WTOL]
+    if k == EV_SLIP_SLOW:
+        return math.hypot(y[Y_U1], y[Y_U2]) - u_tol
+    if k == EV_SLIP_STOP:
+        # the slip along the slaved direction: reaches 0 where the slip ends
+        return y[Y_U1] * math.cos(cs[CS_NU]) + y[Y_U2] * math.sin(cs[CS_NU])
+    if k == EV_SIDE:
+        return cs[CS_SIDE] * y[Y_ALPHA]
+    if k == EV_FACE:
+        return (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
+    return mode_energy(y, p, cs) - level_e   # EV_LEVEL
+
+
+@kernel
 def event_values(y, aux, p, cs, u_tol, level_e, g):
     """g[k] for every event k (inf where not active). `aux` must belong to `y`."""
     for k in range(N_EVENTS):
@@ -462,27 +491,25 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
             if cs[CS_STUCK + i] == 1.0:
                 g[EV_UNSTICK1 + i] = 1.0 - abs(aux[X_SIG1 + i])
             else:
-                g[EV_SIGN1 + i] = cs[CS_SIG + i] * aux[X_G1 + i]
+                g[EV_SIGN1 + i] = state_event_value(EV_SIGN1 + i, y, p, cs, u_tol, level_e)
                 if p[P_WTOL] > 0.0:
-                    g[EV_SPIN1 + i] = g[EV_SIGN1 + i] - p[P_WTOL]
+                    g[EV_SPIN1 + i] = state_event_value(EV_SPIN1 + i, y, p, cs, u_tol, level_e)
     mode = cs[CS_MODE]
     if mode == ROLL:
         g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
     elif mode == SLIDE:
-        un = math.hypot(y[Y_U1], y[Y_U2])
-        g[EV_SLIP_SLOW] = un - u_tol
+        g[EV_SLIP_SLOW] = state_event_value(EV_SLIP_SLOW, y, p, cs, u_tol, level_e)
         if cs[CS_SLAVE_OFF] == 0.0:
-            g[EV_SLAVE] = un - slave_speed(aux, p, u_tol)
+            g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(aux, p, u_tol)
     else:
-        # the slip along the slaved direction: reaches 0 where the slip ends
-        g[EV_SLIP_STOP] = y[Y_U1] * math.cos(cs[CS_NU]) + y[Y_U2] * math.sin(cs[CS_NU])
+        g[EV_SLIP_STOP] = state_event_value(EV_SLIP_STOP, y, p, cs, u_tol, level_e)
         g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
         g[EV_SLAVE_LOST] = -aux[X_DCROSS]
     g[EV_CONTACT] = aux[X_PHI]
-    g[EV_SIDE] = cs[CS_SIDE] * y[Y_ALPHA]
-    g[EV_FACE] = (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
+    g[EV_SIDE] = state_event_value(EV_SIDE, y, p, cs, u_tol, level_e)
+    g[EV_FACE] = state_event_value(EV_FACE, y, p, cs, u_tol, level_e)
     if not math.isnan(level_e):
-        g[EV_LEVEL] = mode_energy(y, p, cs) - level_e
+        g[EV_LEVEL] = state_event_value(EV_LEVEL, y, p, cs, u_tol, level_e)
 
 
 @kernel

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from .contact import N_EVENTS, eval_rhs, event_values
+from .contact import N_EVENTS, eval_rhs, event_values, reads_forces, state_event_value
 from .dop853 import dense_eval
 from .jit import kernel
 from .layout import W_AUXBUF, W_DYBUF, W_GBUF, W_YBUF
@@ -121,8 +121,11 @@ def event_rates(t, y, f, g_here, p, cs, n, u_tol, level_e, wk, istats, rates):
 
 @kernel
 def event_value_at(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
-    """g_k at time t on a step's dense output (coefficients F[row0:row0+7]): one RHS evaluation."""
+    """g_k at time t on a step's dense output (coefficients F[row0:row0+7]); one RHS evaluation
+    for an event that reads the forces, none for one of the state alone."""
     dense_eval(F, row0, y_old, t_old, h, t, n, wk[W_YBUF])
+    if not reads_forces(k):
+        return state_event_value(k, wk[W_YBUF], p, cs, u_tol, level_e)
     eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
     event_values(wk[W_YBUF], wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
     return wk[W_GBUF, k]
