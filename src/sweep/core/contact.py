@@ -491,9 +491,10 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
             if cs[CS_STUCK + i] == 1.0:
                 g[EV_UNSTICK1 + i] = 1.0 - abs(aux[X_SIG1 + i])
             else:
-                g[EV_SIGN1 + i] = state_event_value(EV_SIGN1 + i, y, p, cs, u_tol, level_e)
+                # omega.a_i from the RHS: the same arithmetic as state_event_value, without a sine
+                g[EV_SIGN1 + i] = cs[CS_SIG + i] * aux[X_G1 + i]
                 if p[P_WTOL] > 0.0:
-                    g[EV_SPIN1 + i] = state_event_value(EV_SPIN1 + i, y, p, cs, u_tol, level_e)
+                    g[EV_SPIN1 + i] = g[EV_SIGN1 + i] - p[P_WTOL]
     mode = cs[CS_MODE]
     if mode == ROLL:
         g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])

@@ -23,17 +23,22 @@ RATE_STEP = 1e-7
 
 
 @kernel
-def sign_rate(k, y, dy):
-    """d/dtau of omega.a_k (k = 0, 1, 2) from the state and its derivative."""
+def axis_rates(y, dy):
+    """d/dtau of omega.a_k for k = 0, 1, 2 from the state and its derivative (one sine, one cosine)."""
     a = y[Y_ALPHA]
     s = math.sin(a)
     c = math.cos(a)
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
-    if k == 0:
-        return dy[Y_W1]
-    if k == 1:
-        return dy[Y_W2] * c - dy[Y_W3] * s - w1 * (w2 * s + w3 * c)
-    return dy[Y_W2] * s + dy[Y_W3] * c + w1 * (w2 * c - w3 * s)
+    return (dy[Y_W1],
+            dy[Y_W2] * c - dy[Y_W3] * s - w1 * (w2 * s + w3 * c),
+            dy[Y_W2] * s + dy[Y_W3] * c + w1 * (w2 * c - w3 * s))
+
+
+@kernel
+def sign_rate(k, y, dy):
+    """d/dtau of omega.a_k (k = 0, 1, 2) from the state and its derivative."""
+    r0, r1, r2 = axis_rates(y, dy)
+    return r0 if k == 0 else (r1 if k == 1 else r2)
 
 
 @kernel
@@ -92,13 +97,6 @@ def hermite_dip(g0, d0, g1, d1):
 def hermite_peak(g0, d0, g1, d1):
     """x in (0, 1) of the interpolant's highest interior maximum, else -1 (see _hermite_extremum)."""
     return _hermite_extremum(g0, d0, g1, d1, -1.0)
-
-
-@kernel
-def hermite_interior_root(k, sgn, y0, f0, y1, f1, g0, g1, h):
-    """Interior dip of sgn * omega.a_k on a step whose end values are both positive (see hermite_dip);
-    its derivatives follow from the state and its derivative, so it costs no RHS evaluation."""
-    return hermite_dip(g0, sgn * sign_rate(k, y0, f0) * h, g1, sgn * sign_rate(k, y1, f1) * h)
 
 
 @kernel
