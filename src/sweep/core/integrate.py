@@ -26,7 +26,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_W1
-from .roots import axis_rates, event_rates, event_value_at, hermite_dip, hermite_peak, locate
+from .roots import event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
                        record_samples, record_traj, shift_peak_window, track_peaks)
@@ -98,9 +98,6 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
     g_new = wk[W_GNEW]
     have_dense = False
     trk[T_RATES_NEW] = 0.0
-    # d/dtau of omega.a_i at the step ends (exact, from the state): for the sign and spin events
-    rates_known = False
-    ra0 = ra1 = ra2 = rb0 = rb1 = rb2 = 0.0
     first_k = -1
     first_t = t + h
     for k in range(N_DYN_EVENTS):
@@ -122,12 +119,7 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
                 d0 = cs[CS_SIDE] * y[Y_W1] * h
                 d1 = cs[CS_SIDE] * y_new[Y_W1] * h
             else:
-                if not rates_known:
-                    ra0, ra1, ra2 = axis_rates(y, f)
-                    rb0, rb1, rb2 = axis_rates(y_new, f_new)
-                    rates_known = True
-                d0 = cs[CS_SIG + k] * pick(k, ra0, ra1, ra2) * h
-                d1 = cs[CS_SIG + k] * pick(k, rb0, rb1, rb2) * h
+                d0, d1 = sign_slopes(k, cs[CS_SIG + k], y, f, y_new, f_new, h)
             ta, ga = lift_off(k, t, y, h, g_old[k], d0, g_new[k], d1, F, n, p, cs, u_tol, lev, wk, istats)
             tb, gb = t + h, g_new[k]
             if ta < 0.0:
@@ -140,13 +132,8 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
             # a free component slower than spin_tol at both ends (e.g. just released at an
             # un-stick) can speed past spin_tol and slow to it again within the step: the peak of
             # the Hermite interpolant of g_k (exact end slopes), confirmed on the dense output
-            i = k - EV_SPIN1
-            if not rates_known:
-                ra0, ra1, ra2 = axis_rates(y, f)
-                rb0, rb1, rb2 = axis_rates(y_new, f_new)
-                rates_known = True
-            peak = hermite_peak(g_old[k], cs[CS_SIG + i] * pick(i, ra0, ra1, ra2) * h, g_new[k],
-                                cs[CS_SIG + i] * pick(i, rb0, rb1, rb2) * h)
+            d0, d1 = sign_slopes(k - EV_SPIN1, cs[CS_SIG + k - EV_SPIN1], y, f, y_new, f_new, h)
+            peak = hermite_peak(g_old[k], d0, g_new[k], d1)
             if peak > 0.0:
                 if not have_dense:
                     dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
@@ -164,12 +151,8 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
             elif k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
                 # sigma_i omega.a_i (less spin_tol): exact slopes from the state
                 i = k if k <= EV_SIGN3 else k - EV_SPIN1
-                if not rates_known:
-                    ra0, ra1, ra2 = axis_rates(y, f)
-                    rb0, rb1, rb2 = axis_rates(y_new, f_new)
-                    rates_known = True
-                dip = hermite_dip(g_old[k], cs[CS_SIG + i] * pick(i, ra0, ra1, ra2) * h, g_new[k],
-                                  cs[CS_SIG + i] * pick(i, rb0, rb1, rb2) * h)
+                d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, f, y_new, f_new, h)
+                dip = hermite_dip(g_old[k], d0, g_new[k], d1)
             else:
                 if trk[T_RATES_OLD] == 0.0:
                     event_rates(t, y, f, g_old, p, cs, n, u_tol, lev, wk, istats, wk[W_RATEOLD])
@@ -197,12 +180,6 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
                 first_k = k_event
                 first_t = rb
     return first_k, first_t, have_dense
-
-
-@kernel
-def pick(i, v0, v1, v2):
-    """v_i of three scalars (i = 0, 1, 2)."""
-    return v0 if i == 0 else (v1 if i == 1 else v2)
 
 
 @kernel

@@ -23,22 +23,24 @@ RATE_STEP = 1e-7
 
 
 @kernel
-def axis_rates(y, dy):
-    """d/dtau of omega.a_k for k = 0, 1, 2 from the state and its derivative (one sine, one cosine)."""
+def sign_rate(k, y, dy):
+    """d/dtau of omega.a_k (k = 0, 1, 2) from the state and its derivative."""
     a = y[Y_ALPHA]
     s = math.sin(a)
     c = math.cos(a)
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
-    return (dy[Y_W1],
-            dy[Y_W2] * c - dy[Y_W3] * s - w1 * (w2 * s + w3 * c),
-            dy[Y_W2] * s + dy[Y_W3] * c + w1 * (w2 * c - w3 * s))
+    if k == 0:
+        return dy[Y_W1]
+    if k == 1:
+        return dy[Y_W2] * c - dy[Y_W3] * s - w1 * (w2 * s + w3 * c)
+    return dy[Y_W2] * s + dy[Y_W3] * c + w1 * (w2 * c - w3 * s)
 
 
 @kernel
-def sign_rate(k, y, dy):
-    """d/dtau of omega.a_k (k = 0, 1, 2) from the state and its derivative."""
-    r0, r1, r2 = axis_rates(y, dy)
-    return r0 if k == 0 else (r1 if k == 1 else r2)
+def sign_slopes(i, sig, y0, f0, y1, f1, h):
+    """End slopes, per unit of the step [y0, y1] of length h, of sig * omega.a_i: exact, from the
+    state and its derivative (no RHS evaluation); for the sign and spin events' Hermite checks."""
+    return sig * sign_rate(i, y0, f0) * h, sig * sign_rate(i, y1, f1) * h
 
 
 @kernel
