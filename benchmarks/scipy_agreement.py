@@ -63,7 +63,8 @@ def _driver(cfg: dict, rtol: float, cap: float) -> dict:
     q = {f"t_level_{b:g}": float(tl * sc.chi) for b, tl in zip(sc.levels, r["level_tau"])}
     for tau, a in zip(taus, r["samples"][:, 0]):
         q[f"alpha_tau_{tau:g}"] = float(a)
-    diag = {k: r[k] for k in ("onset_repelling", "unstick_at_restart", "released_by_impulse", "fold_by_failure")}
+    diag = {k: r[k] for k in ("onset_repelling", "unstick_at_restart", "released_by_impulse", "fold_by_failure",
+                              "reslaved_after_update")}
     return {"outcome": r["outcome"], "timed_out": bool(r["timed_out"]), "t_end": r["t_end"] * sc.chi, "q": q,
             "events": [r["n_transitions"], r["n_stick"], r["n_impacts"]], "cpu": cpu, "wall": r["wall"],
             "nfev": r["nfev"], "n_segments": r["n_segments"], "diag": diag, "event_kinds": r["event_kinds"]}

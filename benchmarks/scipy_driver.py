@@ -578,7 +578,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
     right-hand side is several), n_rhs_events (those not made by the stepper), n_segments
     (restarts), n_events, n_transitions, n_stick, n_impacts, t_end, wall (s), timed_out, and
     diagnostics (counts of rules the kernel may not have: onset_repelling, unstick_at_restart,
-    released_by_impulse, fold_by_failure; events by kind).
+    released_by_impulse, fold_by_failure, reslaved_after_update; events by kind).
     max_wall: give up (outcome 'step_limit', timed_out True) once this much time is used, measured
     by `clock` (wall time by default; time.process_time for CPU time).
     """
@@ -601,6 +601,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
     level_alpha = np.full(nl, np.nan)
     stats = dict(n_events=0, n_transitions=0, n_stick=0, n_impacts=0, nfev=0, njev=0, nlu=0, n_segments=0,
                  onset_repelling=0, unstick_at_restart=0, released_by_impulse=0, fold_by_failure=0,
+                 reslaved_after_update=0,
                  impact_loss=0.0)
     kinds: dict[str, int] = {}
     w0 = clock()
@@ -644,7 +645,16 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
         _, aux, nu = disk.rhs(t, y, c, c.nu)
         if c.mode == SLAVED:
             if math.isnan(nu):
-                # no attracting direction is left here: the slip direction follows its own dynamics
+                # the update (a moment component stuck, released or flipped) changed the slip
+                # dynamics and the direction continued from before is no root: the attracting root
+                # the direction dynamics carry it to (docs/model.md, 'a slaved slip gets the slaved
+                # direction of the contact state the update left')
+                root = disk.attracting_direction(c.nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, c)
+                if not math.isnan(root):
+                    c.nu = root
+                    stats["reslaved_after_update"] += 1
+                    continue
+                # none on the circle: the slip spirals, its direction follows its own dynamics
                 c.mode, c.slave_off = SLIDE, True
                 stats["fold_by_failure"] += 1
                 continue
