@@ -488,6 +488,8 @@ class Disk:
         g = _axes(y)
         for i in range(3):
             if self.k[i] > 0.0 and g[i] != g_before[i]:
+                if c.stuck[i] and abs(g[i] - g_before[i]) <= self.p[P_WTOL]:
+                    continue   # moved within spin_tol: still at rest (docs/model.md)
                 if c.stuck[i]:
                     self.stats["released_by_impulse"] += 1
                 c.stuck[i] = False

@@ -390,13 +390,16 @@ def stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
 
 
 @kernel
-def release_moved(y, cs, g_before):
-    """A stuck moment component whose omega.a_i an impulse has moved off its held value is free:
-    the dry-friction moment is finite and cannot hold it through an impulse (sign of the new
-    omega.a_i; an exact 0 is left to settle_signs' stick test)."""
+def release_moved(y, p, cs, g_before):
+    """A stuck moment component whose omega.a_i an impulse has moved off its held value by more
+    than spin_tol is free: the dry-friction moment is finite and cannot hold it through an impulse
+    (sign of the new omega.a_i; an exact 0 is left to settle_signs' stick test). A move within
+    spin_tol leaves it at rest, as a free component that slows to spin_tol is taken to stop: an
+    impulse that hardly turns it (the O(u^2) one of a slaved hand-over moves it by ~1e-16, its
+    round-off) must not release it only to have it stick again at once."""
     g = moment_axes_rates(y)
     for i in range(3):
-        if cs[CS_STUCK + i] == 1.0 and g[i] != g_before[i]:
+        if cs[CS_STUCK + i] == 1.0 and abs(g[i] - g_before[i]) > p[P_WTOL] and g[i] != g_before[i]:
             cs[CS_STUCK + i] = 0.0
             if g[i] != 0.0:
                 cs[CS_SIG + i] = 1.0 if g[i] > 0.0 else -1.0
@@ -584,7 +587,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         # the slip reached slip_tol within the located event's bracket (a stiff slip decays by
         # orders of magnitude in 1e-11 tau): its own event can no longer happen
         end_slip(y, p, cs, wk, istats)
-    release_moved(y, cs, g_before)
+    release_moved(y, p, cs, g_before)
     settle_signs(t, y, p, cs, n, wk, istats, held)
     # a rolling state must be admissible after every discrete update: a moment sign that flips or
     # sticks changes the friction that rolling needs, and it may jump outside the static cone
