@@ -340,3 +340,29 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
         {C.EV_SIGN1, C.EV_SIGN2, C.EV_SIGN3, C.EV_SPIN1, C.EV_SPIN2, C.EV_SPIN3} if mode == L.ROLL
         else {C.EV_SLIP_SLOW} if mode == L.SLIDE else {C.EV_SLIP_STOP})
     assert expected <= checked
+
+
+def test_an_impulse_releases_a_stuck_component_only_beyond_spin_tol(setup):
+    """contact.release_moved: a held omega.a_i moved by an impulse by more than spin_tol is free,
+    with the sign of its new rate; a move within spin_tol (the round-off of a tiny impulse) leaves
+    it stuck; with spin_tol = 0 any move releases it."""
+    p0, y0, _ = setup
+    w_tol = 1e-7 * 0.0375   # dimensionless, of the order of the default for a cm-sized disk
+    for spin_tol, move, released in ((w_tol, 1e-16, False), (w_tol, 0.5 * w_tol, False),
+                                     (w_tol, 2.0 * w_tol, True), (w_tol, -2.0 * w_tol, True),
+                                     (0.0, 1e-16, True), (w_tol, 0.0, False)):
+        p = p0.copy()
+        p[M.P_WTOL] = spin_tol
+        y = y0.copy()
+        y[M.Y_W1] = 0.0                      # omega.a_1 = omega_1, held at 0
+        cs = np.zeros(L.N_CS)
+        cs[L.CS_SIDE] = 1.0
+        cs[L.CS_SIG:L.CS_SIG + 3] = [-1.0, 1.0, 1.0]
+        cs[L.CS_STUCK] = 1.0
+        g_before = M.moment_axes_rates(y)
+        y[M.Y_W1] += move
+        C.release_moved(y, p, cs, g_before)
+        assert (cs[L.CS_STUCK] == 0.0) == released, (spin_tol, move)
+        if released and move != 0.0:
+            assert cs[L.CS_SIG] == math.copysign(1.0, move)
+        assert cs[L.CS_STUCK + 1] == 0.0 and cs[L.CS_STUCK + 2] == 0.0
