@@ -399,7 +399,7 @@ def release_moved(y, p, cs, g_before):
     round-off) must not release it only to have it stick again at once."""
     g = moment_axes_rates(y)
     for i in range(3):
-        if cs[CS_STUCK + i] == 1.0 and abs(g[i] - g_before[i]) > p[P_WTOL] and g[i] != g_before[i]:
+        if cs[CS_STUCK + i] == 1.0 and abs(g[i] - g_before[i]) > p[P_WTOL]:
             cs[CS_STUCK + i] = 0.0
             if g[i] != 0.0:
                 cs[CS_SIG + i] = 1.0 if g[i] > 0.0 else -1.0

@@ -132,7 +132,8 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
             # a free component slower than spin_tol at both ends (e.g. just released at an
             # un-stick) can speed past spin_tol and slow to it again within the step: the peak of
             # the Hermite interpolant of g_k (exact end slopes), confirmed on the dense output
-            d0, d1 = sign_slopes(k - EV_SPIN1, cs[CS_SIG + k - EV_SPIN1], y, f, y_new, f_new, h)
+            i = k - EV_SPIN1
+            d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, f, y_new, f_new, h)
             peak = hermite_peak(g_old[k], d0, g_new[k], d1)
             if peak > 0.0:
                 if not have_dense:
