@@ -65,6 +65,39 @@ def test_rk_step_is_the_tableau_applied_to_the_model(setup):
     assert ist[L.I_RHS] == T.N_STAGES      # 11 stages + f(t + h, y_new); stage 0 is the given f
 
 
+@pytest.mark.parametrize("side", [1.0, -1.0], ids=["own_rim", "past_the_edge"])
+def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
+    """The step's energy-balance residual Delta(E + dissipated) is zero for the exact flow, so it
+    is the 8th-order step's own local error in that direction: halving h divides it by at least
+    ~2^9 (a model whose energy did not match its right-hand side would give a residual ~ h). Also with the contact kept on the rim past alpha = 0 (side -1 at
+    alpha 1), which a step overshooting the rim-edge event integrates."""
+    from sweep.core import integrate as I
+    p, y, cs0 = setup
+    cs = cs0.copy()
+    cs[L.CS_SIDE] = side
+    n = M.N_CORE
+    g = _f(0.0, y, p, cs)[1][M.X_G1:M.X_G3 + 1]
+    cs[L.CS_SIG:L.CS_SIG + 3] = np.sign(g)       # consistent signs: the moments dissipate
+    res = []
+    for h in (0.6, 0.3, 0.4, 0.2):
+        wk, ist = _work()
+        K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
+        f = np.zeros(M.N_FULL)
+        aux = np.zeros(M.N_AUX)
+        C.eval_rhs(0.0, y, p, cs, n, f, aux, wk, ist)
+        y_new = np.zeros(M.N_FULL)
+        D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, np.zeros(M.N_FULL), np.zeros(M.N_AUX), wk, ist)
+        e_cur, e_new = C.mode_energy(y, p, cs), C.mode_energy(y_new, p, cs)
+        assert np.sum(y_new[M.Y_DSLIDE:M.Y_DK3 + 1]) > 1e-6 * e_cur        # it dissipates
+        res.append(abs((e_new + np.sum(y_new[M.Y_DSLIDE:M.Y_DK3 + 1])) - e_cur))
+        # balance_error is that residual over its allowance, which grows with h and the dissipation
+        ratio = I.balance_error(y, y_new, e_cur, e_new, h, p, e_cur, 100.0, 1e-10)
+        allowed = I.BALANCE_FACTOR * 1e-10 * (np.sum(y_new[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
+        assert res[-1] / ratio >= allowed
+    assert res[0] / res[1] > 256.0 and res[2] / res[3] > 256.0, res
+    assert res[3] > 1e-14, res         # far above round-off (~1e-16)
+
+
 @pytest.mark.parametrize("alpha", [0.3, 1.0, -1.5707, 1.5707963])
 def test_error_norm_is_hairers_dop853_norm(alpha):
     """Hairer's norm, with the inclination's error relative to min(|alpha|, pi/2 - |alpha|)."""

@@ -25,7 +25,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
-from .model import N_CORE, N_FULL, N_THETA, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_W1
+from .model import N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_W1
 from .roots import event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
@@ -35,6 +35,14 @@ EPS = 2.220446049250313e-16
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
 # increases, so such a step is an instability the error estimate did not see; it is rejected.
 ENERGY_GUARD = 10.0
+# A step's energy balance, E + dissipated, may move by at most BALANCE_FACTOR * rtol times what the
+# step dissipates plus its share h / tau_max of E(0). Summed over a scene that is at most
+# 2 BALANCE_FACTOR rtol E(0) (nothing dissipates more than E(0)): the budget closes to 1e-9 E(0) at
+# the default rtol 1e-10 (the componentwise error norm alone lets through a bias of the
+# 8th-order step in the energy, one sign over 1e5 steps). Below the round-off of the balance
+# itself (BALANCE_ROUNDOFF times its scale, balance_error) it is not tested.
+BALANCE_FACTOR = 4.0
+BALANCE_ROUNDOFF = 16.0 * EPS
 
 KernelOutput = namedtuple("KernelOutput", "istats fstats levels samples trajectory peaks y_end")
 
@@ -193,10 +201,27 @@ def spin_holds(i, t_event, F, y, t, h, n, p, cs, wk, istats):
 
 
 @kernel
-def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard):
+def balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
+    """The step's energy-balance residual |Delta(E + dissipated)| over what it may be (see
+    BALANCE_FACTOR); accepted if <= 1. e0 = E(0) > 0, tau_span = t_max (tau).
+
+    The residual's round-off: E + dissipated to EPS of its terms, and the inclination's last bit
+    times dE/dalpha ~ (G + omega_1^2)(1 + |h|): near flat, where E << G, the latter dominates."""
+    d_cur = y[Y_DSLIDE] + y[Y_DK1] + y[Y_DK2] + y[Y_DK3]
+    d_new = y_new[Y_DSLIDE] + y_new[Y_DK1] + y_new[Y_DK2] + y_new[Y_DK3]
+    residual = (e_new + d_new) - (e_cur + d_cur)
+    w1 = y[Y_W1]
+    roundoff = abs(e_cur) + abs(d_cur) + abs(y[Y_ALPHA]) * (p[P_G] + w1 * w1) * (1.0 + p[P_H])
+    allowed = (BALANCE_FACTOR * rtol * (max(d_new - d_cur, 0.0) + e0 * h / tau_span)
+               + BALANCE_ROUNDOFF * roundoff)
+    return abs(residual) / allowed
+
+
+@kernel
+def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
     """One DOP853 step into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for
-    a step with a non-finite stage or end state, or one that raises the energy by more than e_guard)
-    and counts it.
+    a step with a non-finite stage or end state, or one that raises the energy by more than
+    ENERGY_GUARD rtol e0), at least its energy-balance error (balance_error), and counts it.
 
     Every stage is checked, also those whose tableau weight in y_new or the error estimate is zero
     (stages 1-4, and f_new): a right-hand side that failed there (a slaved direction that lost its
@@ -212,10 +237,11 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard):
         for j in range(N_STAGES + 1):
             if not math.isfinite(K[j, i]):
                 err = math.inf
-    if err == 0.0 and mode_energy(y_new, p, cs) > e_cur + e_guard:
+    e_new = mode_energy(y_new, p, cs)
+    if err == 0.0 and e_new > e_cur + ENERGY_GUARD * rtol * e0:
         err = math.inf
     if err == 0.0:
-        err = error_norm(K, h, y, y_new, n, rtol, atol)
+        err = max(error_norm(K, h, y, y_new, n, rtol, atol), balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol))
     sliding = cs[CS_MODE] != ROLL
     if err <= 1.0:
         istats[I_STEPS] += 1
@@ -271,7 +297,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     start(y, p, cs, n, u_tol, wk, istats)
     eval_rhs(t, y, p, cs, n, f, aux, wk, istats)
     fstats[F_E0] = mode_energy(y, p, cs)
-    e_guard = ENERGY_GUARD * rtol * max(abs(fstats[F_E0]), 1e-300)
+    e0 = max(abs(fstats[F_E0]), 1e-300)
     lev = level_e[0] if nl > 0 else math.nan
     event_values(y, aux, p, cs, u_tol, lev, g_old)
     outcome = -1
@@ -320,7 +346,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if running:
                 outcome = oc.T_MAX if hit_tmax else oc.STEP_SIZE_UNDERFLOW
             break
-        err = try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e_guard)
+        err = try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, t_max)
         if not err <= 1.0:
             h *= step_factor(err)
             after_reject = True

@@ -81,14 +81,19 @@ def moment_axes_rates(y):
 
 
 @kernel
-def height_above_flat(alpha, habs):
+def height_above_flat(alpha, h):
     """e - |h|: centre height above its flat-lying value, in R, without cancellation near pi/2.
 
-    e = cos(alpha) + |h| |sin(alpha)| (eq. 4.9 with h = |h| sign(alpha));
-    1 - |sin a| = cos(a)^2 / (1 + |sin a|).
+    e = cos(alpha) + h sin(alpha) (eq. 4.9), h = side |h| the contact rim's offset. With side =
+    sign(alpha) this is the physical height, 1 - |sin a| = cos(a)^2 / (1 + |sin a|). Past alpha = 0
+    with the side kept (a step that overshoots the rim-edge event) it is the height of the smooth
+    continuation the right-hand side integrates, so that E + dissipated stays conserved there.
     """
     c = math.cos(alpha)
-    return c - habs * c * c / (1.0 + abs(math.sin(alpha)))
+    s = math.sin(alpha) if h >= 0.0 else -math.sin(alpha)   # side sin(alpha)
+    if s >= 0.0:
+        return c - abs(h) * c * c / (1.0 + s)
+    return c - abs(h) * (1.0 - s)
 
 
 @kernel
@@ -117,7 +122,7 @@ def energy_with_slip(y, p, side, u1, u2):
     vy = u2 - e * w1
     vz = f * w1
     kin = 0.5 * (vx * vx + vy * vy + vz * vz) + 0.5 * p[P_A] * (w1 * w1 + w3 * w3) + 0.5 * p[P_C] * w2 * w2
-    return kin + p[P_G] * height_above_flat(a, p[P_H])
+    return kin + p[P_G] * height_above_flat(a, h)
 
 
 @kernel
