@@ -180,6 +180,21 @@ def test_a_slaved_slip_whose_moment_state_changes_at_the_hand_over_keeps_a_direc
     assert abs(low_atol["q"]["t_halt"] - tight["q"]["t_halt"]) < 1e-9 * tight["q"]["t_halt"]
 
 
+def test_a_released_component_left_past_its_sign_by_an_impulse_is_free_while_it_rises():
+    """Seed 20261124, scene 431: at tau 224.3477 a slip ends; the slip-end impulse leaves the held
+    omega.a_1 at +3.9e-10 (below spin_tol) and the moment, which can no longer hold it, releases it
+    with sign -1: sigma_1 omega.a_1 starts below 0 and rises. A step too short to see it reach 0
+    once counted that as 'moving against its new sign at once' and stuck the component: 13 or 286
+    stick phases depending on rtol (13, 286, 286, 13 at rtol 1e-9..1e-12). The rate at the restart
+    decides now (integrate.first_event), so every rtol takes the same branch."""
+    rng = np.random.default_rng(20261124)
+    cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(432)][431])
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-9, 1e-10, 1e-11, 1e-12)}
+    assert len({tuple(r["events"]) for r in res.values()}) == 1, {k: r["events"] for k, r in res.items()}
+    t12 = res[1e-12]["q"]["t_halt"]
+    assert abs(res[1e-10]["q"]["t_halt"] - t12) < 1e-8 * t12
+
+
 def _counts(cfg, rtol, spin_tol):
     c = copy.deepcopy(cfg)
     c["solver"] = {"rtol": rtol, "atol": rtol * 1e-2, "spin_tol": spin_tol}

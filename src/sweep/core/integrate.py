@@ -42,7 +42,7 @@ ENERGY_GUARD = 10.0
 # 8th-order step in the energy, one sign over 1e5 steps). Below the round-off of the balance
 # itself (BALANCE_ROUNDOFF times its scale, balance_error) it is not tested.
 BALANCE_FACTOR = 4.0
-BALANCE_ROUNDOFF = 16.0 * EPS
+BALANCE_ROUNDOFF = 4.0 * EPS
 
 KernelOutput = namedtuple("KernelOutput", "istats fstats levels samples trajectory peaks y_end")
 
@@ -130,7 +130,16 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
                 d0, d1 = sign_slopes(k, cs[CS_SIG + k], y, f, y_new, f_new, h)
             ta, ga = lift_off(k, t, y, h, g_old[k], d0, g_new[k], d1, F, n, p, cs, u_tol, lev, wk, istats)
             tb, gb = t + h, g_new[k]
-            if ta < 0.0:
+            if ta < 0.0 and k <= EV_SIGN3 and g_old[k] < 0.0 and d0 > 0.0:
+                # released with omega.a_i on the far side of its new sign (an impulse's
+                # residual, below spin_tol) and moving towards it, as its sign says: no event while
+                # it rises (however short the step); turned back below the surface inside the
+                # step, it moves against its sign from that turning point on
+                x_turn = hermite_peak(g_old[k], d0, g_new[k], d1) if d1 <= 0.0 else -1.0
+                if x_turn > 0.0:
+                    ta, tb = t + x_turn * h, t + x_turn * h
+                    k_event = EV_AGAINST1 + k
+            elif ta < 0.0:
                 # it never leaves: at once (a moment component moving against its new sign
                 # means the un-stick only grazed |sigma| = 1: contact.apply_event sticks it)
                 ta, tb = t, t
@@ -205,13 +214,19 @@ def balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
     """The step's energy-balance residual |Delta(E + dissipated)| over what it may be (see
     BALANCE_FACTOR); accepted if <= 1. e0 = E(0) > 0, tau_span = t_max (tau).
 
-    The residual's round-off: E + dissipated to EPS of its terms, and the inclination's last bit
-    times dE/dalpha ~ (G + omega_1^2)(1 + |h|): near flat, where E << G, the latter dominates."""
+    The residual's round-off, in units of EPS: E and the dissipated energy; the height's terms
+    G cos(alpha) (1 + |h|), which cancel near upright for a thick disk; and the inclination's last
+    bit times dE/dalpha ~ G (|sin alpha| + |h| cos(alpha)) + omega_1^2 (1 + |h|), which dominates
+    near flat, where E << G."""
     d_cur = y[Y_DSLIDE] + y[Y_DK1] + y[Y_DK2] + y[Y_DK3]
     d_new = y_new[Y_DSLIDE] + y_new[Y_DK1] + y_new[Y_DK2] + y_new[Y_DK3]
     residual = (e_new + d_new) - (e_cur + d_cur)
+    a = abs(y[Y_ALPHA])
+    c = abs(math.cos(a))
+    habs = p[P_H]
     w1 = y[Y_W1]
-    roundoff = abs(e_cur) + abs(d_cur) + abs(y[Y_ALPHA]) * (p[P_G] + w1 * w1) * (1.0 + p[P_H])
+    roundoff = (abs(e_cur) + abs(d_cur) + p[P_G] * (c * (1.0 + habs) + a * (abs(math.sin(a)) + habs * c))
+                + a * w1 * w1 * (1.0 + habs))
     allowed = (BALANCE_FACTOR * rtol * (max(d_new - d_cur, 0.0) + e0 * h / tau_span)
                + BALANCE_ROUNDOFF * roundoff)
     return abs(residual) / allowed
@@ -250,6 +265,16 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
         istats[I_REJECTED] += 1
         istats[I_SLIDE_REJECTED] += sliding
     return err
+
+
+@kernel
+def recount_rejected(cs, istats):
+    """A step try_step accepted is rejected after all (its kept part missed the energy balance)."""
+    sliding = cs[CS_MODE] != ROLL
+    istats[I_STEPS] -= 1
+    istats[I_SLIDE_STEPS] -= sliding
+    istats[I_REJECTED] += 1
+    istats[I_SLIDE_REJECTED] += sliding
 
 
 @kernel
@@ -364,6 +389,16 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         y_seg = wk[W_YSEG]
         if first_k >= 0:
             dense_eval(F, 0, y, t, h, seg_end, n, y_seg)
+            if running:
+                # the kept part of the step ends on the dense output (7th order): its energy
+                # balance is held like a step's, else the step is retried shorter
+                seg_err = balance_error(y, y_seg, mode_energy(y, p, cs), mode_energy(y_seg, p, cs), seg_end - t, p, e0,
+                                        t_max, rtol)
+                if seg_err > 1.0:
+                    recount_rejected(cs, istats)
+                    h *= step_factor(seg_err)
+                    after_reject = True
+                    continue
         else:
             for i in range(n):
                 y_seg[i] = y_new[i]
