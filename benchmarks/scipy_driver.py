@@ -66,6 +66,7 @@ import types
 
 import numpy as np
 import scipy.integrate as _si
+from scipy.optimize import minimize_scalar as _minimize_scalar
 from numba.core.registry import CPUDispatcher
 
 from sweep import outcomes
@@ -873,12 +874,20 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             xs = sorted([j / (CONE_SAMPLES + 1) for j in range(1, CONE_SAMPLES + 1)]
                                         + ([] if x is None else [x]))
                         # the first candidate at or below 0 brackets the dip
+                        g_low = math.inf
                         for xj in xs:
                             tm = t_old + xj * hstep
                             gm = gd(k, tm)
+                            g_low = min(g_low, gm)
                             if gm <= 0.0:
                                 br = (t_old, g_old[k], tm, gm)
                                 break
+                        if br is None and g_low < 0.1 * min(g_old[k], g_new[k]):
+                            # a shallow dip: decided by the minimum of g on the dense output
+                            res = _minimize_scalar(lambda tt, k=k: gd(k, tt), bounds=(t_old, t_new), method="bounded",
+                                                   options={"xatol": 1e-9 * hstep})
+                            if res.fun <= 0.0:
+                                br = (t_old, g_old[k], float(res.x), float(res.fun))
                     if br is not None:
                         _, tb = _locate(lambda tt, k=k: gd(k, tt), *br)
                         cand = (tb, ORDER.index(k), k, False)

@@ -195,6 +195,20 @@ def test_a_released_component_left_past_its_sign_by_an_impulse_is_free_while_it_
     assert abs(res[1e-10]["q"]["t_halt"] - t12) < 1e-8 * t12
 
 
+def test_a_shallow_dip_below_spin_tol_is_decided_by_the_dense_outputs_minimum():
+    """Harness scene 4 (seed 20261122): after an un-stick at tau 573.62 omega.a_1 swings to 1.6e-4
+    and returns, dipping 2e-10 below spin_tol (a stick there starts a micro-stick regime). At rtol
+    1e-10 the dense output at the cubic Hermite interpolant's minimum was +1.3e-10, so the dip was
+    stepped over: 546 stick phases against 556 at rtol 1e-11..1e-13 (397..439 at 1e-9). A shallow
+    dip is now decided by the minimum of the event function on the dense output (roots.brent_min)."""
+    rng = np.random.default_rng(20261122)
+    cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(5)][4])
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-9, 1e-10, 1e-12)}
+    assert len({tuple(r["events"]) for r in res.values()}) == 1, {k: r["events"] for k, r in res.items()}
+    t12 = res[1e-12]["q"]["t_halt"]
+    assert abs(res[1e-10]["q"]["t_halt"] - t12) < 1e-8 * t12
+
+
 def _counts(cfg, rtol, spin_tol):
     c = copy.deepcopy(cfg)
     c["solver"] = {"rtol": rtol, "atol": rtol * 1e-2, "spin_tol": spin_tol}
@@ -217,9 +231,10 @@ def test_micro_sticks_at_a_moment_limit_are_counted_alike_at_every_rtol():
     ev12, t12 = _counts(cfg, 1e-12, default_tol)
     assert ev10 == ev12, (ev10, ev12)
     assert abs(t10 - t12) < 1e-9 * t12
-    pure10, _ = _counts(cfg, 1e-10, 0.0)
-    pure12, t_pure = _counts(cfg, 1e-12, 0.0)
-    assert pure10 != pure12                    # the pure rule's count moves with rtol (4573 vs 5427)
+    # (the pure rule's count once moved with rtol, 4573 vs 5427; with shallow dips decided by the
+    # dense output's minimum, integrate.DIP_REFINE, it gives 5427 at rtol 1e-10 too, but its dips
+    # of ~1e-13 lie below the integration error, so that is not asserted)
+    _, t_pure = _counts(cfg, 1e-12, 0.0)
     assert abs(t12 - t_pure) < 1e-7 * t_pure
 
 

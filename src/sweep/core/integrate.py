@@ -26,7 +26,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_W1
-from .roots import event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes
+from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
                        record_samples, record_traj, shift_peak_window, track_peaks)
@@ -43,6 +43,10 @@ ENERGY_GUARD = 10.0
 # itself (BALANCE_ROUNDOFF times its scale, balance_error) it is not tested.
 BALANCE_FACTOR = 4.0
 BALANCE_ROUNDOFF = 4.0 * EPS
+
+# A dip whose dense-output value at the cubic Hermite minimum is below DIP_REFINE times the lower end
+# value is searched for its true minimum (roots.brent_min) before it is ruled out.
+DIP_REFINE = 0.1
 
 KernelOutput = namedtuple("KernelOutput", "istats fstats levels samples trajectory peaks y_end")
 
@@ -186,6 +190,10 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
                     have_dense = True
                 tm = t + dip * h
                 gm = event_value_at(k, tm, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+                if 0.0 < gm < DIP_REFINE * min(g_old[k], g_new[k]):
+                    # the cubic's minimum is only near the dense output's: a shallow dip (a
+                    # grazing double crossing) is decided by the minimum of g_k itself
+                    tm, gm = brent_min(k, t, t + h, 0.0, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
                 if gm <= 0.0:
                     ta, ga, tb, gb = t, g_old[k], tm, gm
         if ta >= 0.0 and ta < first_t:

@@ -169,31 +169,35 @@ def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, 
 
 
 @kernel
-def _phi_at(t, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
+def _objective(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
+    """What brent_min minimises: -Phi for k < 0, else event k's value, on the dense output."""
+    if k >= 0:
+        return event_value_at(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats)
     dense_eval(F, row0, y_old, t_old, h, t, n, wk[W_YBUF])
     eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
-    return wk[W_AUXBUF, X_PHI]
+    return -wk[W_AUXBUF, X_PHI]
 
 
 @kernel
-def brent_max_phi(ta, tb, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
-    """Time of the maximum of Phi on [ta, tb] by Brent's parabolic/golden-section search.
+def brent_min(k, ta, tb, stop_at, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
+    """Time and value of the minimum of _objective(k) on [ta, tb] by Brent's parabolic/golden-section
+    search; it returns at once at a value <= stop_at (a dip below an event surface is found).
 
-    The location of a smooth maximum is determined only to ~sqrt(eps) relative to the bracket
+    The location of a smooth minimum is determined only to ~sqrt(eps) relative to the bracket
     (the function is flat there), so xtol = 1e-8 * (tb - ta) + 1e-14 is the useful precision.
     """
     cgold = 0.3819660112501051
     a = ta
     b = tb
     x = w = v = a + cgold * (b - a)
-    fx = fw = fv = -_phi_at(x, F, row0, y_old, t_old, h, n, p, cs, wk, istats)
+    fx = fw = fv = _objective(k, x, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats)
     d = 0.0
     e = 0.0
     for _ in range(100):
         xm = 0.5 * (a + b)
         tol1 = 1e-8 * (tb - ta) + 1e-14
         tol2 = 2.0 * tol1
-        if abs(x - xm) <= tol2 - 0.5 * (b - a):
+        if fx <= stop_at or abs(x - xm) <= tol2 - 0.5 * (b - a):
             break
         use_golden = True
         if abs(e) > tol1:
@@ -216,7 +220,7 @@ def brent_max_phi(ta, tb, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
             e = (a - x) if x >= xm else (b - x)
             d = cgold * e
         u = x + d if abs(d) >= tol1 else x + (tol1 if d >= 0 else -tol1)
-        fu = -_phi_at(u, F, row0, y_old, t_old, h, n, p, cs, wk, istats)
+        fu = _objective(k, u, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats)
         if fu <= fx:
             if u >= x:
                 a = x
@@ -235,4 +239,11 @@ def brent_max_phi(ta, tb, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
             elif fu <= fv or v == x or v == w:
                 v = u
                 fv = fu
-    return x, -fx
+    return x, fx
+
+
+@kernel
+def brent_max_phi(ta, tb, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
+    """Time of the maximum of Phi on [ta, tb] and Phi there (brent_min of -Phi)."""
+    x, f = brent_min(-1, ta, tb, -math.inf, F, row0, y_old, t_old, h, n, p, cs, 0.0, math.nan, wk, istats)
+    return x, -f
