@@ -265,24 +265,20 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
         err = math.inf
     if err == 0.0:
         err = max(error_norm(K, h, y, y_new, n, rtol, atol), balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol))
-    sliding = cs[CS_MODE] != ROLL
-    if err <= 1.0:
-        istats[I_STEPS] += 1
-        istats[I_SLIDE_STEPS] += sliding
-    else:
-        istats[I_REJECTED] += 1
-        istats[I_SLIDE_REJECTED] += sliding
+    tally_step(cs, istats, err <= 1.0, 1)
     return err
 
 
 @kernel
-def recount_rejected(cs, istats):
-    """A step try_step accepted is rejected after all (its kept part missed the energy balance)."""
+def tally_step(cs, istats, accepted, count):
+    """Add count to the accepted or rejected step counters (and to their sliding share)."""
     sliding = cs[CS_MODE] != ROLL
-    istats[I_STEPS] -= 1
-    istats[I_SLIDE_STEPS] -= sliding
-    istats[I_REJECTED] += 1
-    istats[I_SLIDE_REJECTED] += sliding
+    if accepted:
+        istats[I_STEPS] += count
+        istats[I_SLIDE_STEPS] += count * sliding
+    else:
+        istats[I_REJECTED] += count
+        istats[I_SLIDE_REJECTED] += count * sliding
 
 
 @kernel
@@ -403,7 +399,9 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 seg_err = balance_error(y, y_seg, mode_energy(y, p, cs), mode_energy(y_seg, p, cs), seg_end - t, p, e0,
                                         t_max, rtol)
                 if seg_err > 1.0:
-                    recount_rejected(cs, istats)
+                    # try_step accepted it: rejected after all
+                    tally_step(cs, istats, True, -1)
+                    tally_step(cs, istats, False, 1)
                     h *= step_factor(seg_err)
                     after_reject = True
                     continue
