@@ -342,26 +342,44 @@ class Disk:
             self.stats["onset_repelling"] += 1
         return best[2]
 
+    def no_solution(self, nu, u, t, y, c):
+        """The sliding contact law at slip u s(nu) has no solution (Painleve: Phi's coefficient <= 0)."""
+        cs, sn = math.cos(nu), math.sin(nu)
+        ys = np.array(y[:self.n], dtype=float)
+        ys[Y_U1] = u * cs
+        ys[Y_U2] = u * sn
+        try:
+            return self.model(t, ys, SLIDE, c, cs, sn)[1][X_OK] < 0.0
+        except ZeroDivisionError:   # on the singular direction itself (the pure-Python model)
+            return True
+
     def attracting_direction(self, nu, u, t, y, c):
-        """The root of cross that d nu/d tau = cross/u carries nu to (NaN: none on the circle)."""
+        """The root of cross that d nu/d tau = cross/u carries nu to (NaN: none on the circle; inf:
+        what stops it is the Painleve singularity, cross changing sign through a pole of Phi)."""
+        if self.no_solution(nu, u, t, y, c):
+            return math.inf
         c0 = self.cross_dot(nu, u, t, y, c)[0]
         if c0 == 0.0:
             return nu
+
+        def passed(x):
+            return self.no_solution(x, u, t, y, c) or (self.cross_dot(x, u, t, y, c)[0] > 0.0) != (c0 > 0.0)
+
         step = (2.0 * math.pi / 128) * (1.0 if c0 > 0.0 else -1.0)
         xa = nu
         for j in range(1, 129):
             xb = nu + j * step
-            if (self.cross_dot(xb, u, t, y, c)[0] > 0.0) != (c0 > 0.0):
+            if passed(xb):
                 lo, hi = xa, xb
                 for _ in range(100):
                     mid = 0.5 * (lo + hi)
                     if abs(hi - lo) < 1e-15 or mid in (lo, hi):
                         break
-                    if (self.cross_dot(mid, u, t, y, c)[0] > 0.0) == (c0 > 0.0):
-                        lo = mid
-                    else:
+                    if passed(mid):
                         hi = mid
-                return 0.5 * (lo + hi)
+                    else:
+                        lo = mid
+                return math.inf if self.no_solution(hi, u, t, y, c) else 0.5 * (lo + hi)
             xa = xb
         return math.nan
 
@@ -386,20 +404,24 @@ class Disk:
         return aux[X_PHI] > 0.0 and self.p[P_MUS] * aux[X_PHI] < math.hypot(aux[X_F1], aux[X_F2])
 
     def try_slave(self, t, y, c):
+        """Returns outcomes.PAINLEVE where the slip is carried into the Painleve singularity, else -1."""
         u = math.hypot(y[Y_U1], y[Y_U2])
         root = self.attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, c)
+        if math.isinf(root):
+            return outcomes.PAINLEVE
         if math.isnan(root):
             c.slave_off = True
-            return
+            return -1
         saved = y.copy()
         loss = self.be.project_velocity(y, self.p, c.side, True, c.side, True, self.S, root)
         if y[Y_U1] * math.cos(root) + y[Y_U2] * math.sin(root) > 0.0:
             y[Y_DSLIDE] += loss
             c.mode = SLAVED
             c.nu = root
-            return
+            return -1
         y[:] = saved
         self.to_roll(y, c)
+        return -1
 
     def set_slip(self, t, y, c):
         """Contact state for a given slip vector (start, or after an impact while slipping)."""
@@ -408,13 +430,16 @@ class Disk:
             c.mode, c.nu, c.slave_off = SLIDE, math.atan2(y[Y_U2], y[Y_U1]), False
             _, aux = self.model(t, y, SLIDE, c, y[Y_U1] / un, y[Y_U2] / un)
             if un <= self.slave_speed(aux):
-                self.try_slave(t, y, c)
-            return
+                return self.try_slave(t, y, c)
+            return -1
         root = self.attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), un, t, y, c)
+        if math.isinf(root):
+            return outcomes.PAINLEVE
         if math.isnan(root):
             c.mode, c.nu, c.slave_off = SLIDE, math.atan2(y[Y_U2], y[Y_U1]), True
         else:
             c.mode, c.nu = SLAVED, root
+        return -1
 
     def needed_sigma(self, i, t, y, c):
         """sigma_i that holds omega.a_i at 0 (component i treated as stuck)."""
@@ -539,7 +564,7 @@ class Disk:
         if y[Y_W1] * c.side <= 0.0 or zeno:
             return outcomes.LINE_CONTACT
         if slipping:
-            self.set_slip(t, y, c)
+            return self.set_slip(t, y, c)
         return -1
 
 
@@ -617,8 +642,9 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
     y = np.array(y0[:n], dtype=float)
     t = 0.0
     c = Contact(1 if y[Y_ALPHA] > 0.0 else -1)
+    start_code = -1
     if y[Y_U1] != 0.0 or y[Y_U2] != 0.0:
-        disk.set_slip(t, y, c)
+        start_code = disk.set_slip(t, y, c)
     g = _axes(y)
     for i in range(3):
         if k_on[i]:
@@ -629,7 +655,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
     if c.mode == ROLL and disk.cone_violated(t, y, c):
         disk.start_slip(t, y, c)
     e0 = disk.energy(y, c)
-    outcome = -1
+    outcome = start_code
     t_end = 0.0
     isamp = 0
     while isamp < ns and smp[isamp] <= 0.0:
@@ -653,6 +679,9 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 # the direction dynamics carry it to (docs/model.md, 'a slaved slip gets the slaved
                 # direction of the contact state the update left')
                 root = disk.attracting_direction(c.nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, c)
+                if math.isinf(root):
+                    finish(outcomes.PAINLEVE, t)
+                    break
                 if not math.isnan(root):
                     c.nu = root
                     stats["reslaved_after_update"] += 1
@@ -985,7 +1014,9 @@ def _apply(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
     elif kind == "slipfast":
         c.mode, c.slave_off = SLIDE, False
     elif kind == "slave":
-        disk.try_slave(t, y, c)
+        code = disk.try_slave(t, y, c)
+        if code >= 0:
+            return code
     elif kind == "slave_lost":
         c.mode, c.slave_off = SLIDE, True
     elif kind == "contact":

@@ -216,6 +216,32 @@ def _counts(cfg, rtol, spin_tol):
     return (s["n_transitions"], s["n_stick"], s["n_impacts"]), s["levels"][-1]["t"]
 
 
+def test_a_slip_carried_into_the_painleve_singularity_ends_as_painleve_at_every_rtol():
+    """Seed 20261125, scene 472 (a 4.6 mm disk, mu_d 1.53): at tau 7.84396 a decaying slip reaches
+    the slaving speed, and the direction dynamics carry it not to a root of cross but to the
+    direction where the e1 balance's coefficient of Phi falls to 0 (Phi -> inf; beyond it the
+    contact law has no solution). The hand-over once projected the slip onto that pole and every
+    slaved step failed: step_size_underflow at every rtol. attracting_direction now tells a pole
+    from a root by the state past it, and the scene ends as painleve there; the SciPy peer, with the
+    rule written independently, ends at the same time."""
+    from scipy_driver import run_scipy
+    from sweep.scene import load_scene
+
+    rng = np.random.default_rng(20261125)
+    cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(473)][472])
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-9, 1e-10, 1e-12)}
+    assert {r["outcome"] for r in res.values()} == {"painleve"}, {k: r["outcome"] for k, r in res.items()}
+    assert len({tuple(r["events"]) for r in res.values()}) == 1
+    t12 = res[1e-12]["t_end"]
+    assert abs(res[1e-10]["t_end"] - t12) < 1e-9 * t12
+    c = copy.deepcopy(cfg)
+    c["solver"] = {"rtol": 1e-12, "atol": 1e-14}
+    sc = load_scene(c)
+    peer = run_scipy(sc, "DOP853", 1e-12, 1e-14)
+    assert peer["outcome"] == "painleve"
+    assert abs(peer["t_end"] * sc.chi - t12) < 1e-9 * t12
+
+
 def test_micro_sticks_at_a_moment_limit_are_counted_alike_at_every_rtol():
     """Harness scene 252 (seed 20261122): omega.a_1's needed moment oscillates about its limit, so
     the component unsticks once per period, swings to ~1e-5 and comes back to 0 almost

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 
+from .. import outcomes as oc
 from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
@@ -71,6 +72,8 @@ DIR_NOISE = 64.0 * 2.220446049250313e-16
 DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
 DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
 DIR_MAXIT = 30
+# attracting_direction's answer where the slip direction is carried into the Painleve singularity
+JAMMED = math.inf
 
 
 @kernel
@@ -238,7 +241,7 @@ def start_slip(t, y, p, cs, n, wk, istats):
 def set_slip(t, y, p, cs, n, u_tol, wk, istats):
     """Contact state for a Cartesian slip vector y[U1:U3]: SLIDE above the slaving speed (or where
     no quasi-static direction is near), else SLAVED with the quasi-static direction nearest the
-    slip's own."""
+    slip's own. Returns the outcome that ends the scene (try_slave), else -1."""
     un = math.hypot(y[Y_U1], y[Y_U2])
     nu = math.atan2(y[Y_U2], y[Y_U1])
     if un > u_tol:
@@ -247,10 +250,11 @@ def set_slip(t, y, p, cs, n, u_tol, wk, istats):
         cs[CS_SLAVE_OFF] = 0.0
         _model(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0, istats)
         if un <= slave_speed(wk[W_AUXTMP], p, u_tol):
-            try_slave(t, y, p, cs, n, wk, istats)
-        return
+            return try_slave(t, y, p, cs, n, wk, istats)
+        return -1
     cs[CS_MODE] = SLAVED
     cs[CS_NU] = slaved_direction(nu, un, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP], istats)
+    return -1
 
 
 @kernel
@@ -258,11 +262,15 @@ def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
     """The quasi-static slip direction that the direction dynamics d nu/d tau = cross(nu)/u carry nu
     to: followed from nu in the direction of sign(cross) to the first sign change (64 steps on the
     circle), then bisected to 1e-13 rad. NaN if cross keeps its sign on the whole circle (the slip
-    spirals into u = 0)."""
+    spirals into u = 0); JAMMED (inf) if what stops it is not a root of cross but the Painleve
+    singularity, where the e1 balance's coefficient of Phi falls to 0 and Phi grows without bound
+    (cross changes sign through a pole; beyond it the contact law has no solution)."""
     dy = wk[W_DYTMP]
     aux = wk[W_AUXTMP]
     ys = wk[W_YSLIP]
     ca, da = slip_rates(nu, u, t, y, p, cs, n, dy, aux, ys, istats)
+    if aux[X_OK] < 0.0:
+        return JAMMED
     if ca == 0.0:
         return nu
     step = (2.0 * math.pi / 64) * (1.0 if ca > 0.0 else -1.0)
@@ -270,17 +278,20 @@ def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
     for j in range(1, 65):
         xb = nu + j * step
         cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
-        if (cb > 0.0) != (ca > 0.0):
+        if (cb > 0.0) != (ca > 0.0) or aux[X_OK] < 0.0:
             lo, hi = xa, xb
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
                 cm, dm = slip_rates(mid, u, t, y, p, cs, n, dy, aux, ys, istats)
-                if (cm > 0.0) == (ca > 0.0):
+                if (cm > 0.0) == (ca > 0.0) and aux[X_OK] >= 0.0:
                     lo = mid
                 else:
                     hi = mid
                 if abs(hi - lo) < 1e-13:
                     break
+            slip_rates(hi, u, t, y, p, cs, n, dy, aux, ys, istats)
+            if aux[X_OK] < 0.0:
+                return JAMMED
             return 0.5 * (lo + hi)
         xa = xb
     return math.nan
@@ -289,13 +300,17 @@ def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
 @kernel
 def try_slave(t, y, p, cs, n, wk, istats):
     """SLIDE -> SLAVED onto the attracting quasi-static direction of the slip; where there is none
-    (a spiralling slip) it stays in SLIDE, and this hand-over is off until the slip is fast again."""
+    (a spiralling slip) it stays in SLIDE, and this hand-over is off until the slip is fast again.
+    Returns the outcome that ends the scene (PAINLEVE where the direction dynamics carry the slip
+    into the Painleve singularity: see attracting_direction), else -1."""
     # (cone_violated and start_slip are defined below; numba resolves them at compile time)
     u = math.hypot(y[Y_U1], y[Y_U2])
     root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, p, cs, n, wk, istats)
+    if root == JAMMED:
+        return oc.PAINLEVE
     if math.isnan(root):
         cs[CS_SLAVE_OFF] = 1.0
-        return
+        return -1
     # the slip component across the slaved direction is removed by a plastic impulse (O(u^2) loss);
     # an impulse that would leave the slip pointing against that direction stops it instead
     side = int(cs[CS_SIDE])
@@ -307,7 +322,7 @@ def try_slave(t, y, p, cs, n, wk, istats):
         y[Y_DSLIDE] += loss
         cs[CS_MODE] = SLAVED
         cs[CS_NU] = root
-        return
+        return -1
     for i in range(n):
         y[i] = saved[i]
     y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
@@ -315,6 +330,7 @@ def try_slave(t, y, p, cs, n, wk, istats):
     istats[I_TRANS] += 1
     if cone_violated(t, y, p, cs, n, wk, istats):
         start_slip(t, y, p, cs, n, wk, istats)
+    return -1
 
 
 @kernel
@@ -328,19 +344,23 @@ def confirm_slaved(t, y, p, cs, n, wk, istats):
     continued for the new state, else the attracting root is looked for from it; where the slip has
     none (it spirals), it is integrated in SLIDE and the hand-over stays off until it is fast
     again. Without this, the slaved right-hand side had no root near the restart and every step
-    failed (step_size_underflow).
+    failed (step_size_underflow). Returns the outcome that ends the scene (PAINLEVE, see
+    attracting_direction), else -1.
     """
     u = math.hypot(y[Y_U1], y[Y_U2])
     nu = slaved_direction(cs[CS_NU], u, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP], istats)
     if wk[W_AUXTMP, X_OK] != 0.0:
         cs[CS_NU] = nu
-        return
+        return -1
     root = attracting_direction(cs[CS_NU], u, t, y, p, cs, n, wk, istats)
+    if root == JAMMED:
+        return oc.PAINLEVE
     if math.isnan(root):
         cs[CS_MODE] = SLIDE
         cs[CS_SLAVE_OFF] = 1.0
-        return
+        return -1
     cs[CS_NU] = root
+    return -1
 
 
 @kernel
@@ -572,7 +592,9 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         cs[CS_MODE] = SLIDE
         cs[CS_SLAVE_OFF] = 0.0
     elif k == EV_SLAVE:
-        try_slave(t, y, p, cs, n, wk, istats)
+        code = try_slave(t, y, p, cs, n, wk, istats)
+        if code >= 0:
+            return code
     elif k == EV_SLAVE_LOST:
         # the quasi-static direction folds away: the slip direction follows its own dynamics
         cs[CS_MODE] = SLIDE
@@ -617,7 +639,9 @@ def side_change(t, y, p, cs, n, u_tol, wk, istats, fstats):
     if y[Y_W1] * cs[CS_SIDE] <= 0.0 or zeno:
         return 4   # outcomes.LINE_CONTACT: the disk stands on its flat edge
     if mode != ROLL:
-        set_slip(t, y, p, cs, n, u_tol, wk, istats)
+        code = set_slip(t, y, p, cs, n, u_tol, wk, istats)
+        if code >= 0:
+            return code
     consistent_signs(t, y, p, cs, n, wk, istats)
     if mode == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
         start_slip(t, y, p, cs, n, wk, istats)

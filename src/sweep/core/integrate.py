@@ -60,17 +60,21 @@ def failure_outcome(ok):
 
 @kernel
 def start(y, p, cs, n, u_tol, wk, istats):
-    """Initial discrete state: moment signs, slip mode, and slip onset if rolling cannot hold."""
+    """Initial discrete state: moment signs, slip mode, and slip onset if rolling cannot hold.
+    Returns the outcome that ends the scene at once (set_slip), else -1."""
     cs[CS_SIDE] = 1.0 if y[Y_ALPHA] > 0.0 else -1.0
     for i in range(3):
         cs[CS_SIG + i] = 1.0
     if y[Y_U1] != 0.0 or y[Y_U1 + 1] != 0.0:
-        set_slip(0.0, y, p, cs, n, u_tol, wk, istats)
+        code = set_slip(0.0, y, p, cs, n, u_tol, wk, istats)
+        if code >= 0:
+            return code
     else:
         cs[CS_MODE] = ROLL
     consistent_signs(0.0, y, p, cs, n, wk, istats)
     if cs[CS_MODE] == ROLL and cone_violated(0.0, y, p, cs, n, wk, istats):
         start_slip(0.0, y, p, cs, n, wk, istats)
+    return -1
 
 
 @kernel
@@ -323,7 +327,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     # happens there must not depend on whether the frequency outputs are on
     end_trans, end_stick, end_impacts = -1, -1, -1
     t = 0.0
-    start(y, p, cs, n, u_tol, wk, istats)
+    start_code = start(y, p, cs, n, u_tol, wk, istats)
     eval_rhs(t, y, p, cs, n, f, aux, wk, istats)
     fstats[F_E0] = mode_energy(y, p, cs)
     e0 = max(abs(fstats[F_E0]), 1e-300)
@@ -334,6 +338,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         outcome = oc.CONTACT_LOST
     if aux[X_OK] != 1.0:
         outcome = failure_outcome(aux[X_OK])
+    if start_code >= 0:
+        outcome = start_code
     ns = sample_tau.shape[0]
     while int(trk[T_NEXT_SAMPLE]) < ns and sample_tau[int(trk[T_NEXT_SAMPLE])] <= 0.0:
         record_sample(y, aux, p, cs, n, samples[int(trk[T_NEXT_SAMPLE])])
@@ -474,7 +480,12 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if cs[CS_MODE] == SLAVED:
                 # the slaved direction of the contact state the update left, continued across the
                 # event (steps that end in events would otherwise leave it behind the moving root)
-                confirm_slaved(t, y, p, cs, n, wk, istats)
+                code = confirm_slaved(t, y, p, cs, n, wk, istats)
+                if code >= 0:
+                    if running:
+                        outcome = code
+                        fstats[F_TEND] = t
+                    break
             eval_rhs(t, y, p, cs, n, f, aux_new, wk, istats)
             if aux_new[X_OK] != 1.0:
                 if running:
