@@ -242,6 +242,23 @@ def test_a_slip_carried_into_the_painleve_singularity_ends_as_painleve_at_every_
     assert abs(peer["t_end"] * sc.chi - t12) < 1e-9 * t12
 
 
+def test_a_slide_near_flat_is_not_stopped_by_the_round_off_of_its_energy_balance():
+    """Seed 20261125, scene 32 (an 8 mm shell, mu_d 0.0068, sliding at beta ~ 1e-6 before it lies
+    flat): the gyroscopic terms of the right-hand side (tan(alpha) ~ 1e6) leave a round-off of
+    ~1e-11 of the dissipated power in the power balance, which scales with the step like the
+    balance itself; with a floor from the energy's own terms only, every shorter step failed the
+    balance at rtol 1e-12, 1e-13 (step_size_underflow). The floor includes the measured defect
+    (core.integrate.power_defect): the scene halts at every rtol with the same events."""
+    rng = np.random.default_rng(20261125)
+    cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(33)][32])
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-10, 1e-12, 1e-13)}
+    assert {r["outcome"] for r in res.values()} == {"halted"}, {k: r["outcome"] for k, r in res.items()}
+    assert len({tuple(r["events"]) for r in res.values()}) == 1
+    t13 = res[1e-13]["q"]["t_halt"]
+    assert abs(res[1e-10]["q"]["t_halt"] - t13) < 1e-8 * t13
+    assert all(r["budget"] < 1e-9 for r in res.values())
+
+
 def test_micro_sticks_at_a_moment_limit_are_counted_alike_at_every_rtol():
     """Harness scene 252 (seed 20261122): omega.a_1's needed moment oscillates about its limit, so
     the component unsticks once per period, swings to ~1e-5 and comes back to 0 almost

@@ -88,14 +88,111 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
         y_new = np.zeros(M.N_FULL)
         D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, np.zeros(M.N_FULL), np.zeros(M.N_AUX), wk, ist)
         e_cur, e_new = C.mode_energy(y, p, cs), C.mode_energy(y_new, p, cs)
+        delta = wk[L.W_DELTA, :n]
+        assert np.array_equal(y_new[:n], y[:n] + delta)      # the increment the step added
         assert np.sum(y_new[M.Y_DSLIDE:M.Y_DK3 + 1]) > 1e-6 * e_cur        # it dissipates
         res.append(abs((e_new + np.sum(y_new[M.Y_DSLIDE:M.Y_DK3 + 1])) - e_cur))
+        # the residual from the increment in difference form is the same to round-off
+        change, _ = M.energy_increment(y, wk[L.W_DELTA], p, side, False)
+        inc_res = abs(change + np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]))
+        assert abs(inc_res - res[-1]) < 1e-15 * e_cur, (inc_res, res[-1])
         # balance_error is that residual over its allowance, which grows with h and the dissipation
-        ratio = I.balance_error(y, y_new, e_cur, e_new, h, p, e_cur, 100.0, 1e-10)
-        allowed = I.BALANCE_FACTOR * 1e-10 * (np.sum(y_new[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
-        assert res[-1] / ratio >= allowed
+        ratio = I.balance_error(y, wk[L.W_DELTA], h, 0.0, p, cs, e_cur, 100.0, 1e-10)
+        allowed = I.BALANCE_FACTOR * 1e-10 * (np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
+        assert inc_res / ratio >= allowed
     assert res[0] / res[1] > 256.0 and res[2] / res[3] > 256.0, res
     assert res[3] > 1e-14, res         # far above round-off (~1e-16)
+
+
+@pytest.mark.parametrize("alpha", [0.02, 0.9, 1.5478, -1.5706])
+def test_energy_increment_is_exact_to_the_round_off_of_the_change(setup, alpha):
+    """model.energy_increment against E(y + d) - E(y) in extended precision: its error is within
+    BALANCE_ROUNDOFF of its own scale (relative to the change), while the difference of two float64
+    energies errs by ~EPS E, 10..10^4 times more (measured; the error that hid a step's truncation
+    in the budget)."""
+    from sweep.core import integrate as I
+    p, _, _ = setup
+    ld = np.longdouble
+    if np.finfo(ld).eps > 1e-18:
+        pytest.skip("no extended precision on this platform")
+    rng = np.random.default_rng(11)
+    side = math.copysign(1.0, alpha)
+
+    def energy(yv, slip):
+        a = yv[M.Y_ALPHA]
+        h = ld(side * p[M.P_H])
+        c, s = np.cos(a), np.sin(a)
+        e, f = c + h * s, h * c - s
+        u1, u2 = (yv[M.Y_U1], yv[M.Y_U2]) if slip else (ld(0), ld(0))
+        vx, vy, vz = u1 + yv[M.Y_W2] - h * yv[M.Y_W3], u2 - e * yv[M.Y_W1], f * yv[M.Y_W1]
+        kin = (vx * vx + vy * vy + vz * vz) / 2 + ld(p[M.P_A]) * (yv[M.Y_W1] ** 2 + yv[M.Y_W3] ** 2) / 2 \
+            + ld(p[M.P_C]) * yv[M.Y_W2] ** 2 / 2
+        return kin + ld(p[M.P_G]) * (e - abs(h))
+
+    for slip in (False, True):
+        for step in (1e-2, 1e-5):
+            y = np.zeros(M.N_FULL)
+            y[M.Y_ALPHA] = alpha
+            y[M.Y_W1:M.Y_W3 + 1] = rng.normal(size=3) * 0.3
+            y[M.Y_U1:M.Y_U2 + 1] = rng.normal(size=2) * 0.01
+            d = np.zeros(M.N_FULL)
+            d[:M.Y_U2 + 1] = rng.normal(size=M.Y_U2 + 1) * step
+            change, scale = M.energy_increment(y, d, p, side, slip)
+            yl, dl = y.astype(ld), d.astype(ld)
+            e_new, e_old = energy(yl + dl, slip), energy(yl, slip)
+            exact = e_new - e_old
+            ref_err = 4 * np.finfo(ld).eps * (abs(e_new) + abs(e_old))   # the reference's own round-off
+            assert abs(ld(change) - exact) <= I.BALANCE_ROUNDOFF * scale + ref_err, (slip, step, change, exact)
+            naive = M.energy_with_slip(y + d, p, side, *((y + d)[M.Y_U1:M.Y_U2 + 1] if slip else (0.0, 0.0))) \
+                - M.energy_with_slip(y, p, side, *(y[M.Y_U1:M.Y_U2 + 1] if slip else (0.0, 0.0)))
+            assert abs(ld(change) - exact) <= abs(ld(naive) - exact) + 4 * np.finfo(float).eps * scale + ref_err
+
+
+@pytest.mark.parametrize("mode", [M.ROLL, M.SLIDE])
+def test_energy_rate_is_the_gradient_of_the_energy_and_the_power_defect_is_round_off(setup, mode):
+    """model.energy_rate(y, v) is dE/dtau along v: against a central difference of
+    energy_with_slip along random v (the gradient written independently of the energy's own
+    formula would differ at O(1)). Along the right-hand side it is minus the dissipated power, so
+    integrate.power_defect is round-off of the power's terms, also near flat (beta = 1e-6), where
+    the gyroscopic terms (tan(alpha) ~ 1e6) make those terms, and the defect, large against the
+    dissipated power: balance_error's floor measures the defect instead of assuming it small."""
+    from sweep.core import integrate as I
+    p, _, cs0 = setup
+    rng = np.random.default_rng(5)
+    slip = mode == M.SLIDE
+    defects_far, defects_flat = [], []
+    for trial in range(200):
+        beta = 1e-6 if trial % 4 == 0 else rng.uniform(0.05, 1.5)
+        side = float(rng.choice([-1.0, 1.0]))
+        y = np.zeros(M.N_FULL)
+        y[M.Y_ALPHA] = side * (math.pi / 2 - beta)
+        y[M.Y_W1:M.Y_W3 + 1] = rng.normal(size=3) * [0.3, 1.0, 0.3]
+        if slip:
+            y[M.Y_U1:M.Y_U2 + 1] = rng.normal(size=2) * 0.1
+        v = rng.normal(size=M.N_FULL)
+        step = 1e-4 * min(1.0, beta)      # O(step^2) truncation of the difference, its round-off below
+        e_plus = M.energy_with_slip(y + step * v, p, side, *((y + step * v)[M.Y_U1:M.Y_U2 + 1] if slip else (0.0, 0.0)))
+        e_minus = M.energy_with_slip(y - step * v, p, side, *((y - step * v)[M.Y_U1:M.Y_U2 + 1] if slip else (0.0, 0.0)))
+        rate = M.energy_rate(y, v, p, side, slip)
+        assert rate == pytest.approx((e_plus - e_minus) / (2 * step), rel=1e-6, abs=1e-14 * (1 + abs(e_plus)) / step)
+        cs = cs0.copy()
+        cs[L.CS_MODE] = mode
+        cs[L.CS_SIDE] = side
+        dy = np.zeros(M.N_FULL)
+        aux = np.zeros(M.N_AUX)
+        M.rhs(0.0, y, p, mode, int(side), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3],
+              1.0, 0.0, M.N_CORE, dy, aux)
+        if aux[M.X_OK] != 1.0:
+            continue
+        # the power's terms: the rates of the energy's parts and the dissipated powers
+        terms = (abs(p[M.P_G] * dy[M.Y_ALPHA]) + np.sum(np.abs(dy[M.Y_DSLIDE:M.Y_DK3 + 1]))
+                 + p[M.P_A] * (abs(y[M.Y_W1] * dy[M.Y_W1]) + abs(y[M.Y_W3] * dy[M.Y_W3]))
+                 + p[M.P_C] * abs(y[M.Y_W2] * dy[M.Y_W2]) + np.sum(np.abs(dy[M.Y_W1:M.Y_U2 + 1])) ** 2)
+        (defects_flat if beta == 1e-6 else defects_far).append(I.power_defect(y, dy, p, cs) / terms)
+    assert len(defects_far) > 100 and len(defects_flat) > 30
+    assert max(defects_far) < 1e-12, max(defects_far)
+    assert np.median(defects_far) < 1e-14
+    assert max(defects_flat) < 1e-12
 
 
 @pytest.mark.parametrize("alpha", [0.3, 1.0, -1.5707, 1.5707963])

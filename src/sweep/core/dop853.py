@@ -11,7 +11,7 @@ import math
 
 from .contact import eval_rhs
 from .jit import kernel
-from .layout import W_AUXTMP, W_DYTMP, W_YTMP
+from .layout import W_AUXTMP, W_DELTA, W_DYTMP, W_YTMP
 from .model import N_CORE, Y_ALPHA
 from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
 from .tableau import A_COLS, A_COUNT, B_COLS, D_COLS, E_COLS, N_STAGES, N_STAGES_EXTENDED
@@ -46,7 +46,8 @@ def stages(first, last, t, y, h, n, p, cs, K, wk, istats):
 
 @kernel
 def rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats):
-    """One DOP853 step from (t, y, f): y_new, and f_new = K[12] = f(t + h, y_new)."""
+    """One DOP853 step from (t, y, f): y_new, and f_new = K[12] = f(t + h, y_new); the increment
+    y_new - y before rounding in wk[W_DELTA]."""
     for i in range(n):
         K[0, i] = f[i]
     stages(1, N_STAGES, t, y, h, n, p, cs, K, wk, istats)
@@ -56,8 +57,10 @@ def rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats):
         b = RK_B[j]
         for i in range(n):
             y_new[i] += b * K[j, i]
+    delta = wk[W_DELTA]
     for i in range(n):
-        y_new[i] = y[i] + h * y_new[i]
+        delta[i] = h * y_new[i]
+        y_new[i] = y[i] + delta[i]
     eval_rhs(t + h, y_new, p, cs, n, f_new, aux_new, wk, istats)
     for i in range(n):
         K[N_STAGES, i] = f_new[i]

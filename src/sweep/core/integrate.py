@@ -24,8 +24,8 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
-                     W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
-from .model import N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, X_OK, X_PHI, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_W1
+                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
+from .model import N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment, energy_rate, X_OK, X_PHI, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_W1
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
@@ -39,10 +39,25 @@ ENERGY_GUARD = 10.0
 # step dissipates plus its share h / tau_max of E(0). Summed over a scene that is at most
 # 2 BALANCE_FACTOR rtol E(0) (nothing dissipates more than E(0)): the budget closes to 1e-9 E(0) at
 # the default rtol 1e-10 (the componentwise error norm alone lets through a bias of the
-# 8th-order step in the energy, one sign over 1e5 steps). Below the round-off of the balance
-# itself (BALANCE_ROUNDOFF times its scale, balance_error) it is not tested.
+# 8th-order step in the energy, one sign over 1e5 steps). The balance is taken on the step's
+# increment before rounding, in difference form (model.energy_increment), so its own round-off,
+# BALANCE_ROUNDOFF times its scale, is relative to the change; what the rounding of the state adds
+# is a random walk, ~sqrt(steps) EPS G (docs/model.md, 'Energy and the dissipation budget').
 BALANCE_FACTOR = 4.0
-BALANCE_ROUNDOFF = 4.0 * EPS
+# The increment's own round-off: its stages are summed with weights whose magnitudes add to ~12.4
+# (dop853's b), so each component carries up to ~12 EPS of itself, and the change that many EPS of
+# the scale of energy_increment (measured: up to 5 EPS); a floor that round-off could exceed would
+# reject every shorter step alike (both scale with the step), so it is set well above.
+BALANCE_ROUNDOFF = 32.0 * EPS
+# ... and the old floor of a balance taken between two rounded states (state_balance_error).
+STATE_BALANCE_ROUNDOFF = 4.0 * EPS
+# The right-hand side's own round-off in the energy direction (power_defect: what dE/dtau plus the
+# dissipated power leaves of 0 at a step's ends) enters the increment as h times a weighted sum of
+# its values at the stages; the floor takes DEFECT_FACTOR times the larger end value. Near flat the
+# gyroscopic terms (tan(alpha) ~ 1e6) carry it far above the energy's own round-off, and it scales
+# with h like a step's dissipation, so without it every shorter step failed alike (harness seed
+# 20261125 scenes 32, 489: step_size_underflow at rtol 1e-12, 1e-13).
+DEFECT_FACTOR = 16.0
 
 # A dip whose dense-output value at the cubic Hermite minimum is below DIP_REFINE times the lower end
 # value is searched for its true minimum (roots.brent_min) before it is ruled out.
@@ -222,14 +237,36 @@ def spin_holds(i, t_event, F, y, t, h, n, p, cs, wk, istats):
 
 
 @kernel
-def balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
-    """The step's energy-balance residual |Delta(E + dissipated)| over what it may be (see
-    BALANCE_FACTOR); accepted if <= 1. e0 = E(0) > 0, tau_span = t_max (tau).
+def power_defect(y, dy, p, cs):
+    """|dE/dtau + dissipated power| of the evaluated right-hand side dy at y: 0 for the exact flow,
+    so what is left is the right-hand side's own round-off in the energy direction."""
+    rate = energy_rate(y, dy, p, cs[CS_SIDE], cs[CS_MODE] != ROLL)
+    return abs(rate + dy[Y_DSLIDE] + dy[Y_DK1] + dy[Y_DK2] + dy[Y_DK3])
+
+
+@kernel
+def balance_error(y, d, h, defect, p, cs, e0, tau_span, rtol):
+    """The energy-balance residual |Delta(E + dissipated)| of a step's increment d (before rounding:
+    wk[W_DELTA]) from y over h, over what it may be (see BALANCE_FACTOR); accepted if <= 1.
+    defect: power_defect at the step's ends (the larger), e0 = E(0) > 0, tau_span = t_max (tau)."""
+    change, scale = energy_increment(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL)
+    dissipated = d[Y_DSLIDE] + d[Y_DK1] + d[Y_DK2] + d[Y_DK3]
+    allowed = (BALANCE_FACTOR * rtol * (max(dissipated, 0.0) + e0 * h / tau_span)
+               + BALANCE_ROUNDOFF * (scale + abs(d[Y_DSLIDE]) + abs(d[Y_DK1]) + abs(d[Y_DK2]) + abs(d[Y_DK3]))
+               + DEFECT_FACTOR * abs(h) * defect)
+    return abs(change + dissipated) / allowed
+
+
+@kernel
+def state_balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
+    """balance_error of the kept part of a step cut at an event, from the states at its ends (the
+    dense output's increment carries the round-off of its coefficients, not of the change).
 
     The residual's round-off, in units of EPS: E and the dissipated energy; the height's terms
     G cos(alpha) (1 + |h|), which cancel near upright for a thick disk; and the inclination's last
     bit times dE/dalpha ~ G (|sin alpha| + |h| cos(alpha)) + omega_1^2 (1 + |h|), which dominates
-    near flat, where E << G."""
+    near flat, where E << G. Once per event, this floor adds to the budget at most the events'
+    number times it."""
     d_cur = y[Y_DSLIDE] + y[Y_DK1] + y[Y_DK2] + y[Y_DK3]
     d_new = y_new[Y_DSLIDE] + y_new[Y_DK1] + y_new[Y_DK2] + y_new[Y_DK3]
     residual = (e_new + d_new) - (e_cur + d_cur)
@@ -240,7 +277,7 @@ def balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
     roundoff = (abs(e_cur) + abs(d_cur) + p[P_G] * (c * (1.0 + habs) + a * (abs(math.sin(a)) + habs * c))
                 + a * w1 * w1 * (1.0 + habs))
     allowed = (BALANCE_FACTOR * rtol * (max(d_new - d_cur, 0.0) + e0 * h / tau_span)
-               + BALANCE_ROUNDOFF * roundoff)
+               + STATE_BALANCE_ROUNDOFF * roundoff)
     return abs(residual) / allowed
 
 
@@ -268,7 +305,9 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
     if err == 0.0 and e_new > e_cur + ENERGY_GUARD * rtol * e0:
         err = math.inf
     if err == 0.0:
-        err = max(error_norm(K, h, y, y_new, n, rtol, atol), balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol))
+        defect = max(power_defect(y, f, p, cs), power_defect(y_new, wk[W_FNEW], p, cs))
+        err = max(error_norm(K, h, y, y_new, n, rtol, atol),
+                  balance_error(y, wk[W_DELTA], h, defect, p, cs, e0, tau_span, rtol))
     tally_step(cs, istats, err <= 1.0, 1)
     return err
 
@@ -402,8 +441,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if running:
                 # the kept part of the step ends on the dense output (7th order): its energy
                 # balance is held like a step's, else the step is retried shorter
-                seg_err = balance_error(y, y_seg, mode_energy(y, p, cs), mode_energy(y_seg, p, cs), seg_end - t, p, e0,
-                                        t_max, rtol)
+                seg_err = state_balance_error(y, y_seg, mode_energy(y, p, cs), mode_energy(y_seg, p, cs), seg_end - t, p,
+                                              e0, t_max, rtol)
                 if seg_err > 1.0:
                     # try_step accepted it: rejected after all
                     tally_step(cs, istats, True, -1)

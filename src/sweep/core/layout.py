@@ -58,7 +58,8 @@ W_DYSLOPE = 27    # SLAVED: right-hand side beside the slaved direction (d cross
 W_AUXSLOPE = 28
 W_RATEOLD = 29    # d g_k/d tau at the step start (forward difference; roots.event_rates)
 W_RATENEW = 30    # ... at the step end
-N_WORK = 31
+W_DELTA = 31      # the step's (or kept segment's) increment y_new - y before rounding (energy balance)
+N_WORK = 32
 N_WCOLS = 19     # columns of the work buffer: >= N_FULL and >= the number of events
 
 # --- settings vector ----------------------------------------------------------------------------

@@ -126,6 +126,87 @@ def energy_with_slip(y, p, side, u1, u2):
 
 
 @kernel
+def energy_increment(y, d, p, side, slip):
+    """E(y + d) - E(y) of energy_with_slip (the slip counted where slip), in difference form.
+
+    d is a step's increment before it is rounded into the state. Evaluated as the difference of two
+    energies, the change carries the round-off of E itself: near flat E << G, and alpha's last bit
+    alone moves G (e - |h|) by ~EPS G, which hid a step's truncation error in the energy (harness
+    seed 20261125 scene 191: ~1e-14 E0 per step, summed over 1.4 M steps to 1.5e-9 E0). Here every
+    term is (change of q) x (q + change/2), the cosine and sine by their half-angle products, so the
+    round-off is relative to the change. Returns (change, scale): scale bounds the change's round-off
+    in units of EPS."""
+    h = side * p[P_H]
+    a = y[Y_ALPHA]
+    half = 0.5 * d[Y_ALPHA]
+    sh = math.sin(half)
+    dc = -2.0 * math.sin(a + half) * sh     # cos(a + da) - cos(a)
+    ds = 2.0 * math.cos(a + half) * sh      # sin(a + da) - sin(a)
+    c = math.cos(a)
+    s = math.sin(a)
+    e = c + h * s
+    f = h * c - s
+    de = dc + h * ds
+    df = h * dc - ds
+    ade = (abs(dc) + abs(h * ds)) * (1.0 + abs(a))   # its round-off scale (the argument a + da/2)
+    adf = (abs(h * dc) + abs(ds)) * (1.0 + abs(a))
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    d1, d2, d3 = d[Y_W1], d[Y_W2], d[Y_W3]
+    u1 = y[Y_U1] if slip else 0.0
+    u2 = y[Y_U2] if slip else 0.0
+    du1 = d[Y_U1] if slip else 0.0
+    du2 = d[Y_U2] if slip else 0.0
+    vx = u1 + w2 - h * w3
+    vy = u2 - e * w1
+    vz = f * w1
+    dvx = du1 + d2 - h * d3
+    dvy = du2 - (de * (w1 + d1) + e * d1)
+    dvz = df * (w1 + d1) + f * d1
+    A = p[P_A]
+    C = p[P_C]
+    G = p[P_G]
+    change = (dvx * (vx + 0.5 * dvx) + dvy * (vy + 0.5 * dvy) + dvz * (vz + 0.5 * dvz)
+              + A * (d1 * (w1 + 0.5 * d1) + d3 * (w3 + 0.5 * d3)) + C * d2 * (w2 + 0.5 * d2) + G * de)
+    scale = ((abs(du1) + abs(d2) + abs(h * d3)) * (abs(vx) + abs(dvx))
+             + (abs(du2) + ade * abs(w1 + d1) + abs(e * d1)) * (abs(vy) + abs(dvy))
+             + (adf * abs(w1 + d1) + abs(f * d1)) * (abs(vz) + abs(dvz))
+             + A * (abs(d1) * (abs(w1) + abs(d1)) + abs(d3) * (abs(w3) + abs(d3)))
+             + C * abs(d2) * (abs(w2) + abs(d2)) + G * ade)
+    return change, scale
+
+
+@kernel
+def energy_rate(y, dy, p, side, slip):
+    """dE/dtau along dy at y: the gradient of energy_with_slip (the slip counted where slip) times dy.
+
+    With dy the right-hand side, energy_rate(y, dy) + dy[Y_DSLIDE] + dy[Y_DK1..3] is exactly 0 for
+    the exact flow (the power balance of eq. 6.1); what the evaluated right-hand side leaves of it
+    is its round-off in the energy direction, which near flat (tan(alpha) ~ 1e6 in the gyroscopic
+    terms) is far above the round-off of the energy's own terms (integrate.balance_error).
+    Uses de/dalpha = f, df/dalpha = -e (eq. 4.9)."""
+    h = side * p[P_H]
+    a = y[Y_ALPHA]
+    c = math.cos(a)
+    s = math.sin(a)
+    e = c + h * s
+    f = h * c - s
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    da, d1, d2, d3 = dy[Y_ALPHA], dy[Y_W1], dy[Y_W2], dy[Y_W3]
+    u1 = y[Y_U1] if slip else 0.0
+    u2 = y[Y_U2] if slip else 0.0
+    du1 = dy[Y_U1] if slip else 0.0
+    du2 = dy[Y_U2] if slip else 0.0
+    vx = u1 + w2 - h * w3
+    vy = u2 - e * w1
+    vz = f * w1
+    dvx = du1 + d2 - h * d3
+    dvy = du2 - f * da * w1 - e * d1
+    dvz = -e * da * w1 + f * d1
+    return (vx * dvx + vy * dvy + vz * dvz + p[P_A] * (w1 * d1 + w3 * d3) + p[P_C] * w2 * d2
+            + p[P_G] * f * da)
+
+
+@kernel
 def _solve2(m11, m12, m21, m22, b1, b2):
     det = m11 * m22 - m12 * m21
     return (m22 * b1 - m12 * b2) / det, (m11 * b2 - m21 * b1) / det
