@@ -1,18 +1,20 @@
 """The contact as a hybrid system: right-hand side per contact state, event functions, and the
 discrete updates at events. Every decision here reads the state and physical parameters only.
 
-Modes (docs/model.md, 'Contact modes'):
+Modes (docs/model.md, 'Modes, signs and sticking'):
   ROLL    no slip; friction is what rolling needs, inside the static cone |F| <= mu_s Phi.
-  SLIDE   slip speed |u| > slip_tol; friction -mu_d Phi u/|u| (eq. 4.7).
-  SLAVED  a slip starting from rest (or given slower than slip_tol), while |u| <= slip_tol. Its direction nu is the quasi-static one, where the slip
+  SLIDE   friction -mu_d Phi u/|u| (eq. 4.7), the slip integrated in Cartesian form.
+  SLAVED  a slow slip, |u| <= the slaving speed u_s = max(slip_tol, SLAVE_EPS mu_d Phi): its direction
+          nu is not integrated but solved at every evaluation as the quasi-static one, where the slip
           acceleration is parallel to the slip (the direction rate, ~ mu_d Phi / u, is the stiff
           mode of the sliding equations at u -> 0; slaving it is the leading order of the singular
-          perturbation in u). It hands over to SLIDE where u grows past slip_tol, and ends where u
-          returns to 0 (located event; the velocity is continuous).
-A SLIDE ends where |u| falls to slip_tol, by a plastic contact impulse that removes the remaining
-slip (O(slip_tol), first-order convergence in slip_tol). A slaved hand-over is not used there: a
-decaying slip generally spirals into u = 0 (its direction turns at a rate ~ 1/u without a
-quasi-static direction to settle on), so there is no slow manifold to hand over to.
+          perturbation in the relaxation time). Entered at a slip onset (u = 0) and from SLIDE where
+          |u| falls to u_s onto the attracting quasi-static direction, if there is one (try_slave);
+          it hands over to SLIDE where u grows past SLAVE_EXIT u_s or the direction folds away, and
+          ends in ROLL where u.s returns to 0 (located events; the velocity is continuous).
+A SLIDE whose slip spirals into u = 0 (no quasi-static direction to settle on) ends where |u| falls to
+slip_tol, by a plastic contact impulse that removes the remaining slip (O(slip_tol), first-order
+convergence in slip_tol).
 Moment components (eq. 3.3, Filippov): a free component sticks where omega.a_i reaches 0, or where
 it slows to spin_tol (p[P_WTOL]), if the moment can hold it (|sigma needed| < 1); a stuck one is
 released where |sigma needed| reaches 1.
