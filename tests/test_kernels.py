@@ -97,7 +97,7 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
         inc_res = abs(change + np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]))
         assert abs(inc_res - res[-1]) < 1e-15 * e_cur, (inc_res, res[-1])
         # balance_error is that residual over its allowance, which grows with h and the dissipation
-        ratio = I.balance_error(y, wk[L.W_DELTA], 0.0, h, 0.0, p, cs, e_cur, 100.0, 1e-10, np.zeros(L.N_TRACK))
+        ratio = I.balance_error(y, wk[L.W_DELTA], h, 0.0, p, cs, e_cur, 100.0, 1e-10)
         allowed = I.BALANCE_FACTOR * 1e-10 * (np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
         assert inc_res / ratio >= allowed
     assert res[0] / res[1] > 256.0 and res[2] / res[3] > 256.0, res

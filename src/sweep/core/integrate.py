@@ -23,7 +23,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
-                     T_BALANCE, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_STEP_RESIDUAL, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
+                     T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment, energy_rate, X_OK, X_PHI, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_W1
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes
@@ -35,18 +35,14 @@ EPS = 2.220446049250313e-16
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
 # increases, so such a step is an instability the error estimate did not see; it is rejected.
 ENERGY_GUARD = 10.0
-# The energy balance: for the exact flow E + dissipated is constant, so a step's Delta(E + D) is its
-# own local error in that direction. Their running sum over the kept steps (trk[T_BALANCE]) is held
-# inside an envelope that grows with the run, BALANCE_FACTOR rtol (D + E(0) tau / tau_max): a step that
-# would carry the sum out of it is rejected (balance_error). At the end the sum is at most
+# A step's energy balance, E + dissipated, may move by at most BALANCE_FACTOR * rtol times what the
+# step dissipates plus its share h / tau_max of E(0). Summed over a scene that is at most
 # 2 BALANCE_FACTOR rtol E(0) (nothing dissipates more than E(0)): the budget closes to 1e-9 E(0) at
-# the default rtol 1e-10 (the componentwise error norm alone lets through a bias of the 8th-order
-# step in the energy, one sign over 1e5 steps), while steps whose errors cancel or stay far inside
-# the envelope are not shortened (a per-step share of the envelope cost long low-dissipation scenes
-# up to 50 % more steps for nothing). The balance is taken on the step's increment before rounding,
-# in difference form (model.energy_increment), so its own round-off, BALANCE_ROUNDOFF times its
-# scale, is relative to the change; what the rounding of the state adds is a random walk,
-# ~sqrt(steps) EPS G (docs/model.md, 'Energy and the dissipation budget').
+# the default rtol 1e-10 (the componentwise error norm alone lets through a bias of the
+# 8th-order step in the energy, one sign over 1e5 steps). The balance is taken on the step's
+# increment before rounding, in difference form (model.energy_increment), so its own round-off,
+# BALANCE_ROUNDOFF times its scale, is relative to the change; what the rounding of the state adds
+# is a random walk, ~sqrt(steps) EPS G (docs/model.md, 'Energy and the dissipation budget').
 BALANCE_FACTOR = 4.0
 # The increment's own round-off: its stages are summed with weights whose magnitudes add to ~12.4
 # (dop853's b), so each component carries up to ~12 EPS of itself, and the change that many EPS of
@@ -249,42 +245,22 @@ def power_defect(y, dy, p, cs):
 
 
 @kernel
-def balance_ratio(held, residual, envelope, floor):
-    """How much a step's balance residual moves the running sum |held| towards the envelope, over
-    the room left (plus the residual's round-off floor); <= 1 keeps the sum inside. A step that
-    brings the sum back towards 0 gives <= 0."""
-    room = max(envelope - abs(held), 0.0) + floor
-    return (abs(held + residual) - abs(held)) / room
-
-
-@kernel
-def balance_envelope(y, dissipated, t_end, e0, tau_span, rtol):
-    """BALANCE_FACTOR rtol (D + E(0) t_end / tau_span) after a step that dissipates `dissipated`
-    from y (D: everything dissipated so far, y's four quadratures plus the step's)."""
-    d_before = y[Y_DSLIDE] + y[Y_DK1] + y[Y_DK2] + y[Y_DK3]
-    return BALANCE_FACTOR * rtol * (d_before + max(dissipated, 0.0) + e0 * t_end / tau_span)
-
-
-@kernel
-def balance_error(y, d, t, h, defect, p, cs, e0, tau_span, rtol, trk):
-    """The step's energy-balance residual Delta(E + dissipated), from its increment d (before
-    rounding: wk[W_DELTA]) from y at t over h, against the running sum's envelope (see
-    BALANCE_FACTOR; balance_ratio): accepted if <= 1. Leaves the residual in trk[T_STEP_RESIDUAL].
+def balance_error(y, d, h, defect, p, cs, e0, tau_span, rtol):
+    """The energy-balance residual |Delta(E + dissipated)| of a step's increment d (before rounding:
+    wk[W_DELTA]) from y over h, over what it may be (see BALANCE_FACTOR); accepted if <= 1.
     defect: power_defect at the step's ends (the larger), e0 = E(0) > 0, tau_span = t_max (tau)."""
     change, scale = energy_increment(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL)
     dissipated = d[Y_DSLIDE] + d[Y_DK1] + d[Y_DK2] + d[Y_DK3]
-    residual = change + dissipated
-    trk[T_STEP_RESIDUAL] = residual
-    floor = (BALANCE_ROUNDOFF * (scale + abs(d[Y_DSLIDE]) + abs(d[Y_DK1]) + abs(d[Y_DK2]) + abs(d[Y_DK3]))
-             + DEFECT_FACTOR * abs(h) * defect)
-    return balance_ratio(trk[T_BALANCE], residual, balance_envelope(y, dissipated, t + h, e0, tau_span, rtol), floor)
+    allowed = (BALANCE_FACTOR * rtol * (max(dissipated, 0.0) + e0 * h / tau_span)
+               + BALANCE_ROUNDOFF * (scale + abs(d[Y_DSLIDE]) + abs(d[Y_DK1]) + abs(d[Y_DK2]) + abs(d[Y_DK3]))
+               + DEFECT_FACTOR * abs(h) * defect)
+    return abs(change + dissipated) / allowed
 
 
 @kernel
-def state_balance_error(y, y_new, e_cur, e_new, t_end, p, e0, tau_span, rtol, trk):
-    """balance_error of the kept part of a step cut at an event (ending at t_end), from the states
-    at its ends (the dense output's increment carries the round-off of its coefficients, not of the
-    change). Leaves the residual in trk[T_STEP_RESIDUAL].
+def state_balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
+    """balance_error of the kept part of a step cut at an event, from the states at its ends (the
+    dense output's increment carries the round-off of its coefficients, not of the change).
 
     The residual's round-off, in units of EPS: E and the dissipated energy; the height's terms
     G cos(alpha) (1 + |h|), which cancel near upright for a thick disk; and the inclination's last
@@ -294,19 +270,19 @@ def state_balance_error(y, y_new, e_cur, e_new, t_end, p, e0, tau_span, rtol, tr
     d_cur = y[Y_DSLIDE] + y[Y_DK1] + y[Y_DK2] + y[Y_DK3]
     d_new = y_new[Y_DSLIDE] + y_new[Y_DK1] + y_new[Y_DK2] + y_new[Y_DK3]
     residual = (e_new + d_new) - (e_cur + d_cur)
-    trk[T_STEP_RESIDUAL] = residual
     a = abs(y[Y_ALPHA])
     c = abs(math.cos(a))
     habs = p[P_H]
     w1 = y[Y_W1]
     roundoff = (abs(e_cur) + abs(d_cur) + p[P_G] * (c * (1.0 + habs) + a * (abs(math.sin(a)) + habs * c))
                 + a * w1 * w1 * (1.0 + habs))
-    return balance_ratio(trk[T_BALANCE], residual, balance_envelope(y, d_new - d_cur, t_end, e0, tau_span, rtol),
-                         STATE_BALANCE_ROUNDOFF * roundoff)
+    allowed = (BALANCE_FACTOR * rtol * (max(d_new - d_cur, 0.0) + e0 * h / tau_span)
+               + STATE_BALANCE_ROUNDOFF * roundoff)
+    return abs(residual) / allowed
 
 
 @kernel
-def try_step(t, y, f, h, n, p, cs, K, wk, trk, istats, rtol, atol, e0, tau_span):
+def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
     """One DOP853 step into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for
     a step with a non-finite stage or end state, or one that raises the energy by more than
     ENERGY_GUARD rtol e0), at least its energy-balance error (balance_error), and counts it.
@@ -331,7 +307,7 @@ def try_step(t, y, f, h, n, p, cs, K, wk, trk, istats, rtol, atol, e0, tau_span)
     if err == 0.0:
         defect = max(power_defect(y, f, p, cs), power_defect(y_new, wk[W_FNEW], p, cs))
         err = max(error_norm(K, h, y, y_new, n, rtol, atol),
-                  balance_error(y, wk[W_DELTA], t, h, defect, p, cs, e0, tau_span, rtol, trk))
+                  balance_error(y, wk[W_DELTA], h, defect, p, cs, e0, tau_span, rtol))
     tally_step(cs, istats, err <= 1.0, 1)
     return err
 
@@ -444,7 +420,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if running:
                 outcome = oc.T_MAX if hit_tmax else oc.STEP_SIZE_UNDERFLOW
             break
-        err = try_step(t, y, f, h, n, p, cs, K, wk, trk, istats, rtol, atol, e0, t_max)
+        err = try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, t_max)
         if not err <= 1.0:
             h *= step_factor(err)
             after_reject = True
@@ -465,8 +441,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if running:
                 # the kept part of the step ends on the dense output (7th order): its energy
                 # balance is held like a step's, else the step is retried shorter
-                seg_err = state_balance_error(y, y_seg, mode_energy(y, p, cs), mode_energy(y_seg, p, cs), seg_end, p,
-                                              e0, t_max, rtol, trk)
+                seg_err = state_balance_error(y, y_seg, mode_energy(y, p, cs), mode_energy(y_seg, p, cs), seg_end - t, p,
+                                              e0, t_max, rtol)
                 if seg_err > 1.0:
                     # try_step accepted it: rejected after all
                     tally_step(cs, istats, True, -1)
@@ -508,8 +484,6 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             shift_peak_window(t, y, h, seg_end, phi_c, K, F, have_dense, n, cs, trk, wk)
 
         # --- advance ------------------------------------------------------------------------------
-        if running:
-            trk[T_BALANCE] += trk[T_STEP_RESIDUAL]     # the kept step's, or its kept part's
         if cs[CS_MODE] != ROLL and running:
             fstats[F_SLIDETIME] += (seg_end if outcome < 0 else fstats[F_TEND]) - t
         for i in range(n):

@@ -84,9 +84,7 @@ T_PEAK_RING = 13  # 1: the peak buffer is a ring of its last rows (batch path; o
 T_PREV_DENSE = 14  # 1: F[7:14] holds the previous step's dense output; 0: K[K_PREV:] holds its stages
 T_RATES_OLD = 15  # 1: wk[W_RATEOLD] holds the event rates at the current step start (the last step end's)
 T_RATES_NEW = 16  # 1: this step's scan computed wk[W_RATENEW] (the rates at its end)
-T_BALANCE = 17    # the energy balance's running residual: sum of the kept steps' Delta(E + dissipated)
-T_STEP_RESIDUAL = 18  # ... of the step try_step just made (added to T_BALANCE if it is kept whole)
-N_TRACK = 19
+N_TRACK = 17
 
 # --- RK stage buffer ----------------------------------------------------------------------------
 K_PREV = N_STAGES_EXTENDED      # first row of the previous step's stages
