@@ -147,18 +147,44 @@ def test_first_run_says_what_it_installs():
         assert re.search(rf"{name} \d", msg), (name, msg)
 
 
-def test_stale_numba_cache_is_detected(tmp_path):
-    pkg = tmp_path / "pkg"
-    (pkg / "__pycache__").mkdir(parents=True)
-    (pkg / "kern.py").write_text("from numba import njit\n\n@njit(cache=True)\ndef f(x):\n    return x\n")
-    (pkg / "plain.py").write_text('"""mentions cache=True only in text"""\n')
-    assert frontdoor.stale_numba_modules(pkg) == ["pkg/kern.py"]       # never compiled
-    index = pkg / "__pycache__" / "kern.f-3.py311.nbi"
-    index.write_bytes(b"")
-    os.utime(pkg / "kern.py", (time.time() - 100, time.time() - 100))
-    assert frontdoor.stale_numba_modules(pkg) == []                   # cached
-    os.utime(index, (time.time() - 200, time.time() - 200))
-    assert frontdoor.stale_numba_modules(pkg) == ["pkg/kern.py"]       # source newer than cache
+def test_cold_numba_cache_is_detected_and_old_caches_pruned(tmp_path):
+    cache = tmp_path / "__pycache__" / "numba-0123456789abcdef"
+    cache.mkdir(parents=True)
+    assert frontdoor.numba_cache_cold(cache)                            # never compiled
+    (cache / "contact.eval_rhs-150.py311.nbi").write_bytes(b"")
+    assert frontdoor.numba_cache_cold(cache)                            # the main loop is not there yet
+    (cache / "integrate.run-400.py311.nbi").write_bytes(b"")
+    assert not frontdoor.numba_cache_cold(cache)                        # cached
+    old = tmp_path / "__pycache__" / "numba-fedcba9876543210"
+    old.mkdir()
+    (old / "integrate.run-390.py311.nbi").write_bytes(b"")
+    other = tmp_path / "__pycache__" / "model.cpython-311.pyc"
+    other.write_bytes(b"")
+    assert frontdoor.prune_numba_caches(cache) == [old]
+    assert cache.is_dir() and not old.exists() and other.exists()
+
+
+def test_numba_cache_is_keyed_by_every_kernel_source(tmp_path):
+    """numba invalidates a cached function only when its own file changes, and the cached code of a
+    caller contains its callees from other files (integrate.run holds model.rhs): the kernels'
+    cache folder and source stamp are the digest of all kernel sources, so an edit of any one of
+    them (here: a copy of the package with model.py changed) selects a new, empty folder."""
+    from sweep.core import jit
+
+    pkg = tmp_path / "sweep"
+    shutil.copytree(Path(sweep.__file__).parent, pkg, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    paths = [pkg / p.relative_to(jit.PACKAGE) for p in jit.KERNEL_SOURCES]
+    assert jit.sources_digest(paths, pkg) == jit.DIGEST
+    model = pkg / "core" / "model.py"
+    model.write_text(model.read_text() + "\n# edited\n")
+    assert jit.sources_digest(paths, pkg) != jit.DIGEST
+    assert {p.name for p in jit.KERNEL_SOURCES} >= {"model.py", "contact.py", "integrate.py", "outcomes.py", "gpu.py"}
+    assert jit.DIGEST[:16] in jit.cache_dir().name
+    # the kernels are located there, with the digest as their stamp
+    from sweep.core import integrate
+    locator = integrate.run._cache._impl.locator
+    assert isinstance(locator, jit.CoreCacheLocator)
+    assert locator.get_source_stamp() == jit.DIGEST and locator.get_cache_path() == str(jit.cache_dir())
 
 
 # ------------------------------------------------------------------------------- a real run, interrupted

@@ -27,6 +27,7 @@ import json
 import os
 import re
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -53,7 +54,6 @@ JOB_LOG_LINE = re.compile(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ (DEBUG|INFO|WARN
 STEPS = re.compile(r"(\d+) of (\d+) steps \(\d+%\) done")
 NOTHING = "Nothing to be done"
 EXPECTED_COMPILE_S = "up to 90 s"  # measured: 21 s alone, ~50 s on a loaded 2-core machine
-NUMBA_CACHED = re.compile(r"^\s*@(?:numba\.)?n?jit\([^)]*cache\s*=\s*True", flags=re.M)
 SIGNAL_GRACE_S = 60.0            # after the forwarded SIGINT, before SIGKILL
 
 
@@ -99,18 +99,30 @@ def locations(argv: list[str]) -> tuple[Path, Path]:
 
 # ---------------------------------------------------------------------------------------- numba
 
-def stale_numba_modules(pkg: Path | None = None) -> list[str]:
-    """Modules of the package with numba kernels (`cache=True`) whose cache is missing or older
-    than their source: their kernels will be compiled on first use (~tens of seconds)."""
-    pkg = pkg or Path(__file__).resolve().parent
-    stale = []
-    for src in sorted(pkg.rglob("*.py")):
-        if "__pycache__" in src.parts or not NUMBA_CACHED.search(src.read_text(encoding="utf-8", errors="replace")):
-            continue
-        index = list((src.parent / "__pycache__").glob(f"{src.stem}.*.nbi"))
-        if not index or max(p.stat().st_mtime for p in index) < src.stat().st_mtime:
-            stale.append(src.relative_to(pkg.parent).as_posix())
-    return stale
+def numba_cache_cold(cache: Path | None = None) -> bool:
+    """Whether the kernels of this exact source (core.jit.DIGEST) are not yet compiled and cached:
+    the main loop's index is missing from their keyed cache folder (core.jit.cache_dir)."""
+    from .core import jit
+
+    cache = cache or jit.cache_dir()
+    return not any(cache.glob("integrate.run-*.nbi"))
+
+
+def prune_numba_caches(cache: Path | None = None) -> list[Path]:
+    """Remove the cache folders of earlier versions of the kernel sources beside the current one
+    (`numba-<digest>` siblings of core.jit.cache_dir(); ~11 MB each). Called before the jobs start,
+    by the one process that warms the cache. Returns what it removed."""
+    from .core import jit
+
+    cache = cache or jit.cache_dir()
+    prefix = cache.name.rsplit("-", 1)[0] + "-"
+    gone = []
+    if cache.parent.is_dir():
+        for old in cache.parent.glob(prefix + "*"):
+            if old.is_dir() and old != cache:
+                shutil.rmtree(old, ignore_errors=True)
+                gone.append(old)
+    return gone
 
 
 def warm_numba(say) -> None:
@@ -120,14 +132,14 @@ def warm_numba(say) -> None:
     from . import batch
     from .scene import DEFAULTS
 
-    stale = stale_numba_modules()
-    if stale:
-        say(f"numba: compiling the integrator's kernels ({len(stale)} module{'s' if len(stale) != 1 else ''} "
-            "changed or never compiled); "
-            f"this happens once after a change of src/sweep/core and takes {EXPECTED_COMPILE_S} ...")
+    cold = numba_cache_cold()
+    if cold:
+        say("numba: compiling the integrator's kernels (the kernel sources changed or were never "
+            f"compiled); this happens once after a change of src/sweep/core and takes {EXPECTED_COMPILE_S} ...")
     t0 = time.monotonic()
     batch.warm_up(copy.deepcopy(DEFAULTS))
-    if stale:
+    prune_numba_caches()
+    if cold:
         say(f"numba: kernels compiled and cached in {time.monotonic() - t0:.0f} s")
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from numba import float64, int64
 
 from .core.dop853 import N_DENSE
+from .core.jit import register_locator
 from .core.frequency import FQ_COLS, FQ_LEVEL0
 from .core.ensemble import (MAX_LEVELS, N_DERIVED, N_SCRATCH, PEAK_RING, load_inputs, solve_scene,
                             store_outputs)
@@ -93,6 +94,14 @@ def _build_kernel(cuda_module):
     global cuda, _load, _store
     cuda = cuda_module
     sim = simulator_enabled()
+    if not sim:
+        # the kernel's cache keyed by every source it compiles (core.jit.CoreCacheLocator): numba-cuda's
+        # own cache, like numba's, would keep it after an edit of the core alone
+        try:
+            from numba.cuda.core import caching as cuda_caching
+            register_locator(cuda_caching.CacheImpl)
+        except (ImportError, AttributeError):   # another numba-cuda layout: its own per-file cache
+            pass
     # the simulator's arrays are Python objects: there the copies run as plain Python
     _load = load_inputs.py_func if sim else load_inputs
     _store = store_outputs.py_func if sim else store_outputs

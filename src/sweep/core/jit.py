@@ -1,4 +1,4 @@
-"""How the core kernels are compiled for the CPU: `@kernel`.
+"""How the core kernels are compiled for the CPU: `@kernel`, and where their machine code is cached.
 
 `kernel` is numba's `njit` with the compiled code cached on disk and without numba's reference-
 counting runtime (NRT). The kernels never allocate (every buffer comes from the caller) and never
@@ -8,14 +8,99 @@ and those calls made a right-hand-side evaluation cost three times its arithmeti
 performance.md, 'Cost of the core'). An allocation added to a kernel now fails to compile instead of
 slowing it; tests/test_jit.py checks that no kernel returns an array.
 
-numba-cuda compiles the same Python functions as device code (sweep.gpu); it ignores these CPU
-options.
+**The cache is keyed by every kernel source at once** (`CoreCacheLocator`). numba's own cache
+invalidates a function only when *its own* file changes ("cache invalidation fails to recognize
+changes in symbols defined in a different file", numba's caching notes): the cached machine code of
+`integrate.run` contains the `contact`, `model` and `dop853` kernels it calls, and after an edit of
+model.py alone it went on running the old model. Here the cache of every kernel lives in a folder
+named by the SHA-256 of all the sources they are compiled from (`KERNEL_SOURCES`: this package,
+outcomes.py, whose codes the kernels return, and gpu.py, the CUDA kernel), and that digest is also
+each entry's source stamp: any change of any of them compiles everything once, nothing stale is
+ever loaded. The folder is `src/sweep/core/__pycache__/numba-<digest>/`, or
+`$NUMBA_CACHE_DIR/sweep-core-<digest>/` where NUMBA_CACHE_DIR is set.
+
+numba-cuda compiles the same Python functions as device code (sweep.gpu); it ignores the CPU options,
+and sweep.gpu registers the same locator with numba-cuda's cache for its kernel.
 """
 from __future__ import annotations
 
+import hashlib
+import os
+import tempfile
+from pathlib import Path
+
 from numba import njit
+from numba.core import caching as _caching
+from numba.core import config as _config
 
 CPU_OPTIONS = {"cache": True, "_nrt": False}
+
+PACKAGE = Path(__file__).resolve().parents[1]
+KERNEL_SOURCES = tuple(sorted((PACKAGE / "core").glob("*.py"))) + (PACKAGE / "outcomes.py", PACKAGE / "gpu.py")
+
+
+def sources_digest(paths=KERNEL_SOURCES, root: Path = PACKAGE) -> str:
+    """SHA-256 (hex) of the given source files, their paths relative to root included."""
+    h = hashlib.sha256()
+    for path in paths:
+        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+DIGEST = sources_digest()
+
+
+def cache_dir() -> Path:
+    """The folder that holds the compiled kernels of this exact set of sources."""
+    if _config.CACHE_DIR:
+        return Path(_config.CACHE_DIR) / f"sweep-core-{DIGEST[:16]}"
+    return PACKAGE / "core" / "__pycache__" / f"numba-{DIGEST[:16]}"
+
+
+class CoreCacheLocator:
+    """numba cache locator for the functions defined in KERNEL_SOURCES: one folder per DIGEST, and
+    DIGEST as every entry's source stamp (see the module docstring). Other functions are left to
+    numba's own locators (from_function returns None)."""
+
+    _files = frozenset(str(p) for p in KERNEL_SOURCES)
+
+    def __init__(self, py_func, py_file):
+        self._lineno = py_func.__code__.co_firstlineno
+        self._path = str(cache_dir())
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        if str(Path(py_file).resolve()) not in cls._files:
+            return None
+        self = cls(py_func, py_file)
+        try:
+            self.ensure_cache_path()
+        except OSError:
+            return None      # not writable: numba's other locators (user-wide cache) take it
+        return self
+
+    def ensure_cache_path(self):
+        os.makedirs(self._path, exist_ok=True)
+        tempfile.TemporaryFile(dir=self._path).close()
+
+    def get_cache_path(self):
+        return self._path
+
+    def get_source_stamp(self):
+        return DIGEST
+
+    def get_disambiguator(self):
+        return str(self._lineno)
+
+
+def register_locator(impl_class) -> None:
+    """Put CoreCacheLocator first among a numba cache implementation's locators (once)."""
+    classes = impl_class._locator_classes
+    if CoreCacheLocator not in classes:
+        classes.insert(0, CoreCacheLocator)
+
+
+register_locator(_caching.CacheImpl)
 
 
 def kernel(fn=None, **options):
