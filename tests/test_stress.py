@@ -1,7 +1,7 @@
 """Stress grid of hard scenes, and the SciPy driver as a second implementation (issue #3).
 
 Every scene must end with a meaningful outcome code within a modest step budget (max_steps
-200000: the paper's case needs ~2e4), with no NaN/inf in any output (a level's values may be NaN
+200000, 300000 for the frictionless slide: the paper's case needs ~2e4), with no NaN/inf in any output (a level's values may be NaN
 only if the level was not reached), and the energy must never increase. Scenes that currently
 fail would be marked xfail(strict=True) with the reason; the five problems first found here
 (docs/performance.md, 'Stress grid') are fixed in the integrator and now pass.
@@ -36,7 +36,12 @@ GRID = {
     "tiny spin, omega3 -0.1 rad/s": (dict(initial__omega=[0.0, 0.0, -0.1]), {"halted", "face_contact"},
                                      "step collapse within 1e-5 rad of flat: face_contact"),
     "huge spin, omega3 -1000 rad/s": (dict(initial__omega=[0.0, 0.0, -1000.0]), {"contact_lost"}, None),
-    "frictionless sliding, mu_d 0": (dict(contact__mu_d=0.0), {"halted", "face_contact"}, None),
+    # mu_d 0 slides all the way (72 s, ~6000 events) and dissipates only through the small k_i: each
+    # step's energy error is held to its share of 4 rtol E0 over t_max (core.integrate.balance_error),
+    # which takes it 178 000 steps + 34 000 rejections (122 000 + 20 000 before the balance was taken
+    # exactly on the step's increment, stop 24): its own budget of 300 000
+    "frictionless sliding, mu_d 0": (dict(contact__mu_d=0.0, stop__max_steps=300_000), {"halted", "face_contact"},
+                                     None),
     "high friction, mu_s = mu_d = 1.5": (dict(contact__mu_s=1.5, contact__mu_d=1.5), {"halted", "face_contact"},
                                          "creeping slips: their direction is slaved below SLAVE_EPS mu_d Phi"),
     "no rolling resistance, k_i 0": (dict(contact__k1=0.0, contact__k2=0.0, contact__k3=0.0), {"t_max"}, None),
@@ -57,10 +62,10 @@ ROWS: list[dict] = []
 
 def _cfg(mods: dict) -> dict:
     cfg = copy.deepcopy(DEFAULTS)
+    cfg["stop"]["max_steps"] = MAX_STEPS
     for k, v in mods.items():
         sec, key = k.split("__")
         cfg[sec][key] = v
-    cfg["stop"]["max_steps"] = MAX_STEPS
     return cfg
 
 
@@ -116,7 +121,7 @@ def test_stress_scene(name, mods, allowed):
     ROWS.append(dict(scene=name, outcome=s["outcome"], steps=s["n_steps"], rejected=s["n_rejected"],
                      events=s["n_events"], rhs=s["n_rhs"], t_end=s["t_end"],
                      e_ratio=s["energy_final"] / s["energy_initial"], wall=wall))
-    assert s["outcome"] != "step_limit", f"{name}: step budget {MAX_STEPS} used up at t = {s['t_end']:.4g} s"
+    assert s["outcome"] != "step_limit", f"{name}: step budget {cfg['stop']['max_steps']} used up at t = {s['t_end']:.4g} s"
     assert s["outcome"] in allowed, (name, s["outcome"])
     # no NaN/inf in any output, except the values of levels that were not reached and the halt-time
     # fit that needs three reached levels
@@ -144,7 +149,7 @@ def test_stress_scene(name, mods, allowed):
     assert s["energy_final"] <= e0 * (1.0 + 1e-9), (s["energy_final"], e0)
     E = r.samples["energy"][live]
     assert np.all(np.diff(E) <= 1e-8 * e0), float(np.max(np.diff(E)))
-    assert s["n_steps"] + s["n_rejected"] <= MAX_STEPS
+    assert s["n_steps"] + s["n_rejected"] <= cfg["stop"]["max_steps"]
 
 
 # --- the SciPy driver as a second implementation ------------------------------------------------
