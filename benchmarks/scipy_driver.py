@@ -17,11 +17,13 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   SLAVED -> SLIDE where |u| grows to SLAVE_EXIT x the slaving speed u_s = max(slip_tol,
   SLAVE_EPS mu_d Phi), or where the attracting direction ceases to exist (a fold: d cross/d nu
   reaches 0, or no root is left near the last one: the stepper cannot continue and the fold is the
-  last accepted point); after a fold the hand-over back to SLAVED is off for the rest of that slide;
+  last accepted point); after a fold the hand-over back to SLAVED is off until |u| grows past
+  SLAVE_EXIT x u_s again;
 * SLIDE -> ROLL where |u| falls to slip_tol (plastic impulse, its loss booked to sliding); SLIDE ->
   SLAVED where |u| falls to u_s, onto the root of cross that the direction dynamics
-  d nu/d tau = cross/|u| carry the slip to (the cross slip removed plastically; a slip that the
-  impulse would reverse stops instead); none on the whole circle: it stays in SLIDE;
+  d nu/d tau = cross/|u| carry the slip to (the cross slip removed plastically); none on the whole
+  circle, or a slip that the impulse would leave pointing against the root (it is passing by
+  u = 0): it stays in SLIDE, the hand-over off until |u| grows past SLAVE_EXIT x u_s again;
 * moment signs sigma_i = sign(omega.a_i) with Filippov sticking: at omega.a_i = 0 a component
   sticks if the moment needed to hold it is within k_i Phi (|sigma needed| < 1), else it passes;
   a stuck component leaves where |sigma needed| reaches 1, with that sign; a free component that
@@ -419,8 +421,8 @@ class Disk:
             c.mode = SLAVED
             c.nu = root
             return -1
-        y[:] = saved
-        self.to_roll(y, c)
+        y[:] = saved          # pointing against it: passing by u = 0, it goes on sliding
+        c.slave_off = True
         return -1
 
     def set_slip(self, t, y, c):
@@ -745,6 +747,8 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             active += ["slipfast", "slave_lost"]
         if seg.mode == SLIDE and not seg.slave_off:
             active.append("slave")
+        if seg.mode == SLIDE and seg.slave_off:
+            active.append("slipfast")      # fast again: the hand-over is re-armed
         active += ["contact", "side", "face"]
         active.sort(key=ORDER.index)
 

@@ -37,7 +37,7 @@ EV_UNSTICK1, EV_UNSTICK2, EV_UNSTICK3 = 3, 4, 5  # a stuck component needs more 
 EV_CONE = 6        # ROLL: the friction needed leaves the static cone, mu_s Phi - |F| = 0
 EV_SLIP_SLOW = 7   # SLIDE: |u| falls to slip_tol -> ROLL (plastic impulse)
 EV_SLIP_STOP = 8   # SLAVED: u.s reaches 0 -> ROLL
-EV_SLIP_FAST = 9   # SLAVED: |u| grows to the slaving speed -> SLIDE
+EV_SLIP_FAST = 9   # SLAVED: |u| grows to SLAVE_EXIT x the slaving speed -> SLIDE (and SLIDE re-arms the hand-over)
 EV_SLAVE = 10      # SLIDE: |u| falls to the slaving speed -> SLAVED if the direction has relaxed
 EV_CONTACT = 11    # Phi = 0: contact lost
 EV_SIDE = 12       # alpha = 0: the other rim edge takes the contact
@@ -302,10 +302,10 @@ def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
 @kernel
 def try_slave(t, y, p, cs, n, wk, istats):
     """SLIDE -> SLAVED onto the attracting quasi-static direction of the slip; where there is none
-    (a spiralling slip) it stays in SLIDE, and this hand-over is off until the slip is fast again.
+    (a spiralling slip), or where the slip points against it (a slip passing by u = 0), it stays in
+    SLIDE, and this hand-over is off until the slip is fast again (EV_SLIP_FAST re-arms it).
     Returns the outcome that ends the scene (PAINLEVE where the direction dynamics carry the slip
     into the Painleve singularity: see attracting_direction), else -1."""
-    # (cone_violated and start_slip are defined below; numba resolves them at compile time)
     u = math.hypot(y[Y_U1], y[Y_U2])
     root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, p, cs, n, wk, istats)
     if root == JAMMED:
@@ -313,8 +313,10 @@ def try_slave(t, y, p, cs, n, wk, istats):
     if math.isnan(root):
         cs[CS_SLAVE_OFF] = 1.0
         return -1
-    # the slip component across the slaved direction is removed by a plastic impulse (O(u^2) loss);
-    # an impulse that would leave the slip pointing against that direction stops it instead
+    # the slip component across the slaved direction is removed by a plastic impulse (O(u^2) loss).
+    # Where that would leave the slip pointing against the direction, the slip is not settling onto
+    # it but passing by u = 0 (its direction turning towards a root along which it grows): it goes
+    # on sliding, as the sliding equations carry it, past u = 0 or to slip_tol (docs/model.md)
     side = int(cs[CS_SIDE])
     saved = wk[W_YSLIP]
     for i in range(n):
@@ -327,11 +329,7 @@ def try_slave(t, y, p, cs, n, wk, istats):
         return -1
     for i in range(n):
         y[i] = saved[i]
-    y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
-    cs[CS_MODE] = ROLL
-    istats[I_TRANS] += 1
-    if cone_violated(t, y, p, cs, n, wk, istats):
-        start_slip(t, y, p, cs, n, wk, istats)
+    cs[CS_SLAVE_OFF] = 1.0
     return -1
 
 
@@ -527,6 +525,11 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
         g[EV_SLIP_SLOW] = state_event_value(EV_SLIP_SLOW, y, p, cs, u_tol, level_e)
         if cs[CS_SLAVE_OFF] == 0.0:
             g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(aux, p, u_tol)
+        else:
+            # the hand-over is off (no quasi-static direction to settle on, or the slip passed it
+            # by) until the slip is fast again: SLAVE_EXIT times the slaving speed, as a slaved
+            # slip's exit; a slip that reverses and later decays is handed over then
+            g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
     else:
         g[EV_SLIP_STOP] = state_event_value(EV_SLIP_STOP, y, p, cs, u_tol, level_e)
         g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
