@@ -208,11 +208,13 @@ def test_error_norm_is_hairers_dop853_norm(alpha):
     h, rtol, atol = 0.01, 1e-8, 1e-10
     mag = np.maximum(np.abs(y[:n]), np.abs(y_new[:n]))
     mag[M.Y_ALPHA] = min(abs(alpha), 0.5 * math.pi - abs(alpha) * (1.0 - 1e-8))
-    sc = atol + rtol * mag
-    e5 = np.sum(((T.E5 @ K[:13, :n]) / sc) ** 2)
-    e3 = np.sum(((T.E3 @ K[:13, :n]) / sc) ** 2)
-    ref = h * e5 / math.sqrt((e5 + 0.01 * e3) * n)
-    assert D.error_norm(K, h, y, y_new, M.N_FULL, rtol, atol) == pytest.approx(ref, rel=1e-12)
+    for u_atol in (atol, 1e-16):     # the slip components' own absolute tolerance
+        sc = atol + rtol * mag
+        sc[M.Y_U1:M.Y_U2 + 1] = u_atol + rtol * mag[M.Y_U1:M.Y_U2 + 1]
+        e5 = np.sum(((T.E5 @ K[:13, :n]) / sc) ** 2)
+        e3 = np.sum(((T.E3 @ K[:13, :n]) / sc) ** 2)
+        ref = h * e5 / math.sqrt((e5 + 0.01 * e3) * n)
+        assert D.error_norm(K, h, y, y_new, M.N_FULL, rtol, atol, u_atol) == pytest.approx(ref, rel=1e-12)
 
 
 def test_dense_output_interpolates_the_step_at_seventh_order(setup):

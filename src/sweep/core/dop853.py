@@ -12,7 +12,7 @@ import math
 from .contact import eval_rhs
 from .jit import kernel
 from .layout import W_AUXTMP, W_DELTA, W_DYTMP, W_YTMP
-from .model import N_CORE, Y_ALPHA
+from .model import N_CORE, Y_ALPHA, Y_U1, Y_U2
 from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
 from .tableau import A_COLS, A_COUNT, B_COLS, D_COLS, E_COLS, N_STAGES, N_STAGES_EXTENDED
 
@@ -67,8 +67,9 @@ def rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats):
 
 
 @kernel
-def error_norm(K, h, y, y_new, n, rtol, atol):
-    """Hairer's dop853 error norm over the dynamic state and the dissipation quadratures only.
+def error_norm(K, h, y, y_new, n, rtol, atol, u_atol):
+    """Hairer's dop853 error norm over the dynamic state and the dissipation quadratures only;
+    the slip components (Y_U1, Y_U2) with the absolute tolerance u_atol instead of atol.
 
     theta, psi, x, y (when integrated) are passive quadratures that never feed back into the
     dynamics; leaving them out keeps the step sequence, and so every result, identical whether or
@@ -86,7 +87,7 @@ def error_norm(K, h, y, y_new, n, rtol, atol):
         mag = max(abs(y[i]), abs(y_new[i]))
         if i == Y_ALPHA:
             mag = min(mag, max(0.5 * math.pi - min(abs(y[i]), abs(y_new[i])), 0.0))
-        sc = atol + rtol * mag
+        sc = (u_atol if i == Y_U1 or i == Y_U2 else atol) + rtol * mag
         a5 = 0.0
         a3 = 0.0
         for j in E_COLS:

@@ -59,6 +59,12 @@ STATE_BALANCE_ROUNDOFF = 4.0 * EPS
 # 20261125 scenes 32, 489: step_size_underflow at rtol 1e-12, 1e-13).
 DEFECT_FACTOR = 16.0
 
+# Within SLIP_NEAR x slip_tol of u = 0 the slip components are held to rtol SLIP_NEAR slip_tol rather
+# than atol: there the physics decides by |u| against slip_tol (a slip passing by 0 stops if it
+# comes within slip_tol, else reverses), and atol (1e-12 by default, ~1e-4 of slip_tol in u_hat)
+# left that decision to the error of the step: whether a near-reversal stuck moved with rtol.
+SLIP_NEAR = 100.0
+
 # A dip whose dense-output value at the cubic Hermite minimum is below DIP_REFINE times the lower end
 # value is searched for its true minimum (roots.brent_min) before it is ruled out.
 DIP_REFINE = 0.1
@@ -306,10 +312,21 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
         err = math.inf
     if err == 0.0:
         defect = max(power_defect(y, f, p, cs), power_defect(y_new, wk[W_FNEW], p, cs))
-        err = max(error_norm(K, h, y, y_new, n, rtol, atol),
+        err = max(error_norm(K, h, y, y_new, n, rtol, atol, slip_atol(y, y_new, p, rtol, atol)),
                   balance_error(y, wk[W_DELTA], h, defect, p, cs, e0, tau_span, rtol))
     tally_step(cs, istats, err <= 1.0, 1)
     return err
+
+
+@kernel
+def slip_atol(y, y_new, p, rtol, atol):
+    """Absolute tolerance of the slip components on a step: atol, but rtol SLIP_NEAR u_tol where the
+    slip is within SLIP_NEAR x slip_tol (p[P_UFREEZE]) of 0 at either end (see SLIP_NEAR)."""
+    u_tol = p[P_UFREEZE]
+    near = SLIP_NEAR * u_tol
+    if math.hypot(y[Y_U1], y[Y_U1 + 1]) < near or math.hypot(y_new[Y_U1], y_new[Y_U1 + 1]) < near:
+        return min(atol, rtol * near)
+    return atol
 
 
 @kernel
