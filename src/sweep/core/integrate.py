@@ -64,6 +64,10 @@ DEFECT_FACTOR = 16.0
 # comes within slip_tol, else reverses), and atol (1e-12 by default, ~1e-4 of slip_tol in u_hat)
 # left that decision to the error of the step: whether a near-reversal stuck moved with rtol.
 SLIP_NEAR = 100.0
+# The slip is the contact point's velocity, a difference of O(|omega|) terms: its round-off, and its
+# step's round-off in the error estimate, is ~EPS |omega|. A tolerance below it failed every shorter
+# step alike (harness seed 20261124 scene 91 at rtol 1e-13: step_size_underflow).
+SLIP_ROUNDOFF = 4.0 * EPS
 
 # A dip whose dense-output value at the cubic Hermite minimum is below DIP_REFINE times the lower end
 # value is searched for its true minimum (roots.brent_min) before it is ruled out.
@@ -321,11 +325,13 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
 @kernel
 def slip_atol(y, y_new, p, rtol, atol):
     """Absolute tolerance of the slip components on a step: atol, but rtol SLIP_NEAR u_tol where the
-    slip is within SLIP_NEAR x slip_tol (p[P_UFREEZE]) of 0 at either end (see SLIP_NEAR)."""
+    slip is within SLIP_NEAR x slip_tol (p[P_UFREEZE]) of 0 at either end (see SLIP_NEAR), and not
+    below the round-off of the velocities the slip is the difference of (SLIP_ROUNDOFF |omega|)."""
     u_tol = p[P_UFREEZE]
     near = SLIP_NEAR * u_tol
     if math.hypot(y[Y_U1], y[Y_U1 + 1]) < near or math.hypot(y_new[Y_U1], y_new[Y_U1 + 1]) < near:
-        return min(atol, rtol * near)
+        w = max(abs(y[Y_W1]), abs(y[Y_W1 + 1]), abs(y[Y_W1 + 2]), 1.0)
+        return min(atol, max(rtol * near, SLIP_ROUNDOFF * w))
     return atol
 
 
