@@ -245,6 +245,8 @@ def main(argv=None) -> int:
     ap.add_argument("--atol-ratio", type=float, default=ATOL_RATIO,
                     help=f"atol = this x rtol in every run (default {ATOL_RATIO:g}, the product's default scaled)")
     ap.add_argument("--analyse", metavar="JSONL", help="only analyse an existing record file")
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the scenes already in the tag's record file (same seed and core) and run only the rest")
     a = ap.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     if a.analyse:
@@ -258,7 +260,12 @@ def main(argv=None) -> int:
     path = OUT / f"convergence-{tag}.jsonl"
     t0 = time.time()
     recs = []
-    with path.open("w") as fh:
+    if a.resume and path.exists():
+        recs = [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
+        done = {r["index"] for r in recs}
+        scenes = [sc for sc in scenes if sc[0] not in done]
+        print(f"resuming {tag}: {len(done)} scenes on record, {len(scenes)} to run", file=sys.stderr)
+    with path.open("a" if a.resume else "w") as fh:
         if a.jobs > 1:
             with mp.get_context("spawn").Pool(a.jobs) as pool:
                 it = pool.imap_unordered(run_scene, scenes)
