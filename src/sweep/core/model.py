@@ -109,6 +109,22 @@ def energy(y, p, side, mode):
 
 
 @kernel
+def centre_velocity(u1, u2, w1, w2, w3, h, e, f):
+    """Velocity of the centre of mass in chi R/tau, on an orthonormal frame whose first axis is a1:
+    (u1 + w2 - h w3, u2 - e w1, f w1), (u1, u2) the contact point's slip (eq. 4.9 for e, f); half
+    its square is the translational part of energy()."""
+    return u1 + w2 - h * w3, u2 - e * w1, f * w1
+
+
+@kernel
+def slip_of(y, slip):
+    """The slip components (u1, u2) of y where slip, else (0, 0)."""
+    if slip:
+        return y[Y_U1], y[Y_U2]
+    return 0.0, 0.0
+
+
+@kernel
 def energy_with_slip(y, p, side, u1, u2):
     """energy() with the slip components on a1, a2 given explicitly."""
     h = side * p[P_H]
@@ -118,9 +134,7 @@ def energy_with_slip(y, p, side, u1, u2):
     e = c + h * s
     f = h * c - s
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
-    vx = u1 + w2 - h * w3
-    vy = u2 - e * w1
-    vz = f * w1
+    vx, vy, vz = centre_velocity(u1, u2, w1, w2, w3, h, e, f)
     kin = 0.5 * (vx * vx + vy * vy + vz * vz) + 0.5 * p[P_A] * (w1 * w1 + w3 * w3) + 0.5 * p[P_C] * w2 * w2
     return kin + p[P_G] * height_above_flat(a, h)
 
@@ -152,13 +166,9 @@ def energy_increment(y, d, p, side, slip):
     adf = (abs(h * dc) + abs(ds)) * (1.0 + abs(a))
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
     d1, d2, d3 = d[Y_W1], d[Y_W2], d[Y_W3]
-    u1 = y[Y_U1] if slip else 0.0
-    u2 = y[Y_U2] if slip else 0.0
-    du1 = d[Y_U1] if slip else 0.0
-    du2 = d[Y_U2] if slip else 0.0
-    vx = u1 + w2 - h * w3
-    vy = u2 - e * w1
-    vz = f * w1
+    u1, u2 = slip_of(y, slip)
+    du1, du2 = slip_of(d, slip)
+    vx, vy, vz = centre_velocity(u1, u2, w1, w2, w3, h, e, f)
     dvx = du1 + d2 - h * d3
     dvy = du2 - (de * (w1 + d1) + e * d1)
     dvz = df * (w1 + d1) + f * d1
@@ -192,13 +202,9 @@ def energy_rate(y, dy, p, side, slip):
     f = h * c - s
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
     da, d1, d2, d3 = dy[Y_ALPHA], dy[Y_W1], dy[Y_W2], dy[Y_W3]
-    u1 = y[Y_U1] if slip else 0.0
-    u2 = y[Y_U2] if slip else 0.0
-    du1 = dy[Y_U1] if slip else 0.0
-    du2 = dy[Y_U2] if slip else 0.0
-    vx = u1 + w2 - h * w3
-    vy = u2 - e * w1
-    vz = f * w1
+    u1, u2 = slip_of(y, slip)
+    du1, du2 = slip_of(dy, slip)
+    vx, vy, vz = centre_velocity(u1, u2, w1, w2, w3, h, e, f)
     dvx = du1 + d2 - h * d3
     dvy = du2 - f * da * w1 - e * d1
     dvz = -e * da * w1 + f * d1
