@@ -86,6 +86,18 @@ def ask(worker: subprocess.Popen, scene: dict) -> dict:
     return json.loads(worker.stdout.readline())
 
 
+def cpu_model() -> str:
+    """The processor's model name (Linux), for the record: the ratio of two kernels depends on it."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    import platform
+    return platform.processor() or "unknown"
+
+
 def stats(cpu: np.ndarray) -> dict:
     med = float(np.median(cpu))
     p99 = float(np.percentile(cpu, 99))
@@ -123,6 +135,8 @@ def main(argv=None) -> int:
     best = {k: v.min(axis=0) for k, v in cpu.items()}
     s = {k: stats(v) for k, v in best.items()}
     print(f"harness scenes: {len(scenes)} (seed {args.seed}), rtol 1e-10, best of {args.rounds} alternating rounds")
+    print(f"cpu: {cpu_model()}, {os.cpu_count()} cores (ratios of the same two commits have moved by 1.45x between "
+          "machines: compare ratios measured on one machine)")
     print(f"{'':12s} {'total s':>9s} {'median ms':>10s} {'p90 ms':>9s} {'p99 ms':>9s} {'max ms':>9s} {'p99/median':>10s}")
     for k, name in (("base", f"base {args.base}"), ("new", "this tree")):
         v = s[k]
