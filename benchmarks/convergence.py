@@ -208,6 +208,8 @@ def analyse(recs: list[dict]) -> str:
     diff_idx = []
     robust = same_robust = 0
     diff_robust = []
+    complete = same_complete = 0
+    diff_complete = []
     for rec in recs:
         seqs = [tuple(r["events"]) for r in rec["runs"] if r["rtol"] <= DEFAULT_RTOL and "events" in r]
         ok = len(seqs) == 4 and len(set(seqs)) == 1
@@ -220,10 +222,18 @@ def analyse(recs: list[dict]) -> str:
             same_robust += ok
             if not ok:
                 diff_robust.append(rec["index"])
+            # ... of which every run reached a physical end (a run cut at step_limit counts fewer)
+            if all(r.get("outcome") != "step_limit" for r in rec["runs"] + [rec["perturbed"]]):
+                complete += 1
+                same_complete += ok
+                if not ok:
+                    diff_complete.append(rec["index"])
     lines.append(f"same event counts (transitions, sticks, impacts) rtol 1e-10..1e-13: {same}/{n}"
                  + (f"; differ: scenes {diff_idx[:12]}" if diff_idx else ""))
     lines.append(f"  among scenes whose counts do not move under alpha0 + 1e-10: {same_robust}/{robust}"
                  + (f"; differ: scenes {diff_robust[:12]}" if diff_robust else ""))
+    lines.append(f"  ... whose runs all end without step_limit: {same_complete}/{complete}"
+                 + (f"; differ: scenes {diff_complete[:12]}" if diff_complete else ""))
     steps = np.array([r.get("n_steps", 0) for r in default])
     cpu = np.array([r.get("cpu", 0.0) for r in default])
     pct = lambda a, q: float(np.percentile(a, q))  # noqa: E731
