@@ -210,6 +210,8 @@ def analyse(recs: list[dict]) -> str:
     diff_robust = []
     complete = same_complete = 0
     diff_complete = []
+    calm = same_calm = 0
+    diff_calm = []
     for rec in recs:
         seqs = [tuple(r["events"]) for r in rec["runs"] if r["rtol"] <= DEFAULT_RTOL and "events" in r]
         ok = len(seqs) == 4 and len(set(seqs)) == 1
@@ -228,12 +230,24 @@ def analyse(recs: list[dict]) -> str:
                 same_complete += ok
                 if not ok:
                     diff_complete.append(rec["index"])
+                # ... of which no quantity moves by WELL_CONDITIONED under the perturbation either: a
+                # count that one perturbed run happens to keep can still sit on an amplifying trajectory
+                ref = next((r for r in rec["runs"] if r["rtol"] == REF_RTOL), {})
+                sens = [_rel(rec["perturbed"].get("q", {}).get(k), v) for k, v in ref.get("q", {}).items()
+                        if v is not None and math.isfinite(v)]
+                if sens and all(x < WELL_CONDITIONED for x in sens):
+                    calm += 1
+                    same_calm += ok
+                    if not ok:
+                        diff_calm.append(rec["index"])
     lines.append(f"same event counts (transitions, sticks, impacts) rtol 1e-10..1e-13: {same}/{n}"
                  + (f"; differ: scenes {diff_idx[:12]}" if diff_idx else ""))
     lines.append(f"  among scenes whose counts do not move under alpha0 + 1e-10: {same_robust}/{robust}"
                  + (f"; differ: scenes {diff_robust[:12]}" if diff_robust else ""))
     lines.append(f"  ... whose runs all end without step_limit: {same_complete}/{complete}"
                  + (f"; differ: scenes {diff_complete[:12]}" if diff_complete else ""))
+    lines.append(f"  ... whose quantities all move < {WELL_CONDITIONED:g} under alpha0 + 1e-10: {same_calm}/{calm}"
+                 + (f"; differ: scenes {diff_calm[:12]}" if diff_calm else ""))
     steps = np.array([r.get("n_steps", 0) for r in default])
     cpu = np.array([r.get("cpu", 0.0) for r in default])
     pct = lambda a, q: float(np.percentile(a, q))  # noqa: E731
