@@ -84,7 +84,9 @@ T_PEAK_RING = 13  # 1: the peak buffer is a ring of its last rows (batch path; o
 T_PREV_DENSE = 14  # 1: F[7:14] holds the previous step's dense output; 0: K[K_PREV:] holds its stages
 T_RATES_OLD = 15  # 1: wk[W_RATEOLD] holds the event rates at the current step start (the last step end's)
 T_RATES_NEW = 16  # 1: this step's scan computed wk[W_RATENEW] (the rates at its end)
-N_TRACK = 17
+T_DIP_END = 17    # the first event found by an interior dip of an event of the forces: the time of the
+                  # dense output's minimum there, where an integrated step confirms it; -1 else
+N_TRACK = 18
 
 # --- RK stage buffer ----------------------------------------------------------------------------
 K_PREV = N_STAGES_EXTENDED      # first row of the previous step's stages
