@@ -209,6 +209,21 @@ def test_a_shallow_dip_below_spin_tol_is_decided_by_the_dense_outputs_minimum():
     assert abs(res[1e-10]["q"]["t_halt"] - t12) < 1e-8 * t12
 
 
+def test_an_unstick_only_the_dense_output_shows_is_confirmed_by_the_integrated_state():
+    """Harness scene 246 (seed 20261124): at tau 1737.4961541 a slaved slip leaves for SLIDE; at rtol
+    1e-10 the fifth step of the stiff transient that follows has the un-stick function of the held
+    omega.a_3 at 0.369 at both ends and 0 inside on its dense output (|sigma_3| moves ~700 times the
+    friction direction's angle: k3/R 1.2e-3, mu_d 0.81), so the component was released and stuck
+    again at once: 70 stick phases against 69 at rtol 1e-11..1e-13. An event of the forces that only
+    the dense output shows now stands only where an integrated step to its minimum confirms it."""
+    rng = np.random.default_rng(20261124)
+    cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(247)][246])
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-10, 1e-11, 1e-12)}
+    assert {tuple(r["events"]) for r in res.values()} == {(118, 69, 0)}, {k: r["events"] for k, r in res.items()}
+    t12 = res[1e-12]["q"]["t_halt"]
+    assert abs(res[1e-10]["q"]["t_halt"] - t12) < 1e-6 * t12
+
+
 def _counts(cfg, rtol, spin_tol):
     c = copy.deepcopy(cfg)
     c["solver"] = {"rtol": rtol, "atol": rtol * 1e-2, "spin_tol": spin_tol}
