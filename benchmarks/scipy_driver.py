@@ -102,6 +102,7 @@ SPIN = ("spin0", "spin1", "spin2")
 ORDER = (*SIGN, *UNSTICK, "cone", "slipslow", "slipstop", "slipfast", "slave", "contact", "side", "face",
          "slave_lost", *SPIN)
 DIP_CHECKED = {*SIGN, *SPIN, "cone", "side"}   # also checked inside a step (a double crossing)
+FORCE_EVENTS = {"cone"}   # the dip-checked events that read the contact forces
 
 
 def _axes_rate(i, y, f):
@@ -921,6 +922,17 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                                                    options={"xatol": 1e-9 * hstep})
                             if res.fun <= 0.0:
                                 br = (t_old, g_old[k], float(res.x), float(res.fun))
+                        if br is not None and k in FORCE_EVENTS:
+                            # a dip of an event of the forces that only the dense output shows
+                            # stands where the state integrated to its minimum confirms it
+                            sub = solver_cls(fun, t_old, y, br[2], rtol=rtol, atol=atol)
+                            while sub.status == "running":
+                                sub.step()
+                            cache.pop(br[2], None)   # info() caches per time: the dense state's
+                            g_int = gval(k, br[2], np.array(sub.y)) + shift[k]
+                            cache.pop(br[2], None)
+                            if not g_int <= 0.0:
+                                br = None
                     if br is not None:
                         _, tb = _locate(lambda tt, k=k: gd(k, tt), *br)
                         cand = (tb, ORDER.index(k), k, False)
