@@ -25,7 +25,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_DIP_END, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
-from .model import N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment, energy_rate, X_OK, X_PHI, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_W1
+from .model import N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment, energy_rate, X_OK, X_PHI, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
@@ -90,7 +90,7 @@ def start(y, p, cs, n, u_tol, wk, istats):
     cs[CS_SIDE] = 1.0 if y[Y_ALPHA] > 0.0 else -1.0
     for i in range(3):
         cs[CS_SIG + i] = 1.0
-    if y[Y_U1] != 0.0 or y[Y_U1 + 1] != 0.0:
+    if y[Y_U1] != 0.0 or y[Y_U2] != 0.0:
         code = set_slip(0.0, y, p, cs, n, u_tol, wk, istats)
         if code >= 0:
             return code
@@ -334,8 +334,8 @@ def slip_atol(y, y_new, p, rtol, atol):
     below the round-off of the velocities the slip is the difference of (SLIP_ROUNDOFF |omega|)."""
     u_tol = p[P_UFREEZE]
     near = SLIP_NEAR * u_tol
-    if math.hypot(y[Y_U1], y[Y_U1 + 1]) < near or math.hypot(y_new[Y_U1], y_new[Y_U1 + 1]) < near:
-        w = max(abs(y[Y_W1]), abs(y[Y_W1 + 1]), abs(y[Y_W1 + 2]), 1.0)
+    if math.hypot(y[Y_U1], y[Y_U2]) < near or math.hypot(y_new[Y_U1], y_new[Y_U2]) < near:
+        w = max(abs(y[Y_W1]), abs(y[Y_W2]), abs(y[Y_W3]), 1.0)
         return min(atol, max(rtol * near, SLIP_ROUNDOFF * w))
     return atol
 
@@ -583,7 +583,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             g_old[EV_LEVEL] = mode_energy(y, p, cs) - lev if int(trk[T_NEXT_LEVEL]) < nl else math.inf
             if cs[CS_MODE] == SLAVED:
                 # continuation of the slaved direction from this step end
-                cs[CS_NU] = slaved_direction(cs[CS_NU], math.hypot(y[Y_U1], y[Y_U1 + 1]), t, y, p, cs, n,
+                cs[CS_NU] = slaved_direction(cs[CS_NU], math.hypot(y[Y_U1], y[Y_U2]), t, y, p, cs, n,
                                              wk[W_DYBUF], wk[W_AUXBUF], wk[W_YBUF], istats)
         if hit_tmax and outcome < 0 and first_k < 0:
             outcome = oc.T_MAX
