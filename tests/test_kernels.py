@@ -302,6 +302,74 @@ def test_brent_finds_the_maximum_of_the_normal_force(setup):
     assert pmax >= max(phi) - 1e-12
 
 
+def _two_steps(p, y0, cs, t0, t_mid, t_end, n=M.N_CORE):
+    """Two DOP853 steps from (t0, y0), [t0, t_mid] and [t_mid, t_end], set up as track_peaks sees
+    them: the first one's dense output in F[7:14] with its start in wk[W_YPREV], the second's in
+    F[0:7]; returns (F, trk, wk, istats, y_mid)."""
+    wk, ist = _work()
+    F = np.zeros((14, M.N_FULL))
+    trk = np.zeros(L.N_TRACK)
+    ys = [y0.copy()]
+    for k, (ta, tb) in enumerate(((t0, t_mid), (t_mid, t_end))):
+        K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
+        Fs = np.zeros((14, M.N_FULL))
+        f = np.zeros(M.N_FULL)
+        f[:n] = _f(ta, ys[-1], p, cs)[0]
+        y1, f1 = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
+        D.rk_step(ta, ys[-1], f, tb - ta, n, p, cs, K, y1, f1, np.zeros(M.N_AUX), wk, ist)
+        D.dense_coeffs(ta, ys[-1], tb - ta, y1, f1, n, p, cs, K, Fs, wk, ist)
+        F[7 * (1 - k):7 * (2 - k)] = Fs[0:7]
+        ys.append(y1)
+    wk[L.W_YPREV, :M.N_FULL] = ys[0]
+    wk[L.W_CSPREV, :L.N_CS] = cs
+    trk[L.T_TA], trk[L.T_TB], trk[L.T_TPREV], trk[L.T_HPREV] = t0, t_mid, t0, t_mid - t0
+    trk[L.T_PHI_B] = _f(t_mid, ys[1], p, cs)[1][M.X_PHI]
+    return F, trk, wk, ist, ys[1]
+
+
+def test_peak_sides_picks_the_segment_that_holds_the_maximum_of_the_normal_force(setup):
+    """tracking.peak_sides against Phi's maximum on a fine grid of the two steps' dense outputs: a
+    common end left of the maximum searches the right segment only, one right of it the left one,
+    the maximum itself as the common end both (Phi falls on either side)."""
+    from sweep.core import tracking as TR
+
+    p, y, cs = setup
+    n = M.N_CORE
+    # to tau = 1 in short steps; Phi then has a maximum near tau = 1.2 (a swing of the wobble)
+    f, y_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
+    wk, ist = _work()
+    K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
+    y0 = y.copy()
+    for j in range(100):
+        f[:n] = _f(0.01 * j, y0, p, cs)[0]
+        D.rk_step(0.01 * j, y0, f, 0.01, n, p, cs, K, y_new, np.zeros(M.N_FULL), np.zeros(M.N_AUX), wk, ist)
+        y0 = y_new.copy()
+    t0, t1 = 1.0, 1.4
+
+    def phi_max(t_mid):
+        F, trk, wk, ist, y_mid = _two_steps(p, y0, cs, t0, t_mid, t1)
+        grid = np.linspace(t0, t1, 4001)
+        phi = [R.phi_on_dense(t, F, 7, wk[L.W_YPREV], t0, t_mid - t0, n, p, cs, wk, ist) if t <= t_mid
+               else R.phi_on_dense(t, F, 0, y_mid, t_mid, t1 - t_mid, n, p, cs, wk, ist) for t in grid]
+        i = int(np.argmax(phi))
+        assert 0 < i < len(grid) - 1, "the two steps must hold an interior maximum of Phi"
+        return grid[i], F, trk, wk, ist, y_mid
+
+    for t_mid in (1.05, 1.1, 1.25, 1.3):
+        t_star, F, trk, wk, ist, y_mid = phi_max(t_mid)
+        expected = (t_star < t_mid, t_star > t_mid)
+        assert TR.peak_sides(t_mid, t1, F, y_mid, t1 - t_mid, n, p, cs, trk, wk, ist) == expected, (t_mid, t_star)
+        # the side it keeps is where the search of both segments finds the larger maximum
+        _, pv_left = R.brent_max_phi(t0, t_mid, F, 7, wk[L.W_YPREV], t0, t_mid - t0, n, p, cs, wk, ist)
+        _, pv_right = R.brent_max_phi(t_mid, t1, F, 0, y_mid, t_mid, t1 - t_mid, n, p, cs, wk, ist)
+        assert (pv_left >= pv_right) == expected[0]
+    # the common end at the maximum (located by Brent on the two steps with an end near it)
+    t_star, F, trk, wk, ist, y_mid = phi_max(1.1)
+    t_exact, _ = R.brent_max_phi(1.1, t1, F, 0, y_mid, 1.1, t1 - 1.1, n, p, cs, wk, ist)
+    F, trk, wk, ist, y_mid = _two_steps(p, y0, cs, t0, t_exact, t1)
+    assert TR.peak_sides(t_exact, t1, F, y_mid, t1 - t_exact, n, p, cs, trk, wk, ist) == (True, True)
+
+
 def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
     p, y, cs = setup
     n = M.N_CORE

@@ -243,6 +243,12 @@ def brent_min(k, ta, tb, stop_at, F, row0, y_old, t_old, h, n, p, cs, u_tol, lev
 
 
 @kernel
+def phi_on_dense(tau, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
+    """Phi at tau on the dense output F[row0:row0 + 7] of the step from (t_old, y_old) over h."""
+    return -_objective(-1, tau, F, row0, y_old, t_old, h, n, p, cs, 0.0, math.nan, wk, istats)
+
+
+@kernel
 def brent_max_phi(ta, tb, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
     """Time of the maximum of Phi on [ta, tb] and Phi there (brent_min of -Phi)."""
     x, f = brent_min(-1, ta, tb, -math.inf, F, row0, y_old, t_old, h, n, p, cs, 0.0, math.nan, wk, istats)

@@ -6,6 +6,8 @@ over three counted Phi maxima), ringing ratio, cycles in the window (frequency.p
 """
 from __future__ import annotations
 
+import math
+
 from .contact import EV_LEVEL, eval_rhs, mode_energy
 from .dop853 import N_DENSE, dense_coeffs, dense_eval
 from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, open_level, peak_candidate, peak_confirmed
@@ -14,11 +16,16 @@ from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_C
                      T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
                      T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
 from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA
-from .roots import brent_max_phi, locate
+from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
 
 # Minimum prominence of a located maximum of Phi over its bracket ends, relative to Phi.
 PEAK_PROMINENCE = 1e-6
+# Phi is read this fraction of the shorter bracketing segment either side of their common end to
+# tell which segment holds the maximum (peak_sides); a rise or fall counts only beyond
+# PEAK_SIDE_TOL x Phi, far above the round-off of Phi on a dense output (~1e-14 Phi).
+PEAK_SIDE_GAP = 1e-4
+PEAK_SIDE_TOL = 1e-12
 
 
 @kernel
@@ -145,9 +152,14 @@ def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk,
     pa = trk[T_PHI_A]
     if peak_bracketed(phi_c, trk):
         cprev = wk[W_CSPREV, :N_CS]
-        tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], F, 7, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], n, p,
-                                 cprev, wk, istats)
-        tp2, pv2 = brent_max_phi(t, seg_end, F, 0, y, t, h, n, p, cs, wk, istats)
+        left, right = peak_sides(t, seg_end, F, y, h, n, p, cs, trk, wk, istats)
+        tp1, pv1 = trk[T_TB], -math.inf
+        tp2, pv2 = t, -math.inf
+        if left:
+            tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], F, 7, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], n, p,
+                                     cprev, wk, istats)
+        if right:
+            tp2, pv2 = brent_max_phi(t, seg_end, F, 0, y, t, h, n, p, cs, wk, istats)
         ybuf = wk[W_YBUF]
         if pv1 >= pv2:
             tpk, pvk = tp1, pv1
@@ -170,6 +182,29 @@ def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk,
             npk += 1
     trk[T_NPK] = npk
     istats[I_PEAKS] = npk
+
+
+@kernel
+def peak_sides(t, seg_end, F, y, h, n, p, cs, trk, wk, istats):
+    """Which of the two segments bracketing a maximum of Phi (the previous one, [T_TA, T_TB], and
+    [t, seg_end], with T_TB = t) to search: (left, right). Phi at T_TB is known; read a gap past it
+    on each side. Where it rises on one side and falls on the other, the maximum lies on the rising
+    side (for a smooth Phi, one within half the gap of T_TB falls on both sides), and a search of
+    the falling side would only creep to T_TB (Brent's golden steps, ~40 RHS calls) to lose the
+    comparison. Otherwise, or where a difference is within PEAK_SIDE_TOL, both are searched."""
+    gap = PEAK_SIDE_GAP * min(trk[T_TB] - trk[T_TA], seg_end - t)
+    if not gap > 0.0:
+        return True, True
+    phi_b = trk[T_PHI_B]
+    tol = PEAK_SIDE_TOL * abs(phi_b)
+    d_left = phi_on_dense(trk[T_TB] - gap, F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], n, p,
+                          wk[W_CSPREV, :N_CS], wk, istats) - phi_b
+    d_right = phi_on_dense(t + gap, F, 0, y, t, h, n, p, cs, wk, istats) - phi_b
+    if d_left > tol and d_right < -tol:
+        return True, False
+    if d_right > tol and d_left < -tol:
+        return False, True
+    return True, True
 
 
 @kernel
