@@ -255,16 +255,19 @@ def test_hermite_dip_finds_the_minimum_exactly():
     assert R.hermite_dip(1.0, 1.0, 2.0, 1.0) == -1.0          # monotone: no interior minimum
 
 
-def _dense_step(p, y, cs, h, n=M.N_CORE):
-    """One DOP853 step from (0, y) with its dense output: (F, wk, istats)."""
+def _dense_step(p, y, cs, h, n=M.N_CORE, t0=0.0, y_end=None):
+    """One DOP853 step from (t0, y) with its dense output: (F, wk, istats); its end state into
+    y_end if given."""
     wk, ist = _work()
     K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
     F = np.zeros((14, M.N_FULL))
     f = np.zeros(M.N_FULL)
-    f[:n] = _f(0.0, y, p, cs)[0]
+    f[:n] = _f(t0, y, p, cs)[0]
     y_new, f_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
-    D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, f_new, np.zeros(M.N_AUX), wk, ist)
-    D.dense_coeffs(0.0, y, h, y_new, f_new, n, p, cs, K, F, wk, ist)
+    D.rk_step(t0, y, f, h, n, p, cs, K, y_new, f_new, np.zeros(M.N_AUX), wk, ist)
+    D.dense_coeffs(t0, y, h, y_new, f_new, n, p, cs, K, F, wk, ist)
+    if y_end is not None:
+        y_end[:] = y_new
     return F, wk, ist
 
 
@@ -306,19 +309,13 @@ def _two_steps(p, y0, cs, t0, t_mid, t_end, n=M.N_CORE):
     """Two DOP853 steps from (t0, y0), [t0, t_mid] and [t_mid, t_end], set up as track_peaks sees
     them: the first one's dense output in F[7:14] with its start in wk[W_YPREV], the second's in
     F[0:7]; returns (F, trk, wk, istats, y_mid)."""
-    wk, ist = _work()
     F = np.zeros((14, M.N_FULL))
     trk = np.zeros(L.N_TRACK)
     ys = [y0.copy()]
     for k, (ta, tb) in enumerate(((t0, t_mid), (t_mid, t_end))):
-        K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
-        Fs = np.zeros((14, M.N_FULL))
-        f = np.zeros(M.N_FULL)
-        f[:n] = _f(ta, ys[-1], p, cs)[0]
-        y1, f1 = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
-        D.rk_step(ta, ys[-1], f, tb - ta, n, p, cs, K, y1, f1, np.zeros(M.N_AUX), wk, ist)
-        D.dense_coeffs(ta, ys[-1], tb - ta, y1, f1, n, p, cs, K, Fs, wk, ist)
-        F[7 * (1 - k):7 * (2 - k)] = Fs[0:7]
+        y1 = np.zeros(M.N_FULL)
+        Fs, wk, ist = _dense_step(p, ys[-1], cs, tb - ta, n, ta, y1)
+        F[D.N_DENSE * (1 - k):D.N_DENSE * (2 - k)] = Fs[0:D.N_DENSE]
         ys.append(y1)
     wk[L.W_YPREV, :M.N_FULL] = ys[0]
     wk[L.W_CSPREV, :L.N_CS] = cs

@@ -156,14 +156,14 @@ def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk,
         tp1, pv1 = trk[T_TB], -math.inf
         tp2, pv2 = t, -math.inf
         if left:
-            tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], F, 7, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], n, p,
-                                     cprev, wk, istats)
+            tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV],
+                                     n, p, cprev, wk, istats)
         if right:
             tp2, pv2 = brent_max_phi(t, seg_end, F, 0, y, t, h, n, p, cs, wk, istats)
         ybuf = wk[W_YBUF]
         if pv1 >= pv2:
             tpk, pvk = tp1, pv1
-            dense_eval(F, 7, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], tpk, n, ybuf)
+            dense_eval(F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], tpk, n, ybuf)
         else:
             tpk, pvk = tp2, pv2
             dense_eval(F, 0, y, t, h, tpk, n, ybuf)
