@@ -97,7 +97,7 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
         inc_res = abs(change + np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]))
         assert abs(inc_res - res[-1]) < 1e-15 * e_cur, (inc_res, res[-1])
         # balance_error is that residual over its allowance, which grows with h and the dissipation
-        ratio = I.balance_error(y, wk[L.W_DELTA], h, 0.0, p, cs, e_cur, 100.0, 1e-10)
+        ratio = I.balance_error(y, aux, wk[L.W_DELTA], h, 0.0, p, cs, e_cur, 100.0, 1e-10)
         allowed = I.BALANCE_FACTOR * 1e-10 * (np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
         assert inc_res / ratio >= allowed
     assert res[0] / res[1] > 256.0 and res[2] / res[3] > 256.0, res
@@ -188,11 +188,43 @@ def test_energy_rate_is_the_gradient_of_the_energy_and_the_power_defect_is_round
         terms = (abs(p[M.P_G] * dy[M.Y_ALPHA]) + np.sum(np.abs(dy[M.Y_DSLIDE:M.Y_DK3 + 1]))
                  + p[M.P_A] * (abs(y[M.Y_W1] * dy[M.Y_W1]) + abs(y[M.Y_W3] * dy[M.Y_W3]))
                  + p[M.P_C] * abs(y[M.Y_W2] * dy[M.Y_W2]) + np.sum(np.abs(dy[M.Y_W1:M.Y_U2 + 1])) ** 2)
-        (defects_flat if beta == 1e-6 else defects_far).append(I.power_defect(y, dy, p, cs) / terms)
+        (defects_flat if beta == 1e-6 else defects_far).append(I.power_defect(y, dy, aux, p, cs) / terms)
     assert len(defects_far) > 100 and len(defects_flat) > 30
     assert max(defects_far) < 1e-12, max(defects_far)
     assert np.median(defects_far) < 1e-14
     assert max(defects_flat) < 1e-12
+
+
+def test_energy_kernels_from_the_rhs_trig_are_the_plain_ones_to_the_bit(setup):
+    """The step control and the events read sin/cos of alpha from the right-hand side's aux
+    (X_SINA, X_COSA) instead of evaluating them again: aux holds math.sin/math.cos of y's alpha in
+    every mode (SLAVED's last model call is at y), and energy_from_trig, mode_energy_at,
+    energy_rate_trig and energy_increment_trig return exactly what energy_with_slip, mode_energy,
+    energy_rate and energy_increment return, so trajectories do not change by a bit."""
+    p, _, cs0 = setup
+    rng = np.random.default_rng(11)
+    wk, ist = _work()
+    for trial in range(60):
+        mode = (L.ROLL, L.SLIDE, L.SLAVED)[trial % 3]
+        y = np.zeros(M.N_FULL)
+        side = float(rng.choice([-1.0, 1.0]))
+        y[M.Y_ALPHA] = side * (rng.uniform(1e-3, 1.5) if trial % 5 else math.pi / 2 - 1e-6)
+        y[M.Y_W1:M.Y_W3 + 1] = rng.normal(size=3) * [0.3, 1.0, 0.3]
+        if mode != L.ROLL:
+            y[M.Y_U1:M.Y_U2 + 1] = rng.normal(size=2) * (1e-9 if mode == L.SLAVED else 0.1)
+        cs = cs0.copy()
+        cs[L.CS_MODE], cs[L.CS_SIDE] = mode, side
+        cs[L.CS_NU] = math.atan2(y[M.Y_U2], y[M.Y_U1])
+        dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
+        C.eval_rhs(0.0, y, p, cs, M.N_CORE, dy, aux, wk, ist)
+        assert aux[M.X_SINA] == math.sin(y[M.Y_ALPHA]) and aux[M.X_COSA] == math.cos(y[M.Y_ALPHA])
+        slip = mode != L.ROLL
+        assert C.mode_energy_at(y, aux, p, cs) == C.mode_energy(y, p, cs)
+        v = rng.normal(size=M.N_FULL) * 1e-3
+        assert (M.energy_rate_trig(y, v, p, side, slip, aux[M.X_SINA], aux[M.X_COSA])
+                == M.energy_rate(y, v, p, side, slip))
+        assert (M.energy_increment_trig(y, v, p, side, slip, aux[M.X_SINA], aux[M.X_COSA])
+                == M.energy_increment(y, v, p, side, slip))
 
 
 @pytest.mark.parametrize("alpha", [0.3, 1.0, -1.5707, 1.5707963])

@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import outcomes as oc
 from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved,
-                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, needed_sigma, reads_forces, set_slip, slaved_direction, start_slip)
+                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, slaved_direction, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start, lattice_step
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
@@ -25,7 +25,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_DIP_END, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
-from .model import N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment, energy_rate, X_OK, X_PHI, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
+from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
@@ -252,19 +252,20 @@ def spin_holds(i, t_event, F, y, t, h, n, p, cs, wk, istats):
 
 
 @kernel
-def power_defect(y, dy, p, cs):
-    """|dE/dtau + dissipated power| of the evaluated right-hand side dy at y: 0 for the exact flow,
-    so what is left is the right-hand side's own round-off in the energy direction."""
-    rate = energy_rate(y, dy, p, cs[CS_SIDE], cs[CS_MODE] != ROLL)
+def power_defect(y, dy, aux, p, cs):
+    """|dE/dtau + dissipated power| of the evaluated right-hand side dy, aux at y: 0 for the exact
+    flow, so what is left is the right-hand side's own round-off in the energy direction."""
+    rate = energy_rate_trig(y, dy, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, aux[X_SINA], aux[X_COSA])
     return abs(rate + dy[Y_DSLIDE] + dy[Y_DK1] + dy[Y_DK2] + dy[Y_DK3])
 
 
 @kernel
-def balance_error(y, d, h, defect, p, cs, e0, tau_span, rtol):
+def balance_error(y, aux, d, h, defect, p, cs, e0, tau_span, rtol):
     """The energy-balance residual |Delta(E + dissipated)| of a step's increment d (before rounding:
-    wk[W_DELTA]) from y over h, over what it may be (see BALANCE_FACTOR); accepted if <= 1.
-    defect: power_defect at the step's ends (the larger), e0 = E(0) > 0, tau_span = t_max (tau)."""
-    change, scale = energy_increment(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL)
+    wk[W_DELTA]) from y (aux: the right-hand side's there) over h, over what it may be (see
+    BALANCE_FACTOR); accepted if <= 1. defect: power_defect at the step's ends (the larger),
+    e0 = E(0) > 0, tau_span = t_max (tau)."""
+    change, scale = energy_increment_trig(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, aux[X_SINA], aux[X_COSA])
     dissipated = d[Y_DSLIDE] + d[Y_DK1] + d[Y_DK2] + d[Y_DK3]
     allowed = (BALANCE_FACTOR * rtol * (max(dissipated, 0.0) + e0 * h / tau_span)
                + BALANCE_ROUNDOFF * (scale + abs(d[Y_DSLIDE]) + abs(d[Y_DK1]) + abs(d[Y_DK2]) + abs(d[Y_DK3]))
@@ -298,7 +299,8 @@ def state_balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
 
 @kernel
 def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
-    """One DOP853 step into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for
+    """One DOP853 step from y, f (wk[W_AUX]: the right-hand side's aux at y) into wk[W_YNEW],
+    wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for
     a step with a non-finite stage or end state, or one that raises the energy by more than
     ENERGY_GUARD rtol e0), at least its energy-balance error (balance_error), and counts it.
 
@@ -307,8 +309,10 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
     root returns NaN) makes the step fail, so steps shrink until the event that ends the mode is
     located; accepted, its NaN f_new would poison every later step."""
     y_new = wk[W_YNEW]
-    e_cur = mode_energy(y, p, cs)
-    rk_step(t, y, f, h, n, p, cs, K, y_new, wk[W_FNEW], wk[W_AUXNEW], wk, istats)
+    aux = wk[W_AUX]
+    aux_new = wk[W_AUXNEW]
+    e_cur = mode_energy_at(y, aux, p, cs)
+    rk_step(t, y, f, h, n, p, cs, K, y_new, wk[W_FNEW], aux_new, wk, istats)
     err = 0.0
     for i in range(n):
         if not math.isfinite(y_new[i]):
@@ -316,13 +320,13 @@ def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
         for j in range(N_STAGES + 1):
             if not math.isfinite(K[j, i]):
                 err = math.inf
-    e_new = mode_energy(y_new, p, cs)
+    e_new = mode_energy_at(y_new, aux_new, p, cs)
     if err == 0.0 and e_new > e_cur + ENERGY_GUARD * rtol * e0:
         err = math.inf
     if err == 0.0:
-        defect = max(power_defect(y, f, p, cs), power_defect(y_new, wk[W_FNEW], p, cs))
+        defect = max(power_defect(y, f, aux, p, cs), power_defect(y_new, wk[W_FNEW], aux_new, p, cs))
         err = max(error_norm(K, h, y, y_new, n, rtol, atol, slip_atol(y, y_new, p, rtol, atol)),
-                  balance_error(y, wk[W_DELTA], h, defect, p, cs, e0, tau_span, rtol))
+                  balance_error(y, aux, wk[W_DELTA], h, defect, p, cs, e0, tau_span, rtol))
     tally_step(cs, istats, err <= 1.0, 1)
     return err
 
@@ -479,7 +483,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if running:
                 # the kept part of the step ends on the dense output (7th order): its energy
                 # balance is held like a step's, else the step is retried shorter
-                seg_err = state_balance_error(y, y_seg, mode_energy(y, p, cs), mode_energy(y_seg, p, cs), seg_end - t, p,
+                seg_err = state_balance_error(y, y_seg, mode_energy_at(y, aux, p, cs), mode_energy(y_seg, p, cs), seg_end - t, p,
                                               e0, t_max, rtol)
                 if seg_err > 1.0:
                     # try_step accepted it: rejected after all
@@ -530,6 +534,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         if first_k < 0:
             for i in range(n):
                 f[i] = f_new[i]
+            for i in range(N_AUX):
+                aux[i] = aux_new[i]
         # the event rates at the new start are this step's end rates, unless an event restarts here
         trk[T_RATES_OLD] = 1.0 if first_k < 0 and trk[T_RATES_NEW] == 1.0 else 0.0
         if trk[T_RATES_OLD] == 1.0:
@@ -563,24 +569,24 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                         outcome = code
                         fstats[F_TEND] = t
                     break
-            eval_rhs(t, y, p, cs, n, f, aux_new, wk, istats)
-            if aux_new[X_OK] != 1.0:
+            eval_rhs(t, y, p, cs, n, f, aux, wk, istats)
+            if aux[X_OK] != 1.0:
                 if running:
-                    outcome = failure_outcome(aux_new[X_OK])
+                    outcome = failure_outcome(aux[X_OK])
                     fstats[F_TEND] = t
                 break
-            if aux_new[X_PHI] <= 0.0:
+            if aux[X_PHI] <= 0.0:
                 # the discrete update (an impact) leaves the disk with no compressive normal force:
                 # it leaves the table here (its own event, Phi falling through 0, cannot happen)
                 if running:
                     outcome = oc.CONTACT_LOST
                     fstats[F_TEND] = t
                 break
-            event_values(y, aux_new, p, cs, u_tol, lev, g_old)
+            event_values(y, aux, p, cs, u_tol, lev, g_old)
         else:
             for k in range(N_DYN_EVENTS + 1):
                 g_old[k] = g_new[k]
-            g_old[EV_LEVEL] = mode_energy(y, p, cs) - lev if int(trk[T_NEXT_LEVEL]) < nl else math.inf
+            g_old[EV_LEVEL] = mode_energy_at(y, aux, p, cs) - lev if int(trk[T_NEXT_LEVEL]) < nl else math.inf
             if cs[CS_MODE] == SLAVED:
                 # continuation of the slaved direction from this step end
                 cs[CS_NU] = slaved_direction(cs[CS_NU], math.hypot(y[Y_U1], y[Y_U2]), t, y, p, cs, n,

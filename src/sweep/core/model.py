@@ -42,7 +42,10 @@ N_PARAMS = 11
 # --- auxiliary outputs of the right-hand side ----------------------------------------------
 X_PHI, X_F1, X_F2, X_SIG1, X_SIG2, X_SIG3, X_G1, X_G2, X_G3, X_OK = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 X_DCROSS = 10   # SLAVED only (contact.eval_rhs): d cross/d nu at the slaved direction (< 0: attracting)
-N_AUX = 11
+# sin(alpha), cos(alpha) of the state the right-hand side was evaluated at: the energy kernels of
+# the step control and the events read them (*_trig) instead of evaluating the pair again
+X_SINA, X_COSA = 11, 12
+N_AUX = 13
 
 ROLL, SLIDE = 0, 1
 
@@ -82,6 +85,12 @@ def moment_axes_rates(y):
 
 @kernel
 def height_above_flat(alpha, h):
+    """height_from_trig at the inclination alpha."""
+    return height_from_trig(math.sin(alpha), math.cos(alpha), h)
+
+
+@kernel
+def height_from_trig(sin_a, cos_a, h):
     """e - |h|: centre height above its flat-lying value, in R, without cancellation near pi/2.
 
     e = cos(alpha) + h sin(alpha) (eq. 4.9), h = side |h| the contact rim's offset. With side =
@@ -89,8 +98,8 @@ def height_above_flat(alpha, h):
     with the side kept (a step that overshoots the rim-edge event) it is the height of the smooth
     continuation the right-hand side integrates, so that E + dissipated stays conserved there.
     """
-    c = math.cos(alpha)
-    s = math.sin(alpha) if h >= 0.0 else -math.sin(alpha)   # side sin(alpha)
+    c = cos_a
+    s = sin_a if h >= 0.0 else -sin_a   # side sin(alpha)
     if s >= 0.0:
         return c - abs(h) * c * c / (1.0 + s)
     return c - abs(h) * (1.0 - s)
@@ -127,20 +136,30 @@ def slip_of(y, slip):
 @kernel
 def energy_with_slip(y, p, side, u1, u2):
     """energy() with the slip components on a1, a2 given explicitly."""
+    return energy_from_trig(y, p, side, u1, u2, math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA]))
+
+
+@kernel
+def energy_from_trig(y, p, side, u1, u2, s, c):
+    """energy_with_slip with s, c = sin, cos of y's inclination given (e.g. aux[X_SINA], aux[X_COSA]
+    of the right-hand side at y): the same arithmetic, the same result to the last bit."""
     h = side * p[P_H]
-    a = y[Y_ALPHA]
-    s = math.sin(a)
-    c = math.cos(a)
     e = c + h * s
     f = h * c - s
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
     vx, vy, vz = centre_velocity(u1, u2, w1, w2, w3, h, e, f)
     kin = 0.5 * (vx * vx + vy * vy + vz * vz) + 0.5 * p[P_A] * (w1 * w1 + w3 * w3) + 0.5 * p[P_C] * w2 * w2
-    return kin + p[P_G] * height_above_flat(a, h)
+    return kin + p[P_G] * height_from_trig(s, c, h)
 
 
 @kernel
 def energy_increment(y, d, p, side, slip):
+    """energy_increment_trig with sin, cos of y's inclination evaluated here."""
+    return energy_increment_trig(y, d, p, side, slip, math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA]))
+
+
+@kernel
+def energy_increment_trig(y, d, p, side, slip, s, c):
     """E(y + d) - E(y) of energy_with_slip (the slip counted where slip), in difference form.
 
     d is a step's increment before it is rounded into the state. Evaluated as the difference of two
@@ -149,15 +168,13 @@ def energy_increment(y, d, p, side, slip):
     seed 20261125 scene 191: ~1e-14 E0 per step, summed over 1.4 M steps to 1.5e-9 E0). Here every
     term is (change of q) x (q + change/2), the cosine and sine by their half-angle products, so the
     round-off is relative to the change. Returns (change, scale): scale bounds the change's round-off
-    in units of EPS."""
+    in units of EPS. s, c: sin, cos of y's inclination."""
     h = side * p[P_H]
     a = y[Y_ALPHA]
     half = 0.5 * d[Y_ALPHA]
     sh = math.sin(half)
     dc = -2.0 * math.sin(a + half) * sh     # cos(a + da) - cos(a)
     ds = 2.0 * math.cos(a + half) * sh      # sin(a + da) - sin(a)
-    c = math.cos(a)
-    s = math.sin(a)
     e = c + h * s
     f = h * c - s
     de = dc + h * ds
@@ -187,17 +204,20 @@ def energy_increment(y, d, p, side, slip):
 
 @kernel
 def energy_rate(y, dy, p, side, slip):
+    """energy_rate_trig with sin, cos of y's inclination evaluated here."""
+    return energy_rate_trig(y, dy, p, side, slip, math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA]))
+
+
+@kernel
+def energy_rate_trig(y, dy, p, side, slip, s, c):
     """dE/dtau along dy at y: the gradient of energy_with_slip (the slip counted where slip) times dy.
 
     With dy the right-hand side, energy_rate(y, dy) + dy[Y_DSLIDE] + dy[Y_DK1..3] is exactly 0 for
     the exact flow (the power balance of eq. 6.1); what the evaluated right-hand side leaves of it
     is its round-off in the energy direction, which near flat (tan(alpha) ~ 1e6 in the gyroscopic
     terms) is far above the round-off of the energy's own terms (integrate.balance_error).
-    Uses de/dalpha = f, df/dalpha = -e (eq. 4.9)."""
+    Uses de/dalpha = f, df/dalpha = -e (eq. 4.9); s, c: sin, cos of y's inclination."""
     h = side * p[P_H]
-    a = y[Y_ALPHA]
-    c = math.cos(a)
-    s = math.sin(a)
     e = c + h * s
     f = h * c - s
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
@@ -229,7 +249,7 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     (n0x, n0y): slip direction used while the slip speed is <= p[P_UFREEZE] (0: only at u = 0).
     nstate: number of state components to fill (N_CORE, N_THETA, or N_FULL with kinematics).
     aux: Phi, F1, F2 (friction on a1, a2), effective sigma_1..3, omega.a_1..3, ok-flag (1; -1 where the
-    e1 balance's coefficient of Phi is not positive: a Painleve inconsistency).
+    e1 balance's coefficient of Phi is not positive: a Painleve inconsistency), sin and cos of alpha.
     """
     G = p[P_G]
     h = side * p[P_H]
@@ -370,6 +390,8 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     aux[X_G2] = g2
     aux[X_G3] = g3
     aux[X_OK] = ok
+    aux[X_SINA] = s
+    aux[X_COSA] = c
 
 
 @kernel
