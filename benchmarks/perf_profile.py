@@ -1,0 +1,128 @@
+#!/usr/bin/env python3
+"""Profile of the jitted core by function, with Linux `perf` (where the CPU time of a scene goes).
+
+    .venv/bin/python benchmarks/perf_profile.py [--seed 20261122] [--index 27 36 9 13 22] [--top 30]
+
+numba's machine code has no symbols that perf can read, so this compiles the core afresh (into a
+temporary NUMBA_CACHE_DIR: code loaded from the cache keeps no LLVM module to name it), writes
+/tmp/perf-<pid>.map with the address range of every compiled function (perf's convention for JIT
+code), and records the given harness scenes (benchmarks/convergence.py, rtol 1e-10, as the harness
+runs them) with `perf record` attached to this process after a warm-up scene. It prints the
+functions by their share of the samples (libm's sin/cos and hypot appear under their own names).
+Needs `perf` and permission to record this process (perf_event_paranoid <= 2 for one's own
+processes). Compiling takes a few minutes.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def write_perf_map() -> int:
+    """/tmp/perf-<pid>.map for every function of every compiled sweep kernel; returns the count."""
+    import numba
+
+    addrs = {}
+    for mod in list(sys.modules.values()):
+        if not getattr(mod, "__name__", "").startswith("sweep"):
+            continue
+        for v in vars(mod).values():
+            if not isinstance(v, numba.core.dispatcher.Dispatcher):
+                continue
+            for cres in v.overloads.values():
+                lib = cres.library
+                module = getattr(lib, "_final_module", None)
+                if module is None:
+                    continue
+                for fn in module.functions:
+                    if fn.is_declaration:
+                        continue
+                    a = lib._codegen._engine.get_function_address(fn.name)
+                    if a:
+                        addrs[a] = fn.name
+    items = sorted(addrs.items())
+    with open(f"/tmp/perf-{os.getpid()}.map", "w") as fo:
+        for k, (a, name) in enumerate(items):
+            size = min(items[k + 1][0] - a if k + 1 < len(items) else 4096, 1 << 20)
+            fo.write(f"{a:x} {size:x} {name}\n")
+    return len(items)
+
+
+def short_name(symbol: str) -> str:
+    """sweep.core.model.rhs from numba's mangled name _ZN5sweep4core5model3rhsB3v10...; others as given."""
+    if not symbol.startswith("_ZN"):
+        return symbol
+    rest, parts = symbol[3:], []
+    while rest[:1].isdigit():
+        digits = re.match(r"\d+", rest).group(0)
+        n = int(digits)
+        parts.append(rest[len(digits):len(digits) + n])
+        rest = rest[len(digits) + n:]
+    return ".".join(parts) or symbol
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seed", type=int, default=20261122)
+    ap.add_argument("--index", type=int, nargs="+", default=[27, 36, 9, 13, 22])
+    ap.add_argument("--top", type=int, default=30)
+    a = ap.parse_args(argv)
+    if os.environ.get("_PERF_PROFILE_CHILD") != "1":
+        tmp = tempfile.mkdtemp(prefix="perf-profile-")
+        env = dict(os.environ, NUMBA_CACHE_DIR=tmp, _PERF_PROFILE_CHILD="1")
+        return subprocess.call([sys.executable, __file__, *(argv if argv is not None else sys.argv[1:])], env=env)
+
+    sys.path.insert(0, str(HERE))
+    sys.path.insert(0, str(HERE.parent / "src"))
+    import numpy as np
+    import convergence as cv
+    import sweep
+
+    rng = np.random.default_rng(a.seed)
+    scenes = [cv._valid_levels(cv.draw_scene(rng)) for _ in range(max(a.index) + 1)]
+
+    def run(i):
+        c = json.loads(json.dumps(scenes[i]))
+        c["solver"] = {"rtol": cv.DEFAULT_RTOL, "atol": cv.DEFAULT_RTOL * cv.ATOL_RATIO}
+        chi = math.sqrt((({"solid": 1.0, "shell": 2.0}[c["disk"]["shape"]]) + 4.0) / 4.0
+                        * c["disk"]["radius"] / c["gravity"])
+        return sweep.simulate(c, sample_times=[tau * chi for tau in cv.SAMPLE_TAU if tau * chi < cv.T_MAX])
+
+    run(a.index[0])      # compiles everything
+    n_fn = write_perf_map()
+    data = Path(os.environ["NUMBA_CACHE_DIR"]) / "perf.data"
+    rec = subprocess.Popen(["perf", "record", "-F", "2000", "-o", str(data), "-p", str(os.getpid())],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    time.sleep(1.0)
+    t0 = time.process_time()
+    for i in a.index:
+        run(i)
+    cpu = time.process_time() - t0
+    rec.send_signal(2)
+    rec.wait()
+    rep = subprocess.run(["perf", "report", "-i", str(data), "--no-children", "--sort", "symbol", "--stdio"],
+                         capture_output=True, text=True).stdout
+    print(f"seed {a.seed}, scenes {a.index}: {cpu:.1f} s CPU recorded; {n_fn} jitted functions mapped\n")
+    print("| share | function |")
+    print("|---|---|")
+    shown = 0
+    for line in rep.splitlines():
+        m = re.match(r"\s*([\d.]+)%\s+\[\.\]\s+(\S+)", line)
+        if m and shown < a.top:
+            print(f"| {m.group(1)} % | {short_name(m.group(2))} |")
+            shown += 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
