@@ -502,12 +502,14 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 phi_c = wk[W_AUXBUF, X_PHI]
             else:
                 phi_c = aux_new[X_PHI]
-        if not have_dense and dense_wanted(running, seg_end, y_seg, p, cs, level_e, sample_tau, trk, fq, phi_c,
-                                           peaks_on):
+        # the segment end's energy, for the level recorders: from the step's end aux where it is y_new
+        e_seg = mode_energy_at(y_seg, aux_new, p, cs) if first_k < 0 else mode_energy(y_seg, p, cs)
+        if not have_dense and dense_wanted(running, seg_end, e_seg, y_seg[Y_THETA], level_e, sample_tau, trk, fq,
+                                           phi_c, peaks_on):
             dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
             have_dense = True
         if running:
-            t_halt = record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk, peaks_on,
+            t_halt = record_levels(t, y, h, seg_end, e_seg, F, n, p, cs, level_e, level_out, trk, peaks_on,
                                    u_tol, wk, istats, fq)
             if t_halt >= 0.0:
                 outcome = oc.HALTED

@@ -29,16 +29,17 @@ PEAK_SIDE_TOL = 1e-12
 
 
 @kernel
-def dense_wanted(running, seg_end, y_seg, p, cs, level_e, sample_tau, trk, fq, phi_c, peaks_on):
+def dense_wanted(running, seg_end, e_seg, theta_seg, level_e, sample_tau, trk, fq, phi_c, peaks_on):
     """Whether a recorder reads this segment's dense output (the tests they make): a level crossed
-    (while running), a sample due, a new point of the precession lattice, a bracketed Phi maximum."""
+    (while running), a sample due, a new point of the precession lattice, a bracketed Phi maximum.
+    e_seg, theta_seg: the energy (mode_energy) and theta at the segment end."""
     L = int(trk[T_NEXT_LEVEL])
-    if running and L < level_e.shape[0] and mode_energy(y_seg, p, cs) - level_e[L] <= 0.0:
+    if running and L < level_e.shape[0] and e_seg - level_e[L] <= 0.0:
         return True
     j = int(trk[T_NEXT_SAMPLE])
     if j < sample_tau.shape[0] and sample_tau[j] <= seg_end:
         return True
-    return peaks_on and (lattice_due(y_seg[Y_THETA], fq) or peak_bracketed(phi_c, trk))
+    return peaks_on and (lattice_due(theta_seg, fq) or peak_bracketed(phi_c, trk))
 
 
 @kernel
@@ -58,16 +59,17 @@ def previous_dense(y, n, p, K, F, trk, wk, istats):
 
 
 @kernel
-def record_levels(t, y, h, seg_end, y_seg, F, n, p, cs, level_e, level_out, trk, track_peaks, u_tol, wk, istats,
+def record_levels(t, y, h, seg_end, e_seg, F, n, p, cs, level_e, level_out, trk, track_peaks, u_tol, wk, istats,
                   fq):
-    """Record the halt levels crossed on [t, seg_end] (energy is monotone: one root each).
+    """Record the halt levels crossed on [t, seg_end] (energy is monotone: one root each); e_seg is
+    the energy (mode_energy) at seg_end.
 
     Returns the tau of the last level if it was reached in this segment (the scene halts), else -1.
     """
     nl = level_e.shape[0]
     while int(trk[T_NEXT_LEVEL]) < nl:
         L = int(trk[T_NEXT_LEVEL])
-        gl = mode_energy(y_seg, p, cs) - level_e[L]
+        gl = e_seg - level_e[L]
         if not gl <= 0.0:
             return -1.0
         gl0 = mode_energy(y, p, cs) - level_e[L]
