@@ -29,7 +29,7 @@ from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
 from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, Y_ALPHA,
-                    Y_DSLIDE, Y_U1, Y_U2, Y_W1, energy_from_trig, energy_with_slip, moment_axes_rates, rhs)
+                    Y_DSLIDE, Y_U1, Y_U2, Y_W1, energy_from_trig, moment_axes_rates, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
 EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against its moment's sign
@@ -87,19 +87,20 @@ def slave_speed(aux, p, u_tol):
 @kernel
 def mode_energy(y, p, cs):
     """Energy of the state in the contact state cs (eq. 6.1 corrected; the slip counts when sliding)."""
-    side = int(cs[CS_SIDE])
-    mode = cs[CS_MODE]
-    if mode == ROLL:
-        return energy_with_slip(y, p, side, 0.0, 0.0)
-    return energy_with_slip(y, p, side, y[Y_U1], y[Y_U2])
+    return _mode_energy_trig(y, p, cs, math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA]))
 
 
 @kernel
 def mode_energy_at(y, aux, p, cs):
     """mode_energy(y, p, cs) from the sine and cosine of alpha in aux, the right-hand side's at y."""
+    return _mode_energy_trig(y, p, cs, aux[X_SINA], aux[X_COSA])
+
+
+@kernel
+def _mode_energy_trig(y, p, cs, s, c):
     side = int(cs[CS_SIDE])
     u1, u2 = (0.0, 0.0) if cs[CS_MODE] == ROLL else (y[Y_U1], y[Y_U2])
-    return energy_from_trig(y, p, side, u1, u2, aux[X_SINA], aux[X_COSA])
+    return energy_from_trig(y, p, side, u1, u2, s, c)
 
 
 @kernel

@@ -480,10 +480,12 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         y_seg = wk[W_YSEG]
         if first_k >= 0:
             dense_eval(F, 0, y, t, h, seg_end, n, y_seg)
+            # the segment end's energy (the level recorders below read it too)
+            e_seg = mode_energy(y_seg, p, cs)
             if running:
                 # the kept part of the step ends on the dense output (7th order): its energy
                 # balance is held like a step's, else the step is retried shorter
-                seg_err = state_balance_error(y, y_seg, mode_energy_at(y, aux, p, cs), mode_energy(y_seg, p, cs), seg_end - t, p,
+                seg_err = state_balance_error(y, y_seg, mode_energy_at(y, aux, p, cs), e_seg, seg_end - t, p,
                                               e0, t_max, rtol)
                 if seg_err > 1.0:
                     # try_step accepted it: rejected after all
@@ -495,6 +497,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
         else:
             for i in range(n):
                 y_seg[i] = y_new[i]
+            e_seg = mode_energy_at(y_seg, aux_new, p, cs)
         phi_c = 0.0
         if peaks_on:
             if first_k >= 0:
@@ -502,8 +505,6 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 phi_c = wk[W_AUXBUF, X_PHI]
             else:
                 phi_c = aux_new[X_PHI]
-        # the segment end's energy, for the level recorders: from the step's end aux where it is y_new
-        e_seg = mode_energy_at(y_seg, aux_new, p, cs) if first_k < 0 else mode_energy(y_seg, p, cs)
         if not have_dense and dense_wanted(running, seg_end, e_seg, y_seg[Y_THETA], level_e, sample_tau, trk, fq,
                                            phi_c, peaks_on):
             dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
