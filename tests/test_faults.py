@@ -332,9 +332,9 @@ def test_every_scene_has_a_step_budget_and_a_time_limit():
     cfg = fault_config()
     del cfg["stop"]
     s = settings_of(cfg)
-    assert s["stop"] == {"t_max": 120.0, "max_steps": 2_000_000}
+    assert s["stop"] == {"t_max": 120.0, "max_steps": 5_000_000}
     sc = grid.scene(s, tuple(s["grid"][a][0] for a in grid.AXES))
-    assert sc["stop"]["t_max"] == 120.0 and sc["stop"]["max_steps"] == 2_000_000
+    assert sc["stop"]["t_max"] == 120.0 and sc["stop"]["max_steps"] == 5_000_000
 
 
 @pytest.mark.parametrize("solver", [{"method": "adaptive", "rtol": 1e-14, "atol": 1e-16},
