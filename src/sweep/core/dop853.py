@@ -12,7 +12,7 @@ import math
 from .contact import eval_rhs
 from .jit import kernel
 from .layout import W_AUXTMP, W_DELTA, W_DYTMP, W_YTMP
-from .model import N_CORE, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
+from .model import N_CORE, Y_ALPHA, Y_U1, Y_U2
 from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
 from .tableau import A_COLS, A_COUNT, B_COLS, D_COLS, E_COLS, N_STAGES, N_STAGES_EXTENDED
 
@@ -67,11 +67,6 @@ def rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats):
 
 
 @kernel
-def _norm3(a, b, c):
-    return math.sqrt(a * a + b * b + c * c)
-
-
-@kernel
 def error_norm(K, h, y, y_new, n, rtol, atol, u_atol):
     """Hairer's dop853 error norm over the dynamic state and the dissipation quadratures only;
     the slip components (Y_U1, Y_U2) with the absolute tolerance u_atol instead of atol.
@@ -84,25 +79,13 @@ def error_norm(K, h, y, y_new, n, rtol, atol, u_atol):
     min(|alpha|, pi/2 - |alpha|): near flat the dynamics and the face event depend on
     beta = pi/2 - |alpha| (the face contact lies at beta = 1e-6 rad), which an error relative to
     |alpha| ~ 1.57 would resolve only to rtol * 1.57.
-
-    The angular velocity and the slip are vectors on the corotating basis: each component's error
-    is relative to the vector's magnitude |omega| (|u|), not to the component's own, so that the
-    control does not depend on how the basis happens to sit. Relative to its own size, a component
-    that swings through 0 (omega.a_1 = d alpha/d tau at each nutation extreme, a slip component as
-    the slip turns) would be held to atol there, ~rtol/atol times tighter than its vector.
     """
     n = min(n, N_CORE)
     e5 = 0.0
     e3 = 0.0
-    w_mag = max(_norm3(y[Y_W1], y[Y_W2], y[Y_W3]), _norm3(y_new[Y_W1], y_new[Y_W2], y_new[Y_W3]))
-    u_mag = max(math.hypot(y[Y_U1], y[Y_U2]), math.hypot(y_new[Y_U1], y_new[Y_U2]))
     for i in range(n):
         mag = max(abs(y[i]), abs(y_new[i]))
-        if i == Y_W1 or i == Y_W2 or i == Y_W3:
-            mag = w_mag
-        elif i == Y_U1 or i == Y_U2:
-            mag = u_mag
-        elif i == Y_ALPHA:
+        if i == Y_ALPHA:
             mag = min(mag, max(0.5 * math.pi - min(abs(y[i]), abs(y_new[i])), 0.0))
         sc = (u_atol if i == Y_U1 or i == Y_U2 else atol) + rtol * mag
         a5 = 0.0
