@@ -94,6 +94,18 @@ def _valid_levels(cfg: dict) -> dict:
     return cfg
 
 
+def harness_scene(seed: int, index: int, rtol: float | None = None, t_max: float | None = None) -> dict:
+    """Scene `index` of the harness's draw for `seed` (its levels filtered as the harness does),
+    with the solver at rtol (atol = ATOL_RATIO rtol) and stop.t_max (s) set where given."""
+    rng = np.random.default_rng(seed)
+    cfg = _valid_levels([draw_scene(rng) for _ in range(index + 1)][index])
+    if rtol is not None:
+        cfg["solver"] = {"rtol": rtol, "atol": rtol * ATOL_RATIO}
+    if t_max is not None:
+        cfg["stop"]["t_max"] = t_max
+    return cfg
+
+
 def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0, atol_ratio: float = ATOL_RATIO) -> dict:
     import sweep
 

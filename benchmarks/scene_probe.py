@@ -16,7 +16,6 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import convergence as cv  # noqa: E402
@@ -30,8 +29,7 @@ def main(argv=None) -> int:
     ap.add_argument("--atol-ratio", type=float, nargs="+", default=[cv.ATOL_RATIO])
     ap.add_argument("--param-scale", type=float, nargs="+", default=[1.0])
     a = ap.parse_args(argv)
-    rng = np.random.default_rng(a.seed)
-    scene = cv._valid_levels([cv.draw_scene(rng) for _ in range(a.index + 1)][a.index])
+    scene = cv.harness_scene(a.seed, a.index)
     print("atol_ratio param_scale outcome [transitions, stick phases, impacts] steps t_halt_s budget")
     for ratio in a.atol_ratio:
         for scale in a.param_scale:

@@ -33,10 +33,7 @@ def main(argv=None) -> int:
         ap.error("INDEX must be >= 0, --t-max and --window > 0")
     import sweep
 
-    rng = np.random.default_rng(a.seed)
-    cfg = cv._valid_levels([cv.draw_scene(rng) for _ in range(a.index + 1)][a.index])
-    cfg["solver"] = {"rtol": a.rtol, "atol": a.rtol * cv.ATOL_RATIO}
-    cfg["stop"]["t_max"] = a.t_max
+    cfg = cv.harness_scene(a.seed, a.index, a.rtol, a.t_max)
     res = sweep.simulate(cfg, trajectory=True)
     s, tr = res.summary, res.trajectory
     print(f"outcome {s['outcome']} at {s['t_end']:.3f} s: accepted {s['n_steps']}, rejected {s['n_rejected']}, "
