@@ -320,3 +320,26 @@ def test_the_measured_step_control_patches_apply_to_this_tree():
     for patch in patches:
         r = subprocess.run(["git", "apply", "--check", str(patch)], cwd=root, capture_output=True, text=True)
         assert r.returncode == 0, f"{patch.name}: {r.stderr}"
+
+
+def test_the_peer_comparison_counts_totals_only_in_calm_scenes():
+    """benchmarks/scipy_agreement.py: an event count or outcome is a total over the whole run, so it
+    is compared only where every value of the run (t_halt included) moves < 1e-8 under the
+    perturbation; a sensitive scene's count that the one perturbed run left alone is left out."""
+    import scipy_agreement as sa
+
+    def record(t_halt_perturbed):
+        kernel = {"q": {"t_level_0.1": 1.0, "t_halt": 2.0}, "outcome": "halted", "events": [3, 1, 0]}
+        perturbed = {"q": {"t_level_0.1": 1.0 + 1e-12, "t_halt": t_halt_perturbed}, "outcome": "halted",
+                     "events": [3, 1, 0]}
+        driver = {"timed_out": False, "q": {"t_level_0.1": 1.0 + 2e-12}, "outcome": "halted", "events": [4, 1, 0]}
+        return {"index": 0, "kernel": kernel, "perturbed": perturbed, "driver": driver}
+
+    calm = sa.compare(record(2.0 + 1e-12))
+    assert calm["calm"] and calm["ill"] == 0
+    compared = {q[0]: q[3] for q in calm["wc"]}
+    assert compared["t_level_0.1"] < 1e-8 and compared["n_stick"] == 0.0 and compared["outcome"] == 0.0
+    assert math.isnan(compared["n_transitions"])        # 3 against the driver's 4: a disagreement
+    sensitive = sa.compare(record(2.0 * (1 + 1e-5)))
+    assert not sensitive["calm"] and sensitive["ill"] == 4
+    assert [q[0] for q in sensitive["wc"]] == ["t_level_0.1"]
