@@ -102,7 +102,11 @@ SPIN = ("spin0", "spin1", "spin2")
 ORDER = (*SIGN, *UNSTICK, "cone", "slipslow", "slipstop", "slipfast", "slave", "contact", "side", "face",
          "slave_lost", *SPIN)
 DIP_CHECKED = {*SIGN, *SPIN, "cone", "side"}   # also checked inside a step (a double crossing)
-FORCE_EVENTS = {"cone"}   # the dip-checked events that read the contact forces
+# ... and, inside a step only, the un-stick margins 1 - |sigma_i| of held components (a needed
+# moment that rises past the limit and falls back within one step: a release the kernel, which
+# checks every event function inside its steps, makes; harness seed 20261126 scene 34)
+DIP_INSIDE = DIP_CHECKED | set(UNSTICK)
+FORCE_EVENTS = {"cone", *UNSTICK}   # the dip-checked events that read the contact forces
 
 
 def _axes_rate(i, y, f):
@@ -884,7 +888,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             gm = gd(k, tm)
                             if gm > 0.0:
                                 br = (tm, gm, t_new, g_new[k])
-                    elif k in DIP_CHECKED and g_old[k] > 0.0 and g_new[k] > 0.0:
+                    elif k in DIP_INSIDE and g_old[k] > 0.0 and g_new[k] > 0.0:
                         # a double crossing inside the step: the signs and side by the minimum of
                         # the cubic Hermite interpolant (exact end slopes), the cone below;
                         # confirmed on the dense output
@@ -899,7 +903,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                                              seg.sig[i] * _axes_rate(i, y_new, f_new) * hstep)
                             xs = [] if x is None else [x]
                         else:
-                            # the cone margin has no exact slope: its Hermite minimum with end slopes
+                            # the cone and un-stick margins have no exact slope: their Hermite minimum with end slopes
                             # by differences on the dense output, and CONE_SAMPLES interior points
                             dt = 1e-6 * hstep
                             d0 = (gd(k, t_old + dt) - g_old[k]) / dt * hstep
