@@ -21,9 +21,9 @@ the event counts (roll<->slip transitions, stick phases, rim-edge impacts). A va
 well-conditioned where the perturbed kernel run moves it by < 1e-8 relative. An outcome or an event
 count is a total over the whole run: it is well-conditioned where the perturbed run leaves it
 unchanged *and* every value of the run (t_halt included) is well-conditioned, the harness's 'calm'
-scenes (one perturbed run can leave a count of a sensitive scene unchanged by chance). The table gives the share of well-conditioned
-quantities on which driver and kernel agree within 1e-8 relative (exactly, for outcomes and
-counts) and lists every disagreement. Records (one JSON line per scene) go to
+scenes (one perturbed run can leave a count of a sensitive scene unchanged by chance). The table
+gives the share of well-conditioned quantities on which driver and kernel agree within 1e-8
+relative (exactly, for outcomes and counts) and lists every disagreement. Records (one JSON line per scene) go to
 benchmarks/out/scipy-agreement-<tag>.jsonl; an interrupted run resumes from that file.
 """
 from __future__ import annotations
@@ -128,7 +128,7 @@ def compare(rec: dict) -> dict:
         # the outcome and the event counts are totals over the whole run: where any value of the
         # run is sensitive, so is the part of the trajectory that they count, whether or not the
         # one perturbed run happened to change them
-        res["ill"] += 4
+        res["ill"] += 1 + len(k["events"])   # the outcome and each count
         return res
     if pt["outcome"] == k["outcome"]:
         res["wc"].append(("outcome", k["outcome"], d["outcome"], 0.0 if d["outcome"] == k["outcome"] else math.nan, 0.0))

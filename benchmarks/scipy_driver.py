@@ -890,7 +890,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                                 br = (tm, gm, t_new, g_new[k])
                     elif k in DIP_INSIDE and g_old[k] > 0.0 and g_new[k] > 0.0:
                         # a double crossing inside the step: the signs and side by the minimum of
-                        # the cubic Hermite interpolant (exact end slopes), the cone below;
+                        # the cubic Hermite interpolant (exact end slopes), the cone and un-stick below;
                         # confirmed on the dense output
                         hstep = t_new - t_old
                         if k == "side":
