@@ -242,6 +242,26 @@ def assert_clean_console(out: str) -> None:
     assert "localrule" not in out and "without encryption" not in out, out
 
 
+def test_an_interrupted_run_releases_only_the_lock_it_wrote(tmp_path):
+    """Snakemake's lock files (.snakemake/locks/<n>.<type>.lock) written since the run started
+    are removed after an interruption, older ones (another run's) kept; with none left the
+    folder goes too, as Snakemake's own unlock leaves it."""
+    locks = tmp_path / ".snakemake" / "locks"
+    locks.mkdir(parents=True)
+    started = time.time()
+    older = locks / "0.output.lock"
+    older.write_text("results/other/cube.nc\n")
+    os.utime(older, (started - 30.0, started - 30.0))
+    ours = [locks / "1.input.lock", locks / "1.output.lock"]
+    for lock in ours:
+        lock.write_text("results/tiny/cube.nc\n")
+    assert frontdoor.release_own_locks(tmp_path, started - 1.0) == ours
+    assert sorted(locks.iterdir()) == [older]
+    assert frontdoor.release_own_locks(tmp_path, started - 60.0) == [older]
+    assert not locks.exists()
+    assert frontdoor.release_own_locks(tmp_path, started) == []     # nothing there: nothing to do
+
+
 @pytest.mark.slow
 def test_ctrl_c_and_sigterm_then_resume(tmp_path, src):
     wd = copy_workflow(tmp_path / "wf")
@@ -273,7 +293,9 @@ def test_ctrl_c_and_sigterm_then_resume(tmp_path, src):
     assert kept and int(m.group(1)) == len(kept) and int(m.group(3)) == len(kept) and int(m.group(4)) == n_chunks
     assert m.group(5) == str(results)
     resume = shlex.split(m.group(6))
-    assert resume[:3] == ["python3", "run.py", "sweep"] and resume[3:] == argv
+    assert resume[:3] == ["python3", "run.py", "sweep"] and resume[3:] == argv, \
+        (results / "logs" / "sweep.log").read_text()[-6000:]
+    assert not (wd / ".snakemake" / "locks").exists()
     mtimes = {c: (results / "chunks" / f"{c}.nc").stat().st_mtime_ns for c in kept}
 
     # 2. the resume command, stopped by SIGTERM (to run.py alone, as `kill` or a scheduler

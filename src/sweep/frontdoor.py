@@ -252,6 +252,27 @@ def incomplete_outputs(workdir: Path) -> set[Path]:
     return out
 
 
+def release_own_locks(workdir: Path, since: float) -> list[Path]:
+    """Remove the lock files (.snakemake/locks/<n>.<input|output>.lock) written at or after `since`
+    (seconds since the epoch), i.e. by the run this front door started and has seen end, and the
+    lock folder if that leaves it empty, as Snakemake's own unlock does; older locks (another
+    run's) are kept. Returns the removed files.
+
+    Snakemake normally releases its lock when a Ctrl-C stops it, but not always: a CI run found
+    the lock still there after one Ctrl-C, and a SIGKILL (a second Ctrl-C, or the grace period
+    run out) always leaves it. The resume command stays the interrupted command either way."""
+    locks = workdir / ".snakemake" / "locks"
+    removed = []
+    for lock in sorted(locks.glob("*.lock")):
+        with contextlib.suppress(FileNotFoundError):
+            if lock.stat().st_mtime >= since:
+                lock.unlink()
+                removed.append(lock)
+    with contextlib.suppress(OSError):
+        locks.rmdir()
+    return removed
+
+
 class _Stop(Exception):
     pass
 
@@ -330,6 +351,7 @@ def run(argv: list[str]) -> int:
         log_path = results / "logs" / "sweep.log"
         log_path.parent.mkdir(parents=True, exist_ok=True)
         t_start = time.time()
+        t_locks = t_start - 1.0      # file times may be rounded down to the second
         cmd = [sys.executable, "-m", "snakemake", *snakemake_argv(argv, progress=True)]
         log = open(log_path, "a", encoding="utf-8")
         log.write(f"=== {time.strftime('%Y-%m-%d %H:%M:%S')} {resume}\n=== {shlex.join(cmd)}\n")
@@ -391,6 +413,11 @@ def run(argv: list[str]) -> int:
         plan = progress.plan or {}
         present = progress.chunks_kept(workdir)
         kept = sum(plan[c] for c in present)
+        released = release_own_locks(workdir, t_locks)
+        if released:
+            with open(log_path, "a", encoding="utf-8") as note:
+                note.write(f"=== sweep: released the lock this run's Snakemake left: "
+                          f"{', '.join(p.name for p in released)}\n")
         locked = any((workdir / ".snakemake" / "locks").glob("*"))
         again = f"{RESUME_PREFIX} --unlock{resume[len(RESUME_PREFIX):]} && {resume}" if locked else resume
         what = (f"kept {kept} of {progress.total} scenes ({len(present)} of {len(plan)} chunk files) "
