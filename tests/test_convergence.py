@@ -274,6 +274,23 @@ def test_a_slide_near_flat_is_not_stopped_by_the_round_off_of_its_energy_balance
     assert all(r["budget"] < 1e-9 for r in res.values())
 
 
+def test_a_slip_spiralling_into_slip_tol_late_in_a_scene_is_not_a_step_size_underflow():
+    """Seed 20261127, scene 421 (a 14 mm disk, thickness 0.81 R, mu_d 0.93): near flat, at
+    t = 216.09 s (tau ~ 5094), a slide's slip spirals into u = 0 and each step covers a fixed share
+    of what is left, ~1e-11 in tau at |u| = slip_tol. The step floor was 16 eps tau (1.8e-11 there),
+    so every rtol ended as step_size_underflow, decided by how long the scene had run, not by its
+    state. The model is autonomous, so the floor is 2 eps tau: the slide ends at slip_tol and the
+    scene halts, with the same events at every rtol."""
+    rng = np.random.default_rng(20261127)
+    cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(422)][421])
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-10, 1e-12)}
+    assert {r["outcome"] for r in res.values()} == {"halted"}, {k: r["outcome"] for k, r in res.items()}
+    assert len({tuple(r["events"]) for r in res.values()}) == 1
+    t12 = res[1e-12]["q"]["t_halt"]
+    assert abs(res[1e-10]["q"]["t_halt"] - t12) < 1e-8 * t12
+    assert all(r["budget"] < 1e-9 for r in res.values())
+
+
 def test_micro_sticks_at_a_moment_limit_are_counted_alike_at_every_rtol():
     """Harness scene 252 (seed 20261122): omega.a_1's needed moment oscillates about its limit, so
     the component unsticks once per period, swings to ~1e-5 and comes back to 0 almost
