@@ -16,7 +16,6 @@ import json
 import sys
 from pathlib import Path
 
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import convergence as cv  # noqa: E402
 

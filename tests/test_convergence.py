@@ -281,8 +281,7 @@ def test_a_slip_spiralling_into_slip_tol_late_in_a_scene_is_not_a_step_size_unde
     so every rtol ended as step_size_underflow, decided by how long the scene had run, not by its
     state. The model is autonomous, so the floor is 2 eps tau: the slide ends at slip_tol and the
     scene halts, with the same events at every rtol."""
-    rng = np.random.default_rng(20261127)
-    cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(422)][421])
+    cfg = harness.harness_scene(20261127, 421)
     res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-10, 1e-12)}
     assert {r["outcome"] for r in res.values()} == {"halted"}, {k: r["outcome"] for k, r in res.items()}
     assert len({tuple(r["events"]) for r in res.values()}) == 1
