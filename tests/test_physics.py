@@ -165,6 +165,27 @@ def test_paper_case_reaches_flat_with_positive_normal_force_and_rising_frequency
     assert 0.7 < s["ramp_exponent"] < 1.4
 
 
+def test_without_k2_the_wobble_still_brings_the_disk_down():
+    """docs/model.md, 'Does the model reach pi/2 in finite time?': with k2 = 0 the steady
+    centre-fixed rolling dissipates nothing through k3 (omega.a3 = 0 there), but the slips keep a
+    wobble up through which k3 does, and the disk comes down onto its face. The SciPy driver
+    (benchmarks/scipy_driver.py, its own contact rules, rtol 1e-11) gives the 0.01 rad level at
+    20.72947823 s and the face at 27.392 s with 304 transitions and no stick phase; an earlier
+    integrator stuck the k3 component there and froze the inclination at beta ~ 1.3e-3."""
+    import yaml
+    cfg = yaml.safe_load(open("config/scenes/kessler2002.yaml"))
+    cfg["contact"]["k2"] = 0.0
+    cfg["stop"].update(levels=[1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6], t_max=60.0)
+    s = sweep.simulate(cfg).summary
+    print({k: s[k] for k in ("outcome", "t_end", "lay_flat", "n_transitions", "n_stick", "dissipation")})
+    assert s["outcome"] == "halted" and s["lay_flat"]
+    assert s["n_stick"] == 0
+    assert s["dissipation"]["k2"] == 0.0
+    assert s["dissipation"]["k3"] > 0.5 * s["energy_initial"]       # k3 takes most of the energy
+    assert abs(s["levels"][1]["t"] - 20.72947823) < 2e-5             # well-conditioned (sensitivity ~5e-6 s)
+    assert abs(s["t_end"] - 27.392) < 0.02                           # the landing: sensitive to ~3e-3 s
+
+
 def test_shell_sticks_and_stuck_component_is_held():
     r = sweep.simulate(make_scene(disk__shape="shell"), trajectory=True)
     assert r.summary["n_stick"] > 10

@@ -179,7 +179,7 @@ def load_scene(src) -> Scene:
     lv = st["levels"]
     if not isinstance(lv, (list, tuple)) or not lv:
         raise ConfigError("stop.levels", lv, "a non-empty list of inclinations in (0, pi/2) rad")
-    # levels must lie above the face-contact inclination (events.BETA_FACE = 1e-8 rad)
+    # levels below the face inclination (core.contact.BETA_FACE = 1e-6 rad) are crossed when the disk lies flat
     lv = [_num(f"stop.levels[{i}]", x, 1e-7, HALF_PI, hi_open=True,
                allowed="an inclination in [1e-7, pi/2) rad") for i, x in enumerate(lv)]
     if len(set(lv)) != len(lv):
