@@ -10,7 +10,9 @@ reports:
 
 * outcomes, exceptions, NaNs, step_size_underflow, step_limit (allowed only past 100 s simulated),
   the dissipation budget |E0 - E_end - sum(dissipated)| / E0 (target <= 1e-9);
-* for every quantity (level times, t_halt, alpha at tau = 10, 30, 100, 300): its numerical error
+* for every quantity (level times, t_halt, alpha at tau = 10, 30, 100, 300, and the scene's end:
+  alpha at t_max = 300 s where the run gets there, the time of a located end (contact loss, line
+  contact, Painleve)): its numerical error
   (difference to rtol 1e-13) and its sensitivity (change under alpha0 + 1e-10 rad at rtol 1e-13);
   among well-conditioned quantities (sensitivity < 1e-8 relative) the share within 1e-6 of rtol
   1e-13 at the default rtol 1e-10 (target >= 99.5 %), and whether errors shrink with rtol;
@@ -46,6 +48,20 @@ ATOL_RATIO = 1e-2
 WELL_CONDITIONED = 1e-8
 AGREE = 1e-6
 DENSITY = 7800.0
+# outcomes whose t_end is a located event time (a quantity of the scene's end, like a level time)
+LOCATED_ENDS = ("contact_lost", "line_contact", "painleve")
+END_KEYS = ("alpha_t_max", "t_end")
+
+
+def end_quantities(outcome: str, t_end: float, alpha_at_t_max: float) -> dict:
+    """Quantities of the scene's end (s, rad): where the sample times and levels stop short of it
+    (a long t_max scene, a contact loss), they carry the sensitivity test and the error check to the
+    whole run, which the event counts cover."""
+    if outcome == "t_max":
+        return {"alpha_t_max": float(alpha_at_t_max)}
+    if outcome in LOCATED_ENDS:
+        return {"t_end": float(t_end)}
+    return {}
 
 
 def draw_scene(rng: np.random.Generator) -> dict:
@@ -114,7 +130,7 @@ def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0, atol_ratio: float = A
     c["initial"]["alpha"] += d_alpha
     chi = math.sqrt((({"solid": 1.0, "shell": 2.0}[c["disk"]["shape"]]) + 4.0) / 4.0
                     * c["disk"]["radius"] / c["gravity"])
-    times = [tau * chi for tau in SAMPLE_TAU if tau * chi < T_MAX]
+    times = [tau * chi for tau in SAMPLE_TAU if tau * chi < T_MAX] + [T_MAX]
     t0 = time.process_time()
     try:
         r = sweep.simulate(c, sample_times=times)
@@ -126,8 +142,9 @@ def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0, atol_ratio: float = A
     budget = abs(s["energy_initial"] - s["energy_final"] - sum(dis.values())) / s["energy_initial"]
     q = {f"t_level_{lv['inclination']:g}": lv["t"] for lv in s["levels"]}
     q["t_halt"] = s["t_halt"]
-    for tau, a in zip(SAMPLE_TAU, r.samples["alpha"]):
+    for tau, a in zip(SAMPLE_TAU, r.samples["alpha"][:-1]):
         q[f"alpha_tau_{tau:g}"] = float(a)
+    q.update(end_quantities(s["outcome"], s["t_end"], r.samples["alpha"][-1]))
     return {"rtol": rtol, "outcome": s["outcome"], "t_end": s["t_end"], "q": q,
             "events": [s["n_transitions"], s["n_stick"], s["n_impacts"]], "n_steps": s["n_steps"] + s["n_rejected"],
             "cpu": cpu, "budget": budget, "nan_in_summary": _has_bad(s)}
@@ -224,6 +241,8 @@ def analyse(recs: list[dict]) -> str:
     diff_complete = []
     calm = same_calm = 0
     diff_calm = []
+    early = same_early = 0     # the calm class before stop 29: quantities up to tau 300 and the levels only
+    diff_early = []
     for rec in recs:
         seqs = [tuple(r["events"]) for r in rec["runs"] if r["rtol"] <= DEFAULT_RTOL and "events" in r]
         ok = len(seqs) == 4 and len(set(seqs)) == 1
@@ -245,13 +264,19 @@ def analyse(recs: list[dict]) -> str:
                 # ... of which no quantity moves by WELL_CONDITIONED under the perturbation either: a
                 # count that one perturbed run happens to keep can still sit on an amplifying trajectory
                 ref = next((r for r in rec["runs"] if r["rtol"] == REF_RTOL), {})
-                sens = [_rel(rec["perturbed"].get("q", {}).get(k), v) for k, v in ref.get("q", {}).items()
-                        if v is not None and math.isfinite(v)]
-                if sens and all(x < WELL_CONDITIONED for x in sens):
+                sens = {k: _rel(rec["perturbed"].get("q", {}).get(k), v) for k, v in ref.get("q", {}).items()
+                        if v is not None and math.isfinite(v)}
+                if sens and all(x < WELL_CONDITIONED for x in sens.values()):
                     calm += 1
                     same_calm += ok
                     if not ok:
                         diff_calm.append(rec["index"])
+                early_sens = [x for k, x in sens.items() if k not in END_KEYS]
+                if early_sens and all(x < WELL_CONDITIONED for x in early_sens):
+                    early += 1
+                    same_early += ok
+                    if not ok:
+                        diff_early.append(rec["index"])
     lines.append(f"same event counts (transitions, sticks, impacts) rtol 1e-10..1e-13: {same}/{n}"
                  + (f"; differ: scenes {diff_idx[:12]}" if diff_idx else ""))
     lines.append(f"  among scenes whose counts do not move under alpha0 + 1e-10: {same_robust}/{robust}"
@@ -260,6 +285,8 @@ def analyse(recs: list[dict]) -> str:
                  + (f"; differ: scenes {diff_complete[:12]}" if diff_complete else ""))
     lines.append(f"  ... whose quantities all move < {WELL_CONDITIONED:g} under alpha0 + 1e-10: {same_calm}/{calm}"
                  + (f"; differ: scenes {diff_calm[:12]}" if diff_calm else ""))
+    lines.append(f"      (the same without the end quantities {', '.join(END_KEYS)}, i.e. the class before "
+                 f"stop 29: {same_early}/{early}" + (f"; differ: scenes {diff_early[:12]}" if diff_early else "") + ")")
     steps = np.array([r.get("n_steps", 0) for r in default])
     cpu = np.array([r.get("cpu", 0.0) for r in default])
     pct = lambda a, q: float(np.percentile(a, q))  # noqa: E731

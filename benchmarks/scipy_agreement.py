@@ -16,7 +16,9 @@ its seed 20261122 by default, its level filter), taken in order whatever their c
   the load of a shared machine does not change which scenes are compared); a scene over the cap
   is counted as 'not compared' and listed.
 
-Quantities: the level times (s), alpha at tau = 10, 30, 100, 300 (while t <= t_max), the outcome and
+Quantities: the level times (s), alpha at tau = 10, 30, 100, 300 (while t <= t_max), the scene's end
+(alpha at t_max where both runs reach it, the time of a located end: convergence.end_quantities;
+since stop 29), the outcome and
 the event counts (roll<->slip transitions, stick phases, rim-edge impacts). A value is
 well-conditioned where the perturbed kernel run moves it by < 1e-8 relative. An outcome or an event
 count is a total over the whole run: it is well-conditioned where the perturbed run leaves it
@@ -57,14 +59,16 @@ def _driver(cfg: dict, rtol: float, cap: float) -> dict:
     taus = [tau for tau in cv.SAMPLE_TAU if tau * sc.chi < cv.T_MAX]
     t0 = time.process_time()
     try:
-        r = run_scipy(sc, "DOP853", rtol, rtol * 1e-2, sample_tau=np.array(taus), max_wall=cap,
+        r = run_scipy(sc, "DOP853", rtol, rtol * 1e-2, sample_tau=np.array(taus + [cv.T_MAX / sc.chi]), max_wall=cap,
                       clock=time.process_time)
     except Exception as exc:  # noqa: BLE001 - reported per scene
         return {"exception": f"{type(exc).__name__}: {exc}"}
     cpu = time.process_time() - t0
     q = {f"t_level_{b:g}": float(tl * sc.chi) for b, tl in zip(sc.levels, r["level_tau"])}
-    for tau, a in zip(taus, r["samples"][:, 0]):
+    for tau, a in zip(taus, r["samples"][:-1, 0]):
         q[f"alpha_tau_{tau:g}"] = float(a)
+    if not r["timed_out"]:
+        q.update(cv.end_quantities(r["outcome"], r["t_end"] * sc.chi, r["samples"][-1, 0]))
     diag = {k: r[k] for k in ("onset_repelling", "unstick_at_restart", "released_by_impulse", "fold_by_failure",
                               "reslaved_after_update")}
     return {"outcome": r["outcome"], "timed_out": bool(r["timed_out"]), "t_end": r["t_end"] * sc.chi, "q": q,
@@ -117,6 +121,8 @@ def compare(rec: dict) -> dict:
         calm = calm and sens < WELL
         if key == "t_halt":
             continue   # derived from the level times (diagnostics.halt_time), not a driver output
+        if key in cv.END_KEYS and key not in d["q"]:
+            continue   # a driver record from before stop 29, or another kind of end (the outcome is compared)
         if not (vk is not None and math.isfinite(vk)) and not (vd is not None and math.isfinite(vd)):
             continue   # neither run has this value (a level not reached, a sample after the end)
         if not sens < WELL:
