@@ -54,7 +54,8 @@ END_KEYS = ("alpha_t_max", "t_end")
 
 
 def end_quantities(outcome: str, t_end: float, alpha_at_t_max: float) -> dict:
-    """Quantities of the scene's end (s, rad): where the sample times and levels stop short of it
+    """Quantities of the scene's end (s, rad; alpha_at_t_max: alpha sampled at the scene's stop.t_max,
+    NaN if the run ended before). Where the sample times and levels stop short of the end
     (a long t_max scene, a contact loss), they carry the sensitivity test and the error check to the
     whole run, which the event counts cover."""
     if outcome == "t_max":
@@ -130,7 +131,7 @@ def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0, atol_ratio: float = A
     c["initial"]["alpha"] += d_alpha
     chi = math.sqrt((({"solid": 1.0, "shell": 2.0}[c["disk"]["shape"]]) + 4.0) / 4.0
                     * c["disk"]["radius"] / c["gravity"])
-    times = [tau * chi for tau in SAMPLE_TAU if tau * chi < T_MAX] + [T_MAX]
+    times = [tau * chi for tau in SAMPLE_TAU if tau * chi < T_MAX] + [c["stop"]["t_max"]]
     t0 = time.process_time()
     try:
         r = sweep.simulate(c, sample_times=times)

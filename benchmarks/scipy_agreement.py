@@ -59,7 +59,7 @@ def _driver(cfg: dict, rtol: float, cap: float) -> dict:
     taus = [tau for tau in cv.SAMPLE_TAU if tau * sc.chi < cv.T_MAX]
     t0 = time.process_time()
     try:
-        r = run_scipy(sc, "DOP853", rtol, rtol * 1e-2, sample_tau=np.array(taus + [cv.T_MAX / sc.chi]), max_wall=cap,
+        r = run_scipy(sc, "DOP853", rtol, rtol * 1e-2, sample_tau=np.array(taus + [c["stop"]["t_max"] / sc.chi]), max_wall=cap,
                       clock=time.process_time)
     except Exception as exc:  # noqa: BLE001 - reported per scene
         return {"exception": f"{type(exc).__name__}: {exc}"}
