@@ -302,7 +302,9 @@ def test_verification_cache_skips_unchanged_files_only(tmp_path, tiny, monkeypat
 
 def test_every_time_and_frequency_variable_gets_an_error_variable():
     marked = {v.name for v in io.VARIABLES if v.numerical_error}
-    assert {"t_halt", "t_level", "precession_hz", "normal_force_hz"} <= marked
+    assert {"t_halt", "t_level", "precession_hz", "ringing_hz", "normal_force_hz",
+            "n_transitions", "n_stick", "n_impacts", "slip_fraction"} <= marked
+    assert {v.name for v in io.VARIABLES if v.whole_run} == {"n_transitions", "n_stick", "n_impacts", "slip_fraction"}
     names = {v.name: v for v in io.ERROR_VARIABLES}
     for v in io.VARIABLES:
         e = names.get(v.name + "_numerical_error")
@@ -344,6 +346,22 @@ def test_numerical_errors_are_absolute_differences_with_nan_and_inf_rules(tiny):
     # the main result itself is untouched
     for k in ("t_halt", "outcome_code", "t_end"):
         assert s[k] == main[k]
+    # whole-run totals: a count that the rerun changes (a near-tangent crossing decided the other
+    # way) gets the difference; equal counts get 0
+    assert s["n_stick_numerical_error"] == 0.0 and s["n_impacts_numerical_error"] == 0.0
+    ref_c = json.loads(json.dumps(ref))
+    ref_c["n_transitions"] += 2
+    ref_c["slip_fraction"] += 0.01
+    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref_c)
+    assert s["n_transitions_numerical_error"] == 2.0
+    assert s["slip_fraction_numerical_error"] == pytest.approx(0.01, abs=1e-12)
+    # ... but a rerun cut by a numerical failure has partial totals: no error bar (NaN), while a
+    # level it reached before the cut keeps its own
+    ref_c["outcome"], ref_c["outcome_code"] = "step_limit", outcomes.STEP_LIMIT
+    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref_c)
+    for k in ("n_transitions", "n_stick", "n_impacts", "slip_fraction"):
+        assert math.isnan(s[k + "_numerical_error"]), k
+    assert s["levels"][0]["t_level_numerical_error"] == pytest.approx(0.25, abs=1e-12)
     # a rerun that ended physically without the last level: that level's value is an artefact (inf)
     ref2 = _perturbed(main, 0.25)
     ref2["levels"][-1]["t"] = math.nan

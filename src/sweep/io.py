@@ -47,8 +47,12 @@ class Var:
     long_name: str
     get: Callable[[Mapping], Any]  # summary -> scalar, or (for per_level) level dict -> scalar
     per_level: bool = False
-    # a located time or a frequency: with outputs.error_estimate the cube gets <name>_numerical_error
+    # a located time, a frequency or a whole-run total whose value the numerics can move: with
+    # outputs.error_estimate the cube gets <name>_numerical_error
     numerical_error: bool = False
+    # a total over the whole run (a count, a time share): its rerun value only compares where the
+    # rerun ended physically (a rerun cut by its step budget counts fewer)
+    whole_run: bool = False
 
 
 def _d(key: str) -> Callable[[Mapping], Any]:
@@ -81,12 +85,17 @@ VARIABLES: tuple[Var, ...] = (
     Var("normal_force_hz", "float", "Hz", "paper's normal-force frequency f_hat = 2/T, T spanning the three "
         "counted normal-force maxima before the level (1 % hysteresis)", lambda lv: lv["normal_force_hz"],
         per_level=True, numerical_error=True),
+    # the discrete sequence can hinge on a near-tangent crossing (a slip demand or a spin that only
+    # grazes its threshold: docs/performance.md, 'Stop 29'), so the counts and the slip share get
+    # error bars too: a nonzero count error marks a cell whose event sequence the numerics decide
     Var("slip_fraction", "float", "1", "fraction of the simulated time spent slipping",
-        lambda s: s["slip_fraction"]),
-    Var("n_transitions", "int", "1", "number of roll/slip transitions", lambda s: s["n_transitions"]),
-    Var("n_stick", "int", "1", "number of stick episodes", lambda s: s["n_stick"]),
+        lambda s: s["slip_fraction"], numerical_error=True, whole_run=True),
+    Var("n_transitions", "int", "1", "number of roll/slip transitions", lambda s: s["n_transitions"],
+        numerical_error=True, whole_run=True),
+    Var("n_stick", "int", "1", "number of stick episodes", lambda s: s["n_stick"], numerical_error=True,
+        whole_run=True),
     Var("n_impacts", "int", "1", "number of impacts (plastic contact re-establishments)",
-        lambda s: s["n_impacts"]),
+        lambda s: s["n_impacts"], numerical_error=True, whole_run=True),
     Var("energy_initial", "float", "J", "initial mechanical energy", lambda s: s["energy_initial"]),
     Var("energy_final", "float", "J", "final mechanical energy", lambda s: s["energy_final"]),
     Var("dissipation_sliding", "float", "J", "energy dissipated by sliding friction", _d("sliding")),
@@ -149,7 +158,8 @@ def add_numerical_errors(summary: dict, reference: Mapping | None) -> dict:
     `reference`: the summary of the same scene rerun at tighter tolerances, or None where the
     rerun raised (then every error is NaN and reference_outcome is numerical_error). A value the
     reference lacks has error inf if the rerun ended physically (the value is a numerical
-    artefact), NaN if it ended in a numerical failure (step limit, underflow, error).
+    artefact), NaN if it ended in a numerical failure (step limit, underflow, error). Whole-run
+    totals (counts, slip_fraction) get NaN where the rerun failed: its totals stop at its failure.
     """
     ref_code = outcomes.NUMERICAL_ERROR if reference is None else int(reference["outcome_code"])
     failed = reference is None or ref_code in REFERENCE_FAILURES
@@ -162,6 +172,8 @@ def add_numerical_errors(summary: dict, reference: Mapping | None) -> dict:
             for j, lv in enumerate(summary["levels"]):
                 ref = var.get(reference["levels"][j]) if reference is not None else None
                 lv[key] = _abs_difference(var.get(lv), ref, failed)
+        elif var.whole_run and failed:
+            summary[key] = math.nan    # a rerun that did not end physically has partial totals
         else:
             summary[key] = _abs_difference(var.get(summary), var.get(reference) if reference is not None else None,
                                            failed)
