@@ -6,7 +6,8 @@ Takes every K-th point (default 8) of a sweep config's grid and runs each scene 
 
 1. as the sweep does (its levels, its tolerances): t_halt, t_halt_error, the level times;
 2. as `outputs.error_estimate` reruns it (sweep.grid.error_reference: rtol/100, atol/100):
-   t_halt_numerical_error, t_level_numerical_error, and the cost of the rerun (n_rhs, wall time);
+   t_halt_numerical_error, t_level_numerical_error, the count and slip_fraction errors, and the
+   cost of the rerun (n_rhs, wall time);
 3. with the levels extended by 1e-5 and 1e-6 rad: the halt placed 100x closer to the singularity
    (or located: a disk that reaches flat has halted there), the reference for t_halt of run 1.
 
@@ -68,7 +69,9 @@ def main() -> None:
                          err=s1["t_halt_error"], old=old, true=abs(s1["t_halt"] - s3["t_halt"]),
                          num=abs(s1["t_halt"] - s2["t_halt"]),
                          num_lt=float(np.nanmax(np.abs(lt - lt2))) if np.isfinite(lt - lt2).any() else math.nan,
-                         cost=s2["n_rhs"] / s1["n_rhs"], wall=w2 / w1, w1=w1, w2=w2))
+                         cost=s2["n_rhs"] / s1["n_rhs"], wall=w2 / w1, w1=w1, w2=w2,
+                         counts=[abs(s1[k] - s2[k]) for k in ("n_transitions", "n_stick", "n_impacts")],
+                         slip=abs(s1["slip_fraction"] - s2["slip_fraction"])))
         r = rows[-1]
         print(f"{dict(zip(grid.AXES, p))} {r['o1']}/{r['o2']} flat={r['flat']} t_halt={r['th']:.6g} "
               f"t_halt_error={r['err']:.3g} former={r['old']:.3g} true={r['true']:.3g} "
@@ -89,6 +92,12 @@ def main() -> None:
     tot1, tot2 = sum(r["w1"] for r in rows), sum(r["w2"] for r in rows)
     print(f"  total wall: main {tot1:.1f} s, rerun {tot2:.1f} s: error_estimate costs x{(tot1 + tot2) / tot1:.2f}")
     print(f"  outcome of the rerun differs in {sum(r['o1'] != r['o2'] for r in rows)} of {len(rows)}")
+    same = [r for r in rows if r["o1"] == r["o2"]]
+    moved = [r for r in same if any(r["counts"])]
+    print(f"  event counts (transitions, sticks, impacts) moved by the rerun in {len(moved)} of {len(same)} "
+          f"scenes with the same outcome" + (": " + "; ".join(f"{dict(zip(grid.AXES, r['p']))} {r['counts']}"
+                                                               for r in moved[:6]) if moved else ""))
+    print(f"  slip_fraction numerical error           {q([r['slip'] for r in same])}")
 
 
 if __name__ == "__main__":
