@@ -106,6 +106,9 @@ DIP_CHECKED = {*SIGN, *SPIN, "cone", "side"}   # also checked inside a step (a d
 # moment that rises past the limit and falls back within one step: a release the kernel, which
 # checks every event function inside its steps, makes; harness seed 20261126 scene 34)
 DIP_INSIDE = DIP_CHECKED | set(UNSTICK)
+# ... and the slip speed against slip_tol and the slaving speed where a slide passes by u = 0 inside
+# a step: |u| has a V there, narrower than the step (harness seed 20261128 scene 39)
+DIP_INSIDE |= {"slipslow", "slave"}
 FORCE_EVENTS = {"cone", *UNSTICK}   # the dip-checked events that read the contact forces
 
 
@@ -902,6 +905,15 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             x = _hermite_min(g_old[k], seg.sig[i] * _axes_rate(i, y, f_old) * hstep, g_new[k],
                                              seg.sig[i] * _axes_rate(i, y_new, f_new) * hstep)
                             xs = [] if x is None else [x]
+                        elif k in ("slipslow", "slave"):
+                            # |u| falls at the start and rises at the end: its minimum on the dense output
+                            xs = []
+                            if (y[Y_U1] * f_old[Y_U1] + y[Y_U2] * f_old[Y_U2] < 0.0
+                                    and y_new[Y_U1] * f_new[Y_U1] + y_new[Y_U2] * f_new[Y_U2] > 0.0):
+                                res = _minimize_scalar(lambda tt: float(np.hypot(*np.asarray(dense(tt))[[Y_U1, Y_U2]])),
+                                                       bounds=(t_old, t_new), method="bounded",
+                                                       options={"xatol": 1e-12 * hstep})
+                                xs = [(float(res.x) - t_old) / hstep]
                         else:
                             # the cone and un-stick margins have no exact slope: their Hermite minimum with end slopes
                             # by differences on the dense output, and CONE_SAMPLES interior points

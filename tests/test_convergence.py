@@ -290,6 +290,20 @@ def test_a_slip_spiralling_into_slip_tol_late_in_a_scene_is_not_a_step_size_unde
     assert all(r["budget"] < 1e-9 for r in res.values())
 
 
+def test_a_slip_passing_by_zero_within_slip_tol_ends_at_every_rtol():
+    """Seed 20261128, scene 39 (a 58 mm disk, mu_s 0.055, near upright): at tau 827.823 a slide's
+    slip passes by u = 0 with a miss distance 1e-12 (0.07 %) below slip_tol in the runs at rtol
+    1e-10, 1e-11 and 1e-13 alike, so the slide ends there and a new slip starts at once (the cone
+    is violated): two transitions. Its V in |u| is ~4e-9 tau wide, narrower than RATE_STEP; the dip
+    check took the cubic through |u|'s difference-quotient slopes and stepped over it in those
+    three runs (4024 transitions), while the run at 1e-12 passed closer and caught it (4026). The
+    dip check now places the V by the slip's own components (roots.slip_closest_approach)."""
+    cfg = harness.harness_scene(20261128, 39)   # the whole scene: its t_max sets each step's energy share
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-12, 1e-13)}
+    counts = {rtol: tuple(r["events"]) for rtol, r in res.items()}
+    assert len(set(counts.values())) == 1, counts
+
+
 def test_micro_sticks_at_a_moment_limit_are_counted_alike_at_every_rtol():
     """Harness scene 252 (seed 20261122): omega.a_1's needed moment oscillates about its limit, so
     the component unsticks once per period, swings to ~1e-5 and comes back to 0 almost

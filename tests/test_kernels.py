@@ -287,6 +287,34 @@ def test_hermite_dip_finds_the_minimum_exactly():
     assert R.hermite_dip(1.0, 1.0, 2.0, 1.0) == -1.0          # monotone: no interior minimum
 
 
+def test_slip_closest_approach_places_the_v_of_a_slip_passing_by_zero():
+    """A slip passing by u = 0: u(x) = (x - x0) v + w, w perpendicular to v, is its own Hermite curve.
+    |u| - slip_tol has a V at x0 of width ~|w|/|v|, far narrower than the step: the cubic in g
+    through the end values and slopes of |u| puts its minimum elsewhere, and the
+    closest approach puts it at x0 (seed 20261128 scene 39, docs/performance.md 'Stop 29')."""
+    h = 1e-5
+    for x0 in (0.5, 0.137, 0.91):
+        v = np.array([0.3, -0.4]) / h           # per unit tau: |v h| = 0.5 over the step
+        w = np.array([0.4, 0.3]) * 1.5e-9       # miss distance 1.5e-9, perpendicular to v
+        y0, y1, f0, f1 = (np.zeros(M.N_FULL) for _ in range(4))
+        y0[[M.Y_U1, M.Y_U2]] = -x0 * v * h + w
+        y1[[M.Y_U1, M.Y_U2]] = (1 - x0) * v * h + w
+        f0[[M.Y_U1, M.Y_U2]] = v
+        f1[[M.Y_U1, M.Y_U2]] = v
+        x = R.slip_closest_approach(y0, f0, y1, f1, h)
+        assert x == pytest.approx(x0, abs=1e-15)
+        # the cubic through |u| and its exact end slopes misses the V by far more than its width
+        g0, g1 = np.hypot(*y0[[M.Y_U1, M.Y_U2]]), np.hypot(*y1[[M.Y_U1, M.Y_U2]])
+        d0 = y0[[M.Y_U1, M.Y_U2]] @ v * h / g0
+        d1 = y1[[M.Y_U1, M.Y_U2]] @ v * h / g1
+        if x0 != 0.5:
+            assert abs(R.hermite_dip(g0, d0, g1, d1) - x0) > 1e-3
+    # moving away from 0 at the start, or towards it at the end: no interior minimum of |u|
+    y0, y1, f0, f1 = (np.zeros(M.N_FULL) for _ in range(4))
+    y0[M.Y_U1], y1[M.Y_U1], f0[M.Y_U1], f1[M.Y_U1] = 1e-6, 2e-6, 0.1, 0.1
+    assert R.slip_closest_approach(y0, f0, y1, f1, 1e-5) == -1.0
+
+
 def _dense_step(p, y, cs, h, n=M.N_CORE, t0=0.0, y_end=None):
     """One DOP853 step from (t0, y) with its dense output: (F, wk, istats); its end state into
     y_end if given."""

@@ -14,7 +14,7 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
-from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved,
+from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SLAVE, EV_SLIP_SLOW, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved,
                       consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, slaved_direction, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start, lattice_step
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
@@ -26,7 +26,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      T_DIP_END, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
-from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes
+from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes, slip_closest_approach
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
                        record_samples, record_traj, shift_peak_window, track_peaks)
@@ -206,6 +206,10 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
                 i = k if k <= EV_SIGN3 else k - EV_SPIN1
                 d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, f, y_new, f_new, h)
                 dip = hermite_dip(g_old[k], d0, g_new[k], d1)
+            elif k == EV_SLIP_SLOW or k == EV_SLAVE:
+                # |u| less a speed: a V where the slip passes by u = 0, placed from the slip's own
+                # smooth components (a cubic in g, or its difference quotient, can step over it)
+                dip = slip_closest_approach(y, f, y_new, f_new, h)
             else:
                 if trk[T_RATES_OLD] == 0.0:
                     event_rates(t, y, f, g_old, p, cs, n, u_tol, lev, wk, istats, wk[W_RATEOLD])

@@ -14,7 +14,7 @@ from .contact import N_EVENTS, eval_rhs, event_values, reads_forces, state_event
 from .dop853 import dense_eval
 from .jit import kernel
 from .layout import W_AUXBUF, W_DYBUF, W_GBUF, W_YBUF
-from .model import X_PHI, Y_ALPHA, Y_W1, Y_W2, Y_W3
+from .model import X_PHI, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 
 # Location tolerance on tau; below 4 ulp of tau the bracket cannot shrink further.
 EVENT_TOL_TAU = 1e-12
@@ -93,6 +93,41 @@ def hermite_dip(g0, d0, g1, d1):
     the step's dense output there: the cubic's own error can hide a shallow dip below 0 (a grazing
     double crossing), so its value at the minimum decides nothing."""
     return _hermite_extremum(g0, d0, g1, d1, 1.0)
+
+
+@kernel
+def _hermite_slope(x, g0, d0, g1, d1):
+    """d/dx of the cubic Hermite interpolant (_hermite)."""
+    return (6.0 * x * x - 6.0 * x) * (g0 - g1) + (3.0 * x * x - 4.0 * x + 1.0) * d0 + (3.0 * x * x - 2.0 * x) * d1
+
+
+@kernel
+def slip_closest_approach(y0, f0, y1, f1, h):
+    """Where in (0, 1) the slip vector passes closest to u = 0 on the step [y0, y1] of length h
+    (derivatives f0, f1): x of a minimum of |U(x)|^2, U the cubic Hermite curve of (u1, u2) with
+    the exact end derivatives h f; -1 unless |U| falls at the start and rises at the end.
+
+    |u| less a speed (slip_tol, the slaving speed) has a V-shaped minimum where a slip passes by
+    u = 0, as wide as (miss distance) / (slip rate): often far narrower than the step and than
+    RATE_STEP, so that neither a cubic in g nor a difference quotient of g sees it (harness seed
+    20261128 scene 39: |u| dipped 1e-12 below slip_tol inside a V ~4e-9 tau wide, and the runs at
+    rtol 1e-10, 1e-11 and 1e-13 stepped over it). The components are smooth: U'(x).U(x) changes
+    sign once across the V, and bisection on it finds the place to 2^-60 of the step."""
+    a0x, a0y, a1x, a1y = y0[Y_U1], y0[Y_U2], y1[Y_U1], y1[Y_U2]
+    d0x, d0y, d1x, d1y = h * f0[Y_U1], h * f0[Y_U2], h * f1[Y_U1], h * f1[Y_U2]
+    if not (a0x * d0x + a0y * d0y < 0.0 and a1x * d1x + a1y * d1y > 0.0):
+        return -1.0
+    lo = 0.0
+    hi = 1.0
+    for _ in range(60):
+        x = 0.5 * (lo + hi)
+        ux = _hermite(x, a0x, d0x, a1x, d1x)
+        uy = _hermite(x, a0y, d0y, a1y, d1y)
+        if ux * _hermite_slope(x, a0x, d0x, a1x, d1x) + uy * _hermite_slope(x, a0y, d0y, a1y, d1y) < 0.0:
+            lo = x
+        else:
+            hi = x
+    return 0.5 * (lo + hi)
 
 
 @kernel
