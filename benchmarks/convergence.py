@@ -1,6 +1,7 @@
 """Random-scene convergence harness (issue #8): does the integrator converge everywhere?
 
     python benchmarks/convergence.py [--quick] [--scenes N] [--seed S] [--jobs J] [--tag NAME] [--atol-ratio R]
+    python benchmarks/convergence.py --seed S --only I J ... --tag NAME     # some scenes of a seed again
 
 Draws scenes over wide physical ranges (radius 3 mm..30 cm, thickness/radius 0.01..2, solid or
 shell, mu_s 0.05..1.6, mu_d/mu_s 0..1, each k_i/R 0 or 1e-6..5e-2, |alpha0| 0.03..1.5 rad with both
@@ -309,6 +310,8 @@ def main(argv=None) -> int:
     ap.add_argument("--atol-ratio", type=float, default=ATOL_RATIO,
                     help=f"atol = this x rtol in every run (default {ATOL_RATIO:g}, the product's default scaled)")
     ap.add_argument("--analyse", metavar="JSONL", help="only analyse an existing record file")
+    ap.add_argument("--only", type=int, nargs="+", metavar="INDEX",
+                    help="run only these scene indices of the seed's draw (e.g. a table's exceptions again)")
     ap.add_argument("--resume", action="store_true",
                     help="keep the scenes already in the tag's record file (same seed and core) and run only the rest")
     a = ap.parse_args(argv)
@@ -318,9 +321,14 @@ def main(argv=None) -> int:
         print(analyse(recs))
         return 0
     n = a.scenes or (100 if a.quick else 500)
+    if a.only:
+        n = max(a.only) + 1
     tag = a.tag or f"n{n}-seed{a.seed}"
     rng = np.random.default_rng(a.seed)
     scenes = [(i, draw_scene(rng), a.atol_ratio) for i in range(n)]
+    if a.only:
+        scenes = [sc for sc in scenes if sc[0] in set(a.only)]
+        n = len(scenes)
     path = OUT / f"convergence-{tag}.jsonl"
     t0 = time.time()
     recs = []
