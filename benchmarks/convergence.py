@@ -327,7 +327,8 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(a.seed)
     scenes = [(i, draw_scene(rng), a.atol_ratio) for i in range(n)]
     if a.only:
-        scenes = [sc for sc in scenes if sc[0] in set(a.only)]
+        only = set(a.only)
+        scenes = [sc for sc in scenes if sc[0] in only]
         n = len(scenes)
     path = OUT / f"convergence-{tag}.jsonl"
     t0 = time.time()
