@@ -32,8 +32,9 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   and the stuck components at rest (loss booked to k_i), else it stays free;
 * after every discrete update (the driver's 'settle'): a slide at or below slip_tol ends; a
   component whose omega.a_i an impulse moved takes the sign of its new omega.a_i (a stuck one is
-  released: a finite moment cannot hold it through an impulse); a free component at or past its
-  switching surface gets the stick test; a stuck component whose needed moment now exceeds k_i Phi
+  released, a finite moment cannot hold it through an impulse, unless the move is within spin_tol;
+  a free one left past its switching surface by no more than spin_tol is at rest and gets the stick
+  test); a free component at or past its switching surface gets the stick test; a stuck component whose needed moment now exceeds k_i Phi
   (the contact law changed under it) is released with that sign; Phi <= 0 is contact loss; a
   rolling state outside the static cone starts to slip;
 * an event function that is <= 0 at a restart (the state sits on that surface: alpha = 0 after
@@ -452,10 +453,19 @@ class Disk:
         return -1
 
     def needed_sigma(self, i, t, y, c):
-        """sigma_i that holds omega.a_i at 0 (component i treated as stuck)."""
+        """sigma_i that holds omega.a_i at 0 (component i treated as stuck). A slaved slip's friction
+        acts along its direction at this instant: the root for the contact state as it is (c.nu
+        where there is none), not one solved with component i held."""
+        nu = c.nu
+        if c.mode == SLAVED:
+            root = self.slaved_root(c.nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, c)
+            nu = c.nu if math.isnan(root) else root
         was = c.stuck[i]
         c.stuck[i] = True
-        _, aux, _ = self.rhs(t, y, c, c.nu)
+        if c.mode == SLAVED:
+            _, aux = self.model(t, y, SLIDE, c, math.cos(nu), math.sin(nu), self.pf)
+        else:
+            _, aux, _ = self.rhs(t, y, c, c.nu)
         c.stuck[i] = was
         return aux[X_SIG1 + i]
 
@@ -526,6 +536,8 @@ class Disk:
             if self.k[i] > 0.0 and g[i] != g_before[i]:
                 if c.stuck[i] and abs(g[i] - g_before[i]) <= self.p[P_WTOL]:
                     continue   # moved within spin_tol: still at rest (docs/model.md)
+                if not c.stuck[i] and c.sig[i] * g[i] <= 0.0 and abs(g[i]) <= self.p[P_WTOL]:
+                    continue   # left within spin_tol of its surface: at rest, the stick test below
                 if c.stuck[i]:
                     self.stats["released_by_impulse"] += 1
                 c.stuck[i] = False

@@ -381,13 +381,42 @@ def cone_violated(t, y, p, cs, n, wk, istats):
 
 
 @kernel
+def decision_rhs(i, t, y, p, cs, n, dy, aux, wk, istats):
+    """The right-hand side on which a discrete decision at an event reads the moments (to dy, aux),
+    with component i treated as stuck (i < 0: the contact state as it is; cs is left as it was).
+
+    In a SLAVED slip the friction acts along the slip's direction at this instant: the slaved root
+    continued from cs[CS_NU] for the contact state as it is (cs[CS_NU] itself where the secant
+    finds none). It is not solved again for the hypothesis: holding omega.a_i changes the slip
+    dynamics, and a root of those (if any: confirm_slaved looks for it after the update) is where
+    the direction relaxes to, not where it is; a secant that fails there left its last iterate, a
+    direction set by the iteration, to decide the stick (seed 20261128 scene 70)."""
+    slaved = cs[CS_MODE] == SLAVED
+    nu = cs[CS_NU]
+    pf = wk[W_PFRICTION]
+    if slaved:
+        nu = slaved_direction(nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, p, cs, n, dy, aux, wk[W_YSLIP], istats)
+        if aux[X_OK] == 0.0:
+            nu = cs[CS_NU]
+        for j in range(N_PARAMS):
+            pf[j] = p[j]
+        pf[P_UFREEZE] = math.inf
+    was = cs[CS_STUCK + i] if i >= 0 else 0.0
+    if i >= 0:
+        cs[CS_STUCK + i] = 1.0
+    if slaved:
+        _model(t, y, pf, cs, n, dy, aux, math.cos(nu), math.sin(nu), istats)
+    else:
+        eval_rhs(t, y, p, cs, n, dy, aux, wk, istats)
+    if i >= 0:
+        cs[CS_STUCK + i] = was
+
+
+@kernel
 def needed_sigma(i, t, y, p, cs, n, dy, aux, wk, istats):
     """sigma_i of the moment that holds omega.a_i where it is (component i treated as stuck; its
-    contact state is left as it was). The right-hand side of that state goes to dy, aux."""
-    was = cs[CS_STUCK + i]
-    cs[CS_STUCK + i] = 1.0
-    eval_rhs(t, y, p, cs, n, dy, aux, wk, istats)
-    cs[CS_STUCK + i] = was
+    contact state is left as it was; decision_rhs). The right-hand side goes to dy, aux."""
+    decision_rhs(i, t, y, p, cs, n, dy, aux, wk, istats)
     return aux[X_SIG1 + i]
 
 
@@ -420,18 +449,25 @@ def stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
 
 @kernel
 def release_moved(y, p, cs, g_before):
-    """A stuck moment component whose omega.a_i an impulse has moved off its held value by more
-    than spin_tol is free: the dry-friction moment is finite and cannot hold it through an impulse
-    (sign of the new omega.a_i; an exact 0 is left to settle_signs' stick test). A move within
-    spin_tol leaves it at rest, as a free component that slows to spin_tol is taken to stop: an
-    impulse that hardly turns it (the O(u^2) one of a slaved hand-over moves it by ~1e-16, its
-    round-off) must not release it only to have it stick again at once."""
+    """Moment components whose omega.a_i an impulse has moved. A stuck one moved off its held value
+    by more than spin_tol is free: the dry-friction moment is finite and cannot hold it through an
+    impulse (sign of the new omega.a_i; an exact 0 is left to settle_signs' stick test). A move
+    within spin_tol leaves it at rest, as a free component that slows to spin_tol is taken to stop:
+    an impulse that hardly turns it (the O(u^2) one of a slaved hand-over moves it by ~1e-16, its
+    round-off) must not release it only to have it stick again at once. A free one carried past its
+    switching surface by more than spin_tol spins the other way at a finite rate: its moment takes
+    the new sign (a stick test there would hold a spinning component); one left within spin_tol of
+    the surface is at rest and gets settle_signs' stick test."""
     g = moment_axes_rates(y)
     for i in range(3):
+        if g[i] == g_before[i]:
+            continue
         if cs[CS_STUCK + i] == 1.0 and abs(g[i] - g_before[i]) > p[P_WTOL]:
             cs[CS_STUCK + i] = 0.0
             if g[i] != 0.0:
                 cs[CS_SIG + i] = 1.0 if g[i] > 0.0 else -1.0
+        elif cs[CS_STUCK + i] == 0.0 and cs[CS_SIG + i] * g[i] < 0.0 and abs(g[i]) > p[P_WTOL]:
+            cs[CS_SIG + i] = 1.0 if g[i] > 0.0 else -1.0
 
 
 @kernel
@@ -448,7 +484,7 @@ def settle_signs(t, y, p, cs, n, wk, istats, held):
     """
     k = (p[P_K1], p[P_K2], p[P_K3])
     for _ in range(6):
-        eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+        decision_rhs(-1, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
         found = -1
         for i in range(3):
             if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 1.0 and i != held \
