@@ -304,6 +304,20 @@ def test_a_slip_passing_by_zero_within_slip_tol_ends_at_every_rtol():
     assert len(set(counts.values())) == 1, counts
 
 
+def test_a_stick_test_in_a_slaved_slip_reads_the_moment_along_the_slips_direction():
+    """Seed 20261128, scene 70: at tau 101.71254987 the slide hands over to SLAVED, and its impulse
+    carries a just-released omega.a_3 across 0 by 2.0e-9 (within spin_tol, 2.6e-9: at rest), so
+    it gets the stick test. With component 3 held the slaved slip has no root near its direction;
+    the test solved for one, and its failed secant's last iterate decided (held, 52 stick phases
+    at every rtol) while the SciPy peer read NaN there and passed (51). Both now read the moment
+    with the friction along the slip's direction at that instant (contact.decision_rhs): the
+    peer's count, 51, at rtol 1e-12 and 1e-13 (benchmarks/scipy_agreement.py)."""
+    cfg = harness._valid_levels(harness.harness_scene(20261128, 70))
+    for rtol in (1e-10, 1e-12):
+        r = harness._one_run(cfg, rtol)
+        assert r["outcome"] == "halted" and r["events"] == [113, 51, 0], (rtol, r["events"])
+
+
 def test_micro_sticks_at_a_moment_limit_are_counted_alike_at_every_rtol():
     """Harness scene 252 (seed 20261122): omega.a_1's needed moment oscillates about its limit, so
     the component unsticks once per period, swings to ~1e-5 and comes back to 0 almost

@@ -517,6 +517,32 @@ def test_settle_signs_releases_a_stuck_component_the_moment_cannot_hold(setup, k
             assert cs[L.CS_STUCK] == 0.0 and cs[L.CS_SIG] == math.copysign(1.0, need)
 
 
+@pytest.mark.parametrize("w1_after", [-5e-7, -5e-6])
+def test_an_impulse_carrying_a_free_component_past_its_surface(setup, w1_after):
+    """An impulse that carries a free component (sigma_1 = +1, omega.a_1 = omega_1 = 0.05) past its
+    switching surface: by more than spin_tol (1e-6) it spins the other way at a finite rate, and
+    its moment takes the new sign, although the moment could hold it (|sigma needed| < 1 there, so
+    a stick test would have stuck a spinning component); within spin_tol it is at rest and gets
+    the stick test (docs/model.md, 'Restarts on a surface')."""
+    p, y, cs0 = setup
+    pp = p.copy()
+    pp[M.P_K1], pp[M.P_WTOL] = 1.0, 1e-6
+    g_before = M.moment_axes_rates(y)
+    y1 = y.copy()
+    y1[M.Y_W1] = w1_after
+    cs = cs0.copy()
+    cs[L.CS_MODE] = L.ROLL
+    wk, ist = _work()
+    need = C.needed_sigma(0, 0.0, y1, pp, cs, M.N_CORE, wk[L.W_DYTMP], wk[L.W_AUXTMP], wk, ist)
+    assert abs(need) < 1.0
+    C.release_moved(y1, pp, cs, g_before)
+    C.settle_signs(0.0, y1, pp, cs, M.N_CORE, wk, ist, -1)
+    if abs(w1_after) > pp[M.P_WTOL]:
+        assert cs[L.CS_STUCK] == 0.0 and cs[L.CS_SIG] == -1.0
+    else:
+        assert cs[L.CS_STUCK] == 1.0
+
+
 def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(setup):
     """roots.event_rates (one forward difference for every event) against the exact slopes of the
     sign functions (sign_rate: from the state and its derivative) and of side * alpha (omega_1), and
