@@ -110,7 +110,8 @@ DIP_INSIDE = DIP_CHECKED | set(UNSTICK)
 # ... and the slip speed against slip_tol and the slaving speed where a slide passes by u = 0 inside
 # a step: |u| has a V there, narrower than the step (harness seed 20261128 scene 39)
 DIP_INSIDE |= {"slipslow", "slave"}
-FORCE_EVENTS = {"cone", *UNSTICK}   # the dip-checked events that read the contact forces
+FORCE_EVENTS = {"cone", *UNSTICK}
+STEP_MIN_XATOL = 1e-12   # the minimum of a function over a step: its position to this fraction of the step   # the dip-checked events that read the contact forces
 
 
 def _axes_rate(i, y, f):
@@ -122,6 +123,17 @@ def _axes_rate(i, y, f):
     if i == 1:
         return f[Y_W2] * c - f[Y_W3] * s - w1 * (w2 * s + w3 * c)
     return f[Y_W2] * s + f[Y_W3] * c + w1 * (w2 * c - w3 * s)
+
+
+def _step_minimum(fun, t_old, hstep):
+    """(x, fun(t_old + x hstep)) at the minimum of fun over a step, x in [0, 1] (bounded Brent).
+    In the step's own coordinate: SciPy's bounded method stops at sqrt(eps) |x| + xatol / 3, which
+    in absolute time (|t| ~ 100, a step of 1e-8) is wider than the step itself, so it returned its
+    first golden-section point (harness seed 20261128 scene 19: |u| 1.342e-9 there against a
+    minimum of 1.250e-9 under slip_tol 1.264e-9)."""
+    res = _minimize_scalar(lambda x: fun(t_old + x * hstep), bounds=(0.0, 1.0), method="bounded",
+                           options={"xatol": STEP_MIN_XATOL})
+    return float(res.x), float(res.fun)
 
 
 def _hermite_min(g0, d0, g1, d1):
@@ -922,10 +934,9 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                             xs = []
                             if (y[Y_U1] * f_old[Y_U1] + y[Y_U2] * f_old[Y_U2] < 0.0
                                     and y_new[Y_U1] * f_new[Y_U1] + y_new[Y_U2] * f_new[Y_U2] > 0.0):
-                                res = _minimize_scalar(lambda tt: float(np.hypot(*np.asarray(dense(tt))[[Y_U1, Y_U2]])),
-                                                       bounds=(t_old, t_new), method="bounded",
-                                                       options={"xatol": 1e-12 * hstep})
-                                xs = [(float(res.x) - t_old) / hstep]
+                                xm, _ = _step_minimum(lambda tt: float(np.hypot(*np.asarray(dense(tt))[[Y_U1, Y_U2]])),
+                                                      t_old, hstep)
+                                xs = [xm]
                         else:
                             # the cone and un-stick margins have no exact slope: their Hermite minimum with end slopes
                             # by differences on the dense output, and CONE_SAMPLES interior points
@@ -946,10 +957,9 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                                 break
                         if br is None and g_low < 0.1 * min(g_old[k], g_new[k]):
                             # a shallow dip: decided by the minimum of g on the dense output
-                            res = _minimize_scalar(lambda tt, k=k: gd(k, tt), bounds=(t_old, t_new), method="bounded",
-                                                   options={"xatol": 1e-9 * hstep})
-                            if res.fun <= 0.0:
-                                br = (t_old, g_old[k], float(res.x), float(res.fun))
+                            xm, gm = _step_minimum(lambda tt, k=k: gd(k, tt), t_old, hstep)
+                            if gm <= 0.0:
+                                br = (t_old, g_old[k], t_old + xm * hstep, gm)
                         if br is not None and k in FORCE_EVENTS:
                             # a dip of an event of the forces that only the dense output shows
                             # stands where the state integrated to its minimum confirms it
