@@ -318,6 +318,20 @@ def test_a_stick_test_in_a_slaved_slip_reads_the_moment_along_the_slips_directio
         assert r["outcome"] == "halted" and r["events"] == [113, 51, 0], (rtol, r["events"])
 
 
+def test_the_peers_minimum_over_a_short_step_late_in_a_run_is_the_minimum():
+    """The SciPy peer's dip checks minimise over a step in the step's own coordinate: SciPy's
+    bounded Brent stops at sqrt(eps) |x| + xatol/3, which in absolute time (tau ~ 124, a step of
+    8.8e-9) exceeds the step, and it returned its first golden-section point (seed 20261128 scene
+    19: |u| 1.342e-9 there, against a minimum of 1.250e-9 below slip_tol 1.264e-9; the slide's end
+    was missed at rtol 1e-11 and 1e-12). A V of |u| with its bottom at 0.63 of the step:"""
+    from scipy_driver import _step_minimum
+
+    t_old, hstep = 124.24662130825361, 8.8155e-9
+    t_bottom = t_old + 0.63 * hstep
+    x, value = _step_minimum(lambda t: 1.25e-9 + 0.13 * abs(t - t_bottom), t_old, hstep)
+    assert abs(x - 0.63) < 1e-4 and value < 1.25e-9 + 1e-12, (x, value)
+
+
 def test_micro_sticks_at_a_moment_limit_are_counted_alike_at_every_rtol():
     """Harness scene 252 (seed 20261122): omega.a_1's needed moment oscillates about its limit, so
     the component unsticks once per period, swings to ~1e-5 and comes back to 0 almost
