@@ -471,7 +471,7 @@ def release_moved(y, p, cs, g_before):
 
 
 @kernel
-def settle_signs(t, y, p, cs, n, wk, istats, held):
+def settle_signs(t, y, p, cs, n, wk, istats, own):
     """After a discrete update, every moment component is made consistent with the new state.
 
     A stuck component whose holding moment now exceeds the limit (|sigma needed| > 1: the update
@@ -479,28 +479,34 @@ def settle_signs(t, y, p, cs, n, wk, istats, held):
     needed moment: its un-stick event, |sigma| rising to 1, can no longer happen. A free component
     whose sign function sigma_i (omega.a_i) is <= 0 has reached its switching surface at this same
     event (two components of a spin-free rocking disk pass omega.a_i = 0 together) and gets the
-    stick test now, since its own event, g going from > 0 to <= 0, can no longer happen. `held` is
-    a component the caller holds on its surface by the Filippov rule (-1: none).
+    stick test now, since its own event, g going from > 0 to <= 0, can no longer happen. `own` is
+    the component this event put on its surface (-1: none), left to its own rule: held there by
+    the Filippov rule, or just released at an un-stick (leaving it: the next step looks for its
+    lift-off). Every component is looked at until none changes: a test that changes nothing does
+    not stop the others' (three components, so a few passes).
     """
     k = (p[P_K1], p[P_K2], p[P_K3])
     for _ in range(6):
         decision_rhs(-1, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
         found = -1
         for i in range(3):
-            if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 1.0 and i != held \
+            if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 1.0 and i != own \
                     and abs(wk[W_AUXTMP, X_SIG1 + i]) > 1.0:
                 found = i
         if found >= 0:
             cs[CS_STUCK + found] = 0.0
             cs[CS_SIG + found] = 1.0 if wk[W_AUXTMP, X_SIG1 + found] > 0.0 else -1.0
             continue
+        g = moment_axes_rates(y)
         for i in range(3):
-            if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 0.0 \
-                    and cs[CS_SIG + i] * wk[W_AUXTMP, X_G1 + i] <= 0.0:
-                found = i
+            if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 0.0 and i != own \
+                    and cs[CS_SIG + i] * g[i] <= 0.0:
+                sig_before = cs[CS_SIG + i]
+                stick_or_flip(i, t, y, p, cs, n, wk, istats)
+                if cs[CS_STUCK + i] == 1.0 or cs[CS_SIG + i] != sig_before:
+                    found = i
         if found < 0:
             return
-        stick_or_flip(found, t, y, p, cs, n, wk, istats)
 
 
 @kernel
@@ -604,7 +610,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     right-hand side and the event functions afterwards.
     """
     g_before = moment_axes_rates(y)
-    held = -1
+    own = -1   # the component this event puts on its surface (settle_signs)
     if k <= EV_SIGN3:
         stick_or_flip(k, t, y, p, cs, n, wk, istats)
     elif k >= EV_AGAINST1:
@@ -616,7 +622,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         if cs[CS_STUCK + i] == 0.0 and cs[CS_SIG + i] == sig_failed:
             cs[CS_STUCK + i] = 1.0
             istats[I_STICK] += 1
-            held = i
+            own = i
     elif EV_SPIN1 <= k <= EV_SPIN3:
         i = k - EV_SPIN1
         if stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
@@ -626,6 +632,7 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
         cs[CS_SIG + i] = 1.0 if wk[W_AUXTMP, X_SIG1 + i] > 0.0 else -1.0
         cs[CS_STUCK + i] = 0.0
+        own = i
     elif k == EV_CONE:
         start_slip(t, y, p, cs, n, wk, istats)
         cs[CS_SLAVE_OFF] = 0.0
@@ -660,13 +667,14 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         # orders of magnitude in 1e-11 tau): its own event can no longer happen
         end_slip(y, p, cs, wk, istats)
     release_moved(y, p, cs, g_before)
-    settle_signs(t, y, p, cs, n, wk, istats, held)
+    settle_signs(t, y, p, cs, n, wk, istats, own)
     # a rolling state must be admissible after every discrete update: a moment sign that flips or
     # sticks changes the friction that rolling needs, and it may jump outside the static cone
     if cs[CS_MODE] == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
         start_slip(t, y, p, cs, n, wk, istats)
         # the slip changes the moments the stuck components need
-        settle_signs(t, y, p, cs, n, wk, istats, -1)
+        # (a component the Filippov rule held is tested again: the slip changed its dynamics)
+        settle_signs(t, y, p, cs, n, wk, istats, own if own >= 0 and cs[CS_STUCK + own] == 0.0 else -1)
     return -1
 
 
