@@ -543,6 +543,34 @@ def test_an_impulse_carrying_a_free_component_past_its_surface(setup, w1_after):
         assert cs[L.CS_STUCK] == 1.0
 
 
+def test_settle_signs_tests_every_component_on_its_surface(setup):
+    """A stick test that changes nothing (component 1 at omega.a_1 = 0, its moment too weak to hold
+    it, already signed the way the motion goes) must not stop the test of another component on or
+    past its surface (component 3, signed against its omega.a_3): it gets its stick test. Before,
+    the scan took the first such component on every pass and never reached the third."""
+    p, y, cs0 = setup
+    pp = p.copy()
+    pp[M.P_K1], pp[M.P_K2], pp[M.P_K3] = 1e-6, 1e-6, 1e-6
+    y1 = y.copy()
+    y1[M.Y_W1] = 0.0
+    g = M.moment_axes_rates(y1)
+    cs = cs0.copy()
+    cs[L.CS_MODE] = L.ROLL
+    cs[L.CS_SIG + 1] = math.copysign(1.0, g[1])
+    cs[L.CS_SIG + 2] = -math.copysign(1.0, g[2])
+    wk, ist = _work()
+    need1 = C.needed_sigma(0, 0.0, y1, pp, cs, M.N_CORE, wk[L.W_DYTMP], wk[L.W_AUXTMP], wk, ist)
+    need3 = C.needed_sigma(2, 0.0, y1, pp, cs, M.N_CORE, wk[L.W_DYTMP], wk[L.W_AUXTMP], wk, ist)
+    assert abs(need1) > 1.0
+    cs[L.CS_SIG] = math.copysign(1.0, need1)
+    C.settle_signs(0.0, y1, pp, cs, M.N_CORE, wk, ist, -1)
+    assert cs[L.CS_STUCK] == 0.0 and cs[L.CS_SIG] == math.copysign(1.0, need1)
+    if abs(need3) < 1.0:   # (0.78 here: the moment holds it)
+        assert cs[L.CS_STUCK + 2] == 1.0
+    else:
+        assert cs[L.CS_STUCK + 2] == 0.0 and cs[L.CS_SIG + 2] == math.copysign(1.0, need3) != -math.copysign(1.0, g[2])
+
+
 def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(setup):
     """roots.event_rates (one forward difference for every event) against the exact slopes of the
     sign functions (sign_rate: from the state and its derivative) and of side * alpha (omega_1), and
