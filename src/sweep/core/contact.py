@@ -156,6 +156,17 @@ def slaved_direction(nu0, u, t, y, p, cs, n, dy, aux, ys, istats):
 
 
 @kernel
+def friction_along(nu, t, y, p, cs, n, dy, aux, wk, istats):
+    """The sliding right-hand side at the state's own slip vector with the friction along s(nu),
+    whatever |u| (the parameters' freeze speed lifted, in wk[W_PFRICTION])."""
+    pf = wk[W_PFRICTION]
+    for i in range(N_PARAMS):
+        pf[i] = p[i]
+    pf[P_UFREEZE] = math.inf
+    _model(t, y, pf, cs, n, dy, aux, math.cos(nu), math.sin(nu), istats)
+
+
+@kernel
 def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
     """d y/d tau and contact quantities (aux) for the contact state cs; counts its model calls."""
     mode = cs[CS_MODE]
@@ -170,11 +181,7 @@ def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
         ok = aux[X_OK]
         cross1, _ = slip_rates(nu + DCROSS_DNU, u, t, y, p, cs, n, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP],
                                istats)
-        pf = wk[W_PFRICTION]
-        for i in range(N_PARAMS):
-            pf[i] = p[i]
-        pf[P_UFREEZE] = math.inf
-        _model(t, y, pf, cs, n, dy, aux, math.cos(nu), math.sin(nu), istats)
+        friction_along(nu, t, y, p, cs, n, dy, aux, wk, istats)
         aux[X_DCROSS] = (cross1 - cross0) / DCROSS_DNU
         if ok < 0.0:
             aux[X_OK] = ok
@@ -393,19 +400,15 @@ def decision_rhs(i, t, y, p, cs, n, dy, aux, wk, istats):
     direction set by the iteration, to decide the stick (seed 20261128 scene 70)."""
     slaved = cs[CS_MODE] == SLAVED
     nu = cs[CS_NU]
-    pf = wk[W_PFRICTION]
     if slaved:
         nu = slaved_direction(nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, p, cs, n, dy, aux, wk[W_YSLIP], istats)
         if aux[X_OK] == 0.0:
             nu = cs[CS_NU]
-        for j in range(N_PARAMS):
-            pf[j] = p[j]
-        pf[P_UFREEZE] = math.inf
     was = cs[CS_STUCK + i] if i >= 0 else 0.0
     if i >= 0:
         cs[CS_STUCK + i] = 1.0
     if slaved:
-        _model(t, y, pf, cs, n, dy, aux, math.cos(nu), math.sin(nu), istats)
+        friction_along(nu, t, y, p, cs, n, dy, aux, wk, istats)
     else:
         eval_rhs(t, y, p, cs, n, dy, aux, wk, istats)
     if i >= 0:
