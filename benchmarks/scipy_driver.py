@@ -466,12 +466,12 @@ class Disk:
 
     def needed_sigma(self, i, t, y, c):
         """sigma_i that holds omega.a_i at 0 (component i treated as stuck). A slaved slip's friction
-        acts along its direction at this instant: the root for the contact state as it is (c.nu
-        where there is none), not one solved with component i held."""
+        acts along its direction at this instant: the root for the contact state as it is (where
+        there is none, the slip vector's own direction), not one solved with component i held."""
         nu = c.nu
         if c.mode == SLAVED:
             root = self.slaved_root(c.nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, c)
-            nu = c.nu if math.isnan(root) else root
+            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root
         was = c.stuck[i]
         c.stuck[i] = True
         if c.mode == SLAVED:

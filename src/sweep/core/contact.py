@@ -393,17 +393,19 @@ def decision_rhs(i, t, y, p, cs, n, dy, aux, wk, istats):
     with component i treated as stuck (i < 0: the contact state as it is; cs is left as it was).
 
     In a SLAVED slip the friction acts along the slip's direction at this instant: the slaved root
-    continued from cs[CS_NU] for the contact state as it is (cs[CS_NU] itself where the secant
-    finds none). It is not solved again for the hypothesis: holding omega.a_i changes the slip
-    dynamics, and a root of those (if any: confirm_slaved looks for it after the update) is where
-    the direction relaxes to, not where it is; a secant that fails there left its last iterate, a
-    direction set by the iteration, to decide the stick (seed 20261128 scene 70)."""
+    continued from cs[CS_NU] for the contact state as it is. Where the secant finds no root there,
+    the friction opposes the slip vector itself, as in SLIDE (a direction of the state; cs[CS_NU]
+    was set at a step end, which the step size places). The root is not solved again for the
+    hypothesis: holding omega.a_i changes the slip dynamics, and a root of those (if any:
+    confirm_slaved looks for it after the update) is where the direction relaxes to, not where it
+    is; a secant that fails there left its last iterate, a direction set by the iteration, to
+    decide the stick (seed 20261128 scene 70)."""
     slaved = cs[CS_MODE] == SLAVED
     nu = cs[CS_NU]
     if slaved:
         nu = slaved_direction(nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, p, cs, n, dy, aux, wk[W_YSLIP], istats)
         if aux[X_OK] == 0.0:
-            nu = cs[CS_NU]
+            nu = math.atan2(y[Y_U2], y[Y_U1])
     was = cs[CS_STUCK + i] if i >= 0 else 0.0
     if i >= 0:
         cs[CS_STUCK + i] = 1.0
