@@ -16,20 +16,20 @@ import numpy as np
 from .. import outcomes as oc
 from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SLAVE, EV_SLIP_SLOW, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved,
                       consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, slaved_direction, start_slip)
-from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start, lattice_step
+from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
 from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
-                     T_DIP_END, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
+                     T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
 from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes, slip_closest_approach
 from .tableau import N_STAGES
-from .tracking import (dense_wanted, halt_flat, peak_bracketed, previous_dense, record_levels, record_sample,
-                       record_samples, record_traj, shift_peak_window, track_peaks)
+from .tracking import (dense_wanted, halt_flat, record_levels, record_sample, record_samples, record_traj,
+                       track_frequency)
 
 EPS = 2.220446049250313e-16
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
@@ -363,51 +363,46 @@ def tally_step(cs, istats, accepted, count):
 @kernel
 def mark_end(t_end, y_at_end, n, p, cs, fstats, trk, y_end, istats):
     """The scene ended (halted, or reached t_max) at t_end in state y_at_end: its end state,
-    energy and impact losses; returns its event counts (transitions, stick phases, impacts).
-    Steps after the end only resolve Phi maxima and change none of them."""
+    energy, impact losses and event counts (trk[T_END_*]). Steps after the end only resolve Phi
+    maxima and change none of them."""
     fstats[F_TEND] = t_end
     for i in range(n):
         y_end[i] = y_at_end[i]
     fstats[F_EEND] = mode_energy(y_end, p, cs)
     trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
-    return istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS]
+    trk[T_END_TRANS] = istats[I_TRANS]
+    trk[T_END_STICK] = istats[I_STICK]
+    trk[T_END_IMPACTS] = istats[I_IMPACTS]
 
 
 @kernel
-def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, level_out, samples, traj,
-        peaks, y_end, fq):
-    """Integrate one scene in place of the given buffers (see integrate for their shapes)."""
-    rtol = settings[S_RTOL]
-    atol = settings[S_ATOL]
-    h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
-    t_max = settings[S_TMAX]
+def state_size(settings):
+    """Components integrated: the dynamics and the dissipation books (N_CORE), + theta for the
+    frequency outputs (N_THETA), + the kinematics (N_FULL)."""
+    if settings[S_KIN] > 0.0:
+        return N_FULL
+    return N_THETA if settings[S_PEAKS] > 0.0 else N_CORE
+
+
+@kernel
+def begin(y, p, settings, level_e, sample_tau, cs, wk, trk, istats, fstats, samples, traj, fq):
+    """The scene at tau = 0: its contact state, f and aux (wk[W_F], wk[W_AUX]), E(0), the event
+    values (wk[W_GOLD]), the samples and trajectory row at 0, the trackers. Returns (the outcome that
+    ends the scene at once, else -1; the first step size)."""
+    n = state_size(settings)
     u_tol = settings[S_UTOL]
-    max_steps = int(settings[S_MAXSTEPS])
-    peaks_on = settings[S_PEAKS] > 0.0
-    n = N_FULL if settings[S_KIN] > 0.0 else (N_THETA if peaks_on else N_CORE)
-    extra_steps = int(settings[S_EXTRA])
-    nl = level_e.shape[0]
-    want_traj = traj.shape[0] > 0
     f = wk[W_F]
     aux = wk[W_AUX]
-    y_new = wk[W_YNEW]
-    f_new = wk[W_FNEW]
-    aux_new = wk[W_AUXNEW]
-    g_old = wk[W_GOLD]
-    g_new = wk[W_GNEW]
-
     p[P_UFREEZE] = u_tol
     fstats[F_TIMPACT] = -math.inf
-    # event counts at the end (halt or t_max): steps after it only resolve Phi maxima, and what
-    # happens there must not depend on whether the frequency outputs are on
-    end_trans, end_stick, end_impacts = -1, -1, -1
-    t = 0.0
+    trk[T_END_TRANS] = -1.0
+    trk[T_END_STICK] = -1.0
+    trk[T_END_IMPACTS] = -1.0
+    trk[T_H_AFTER] = 0.0
     start_code = start(y, p, cs, n, u_tol, wk, istats)
-    eval_rhs(t, y, p, cs, n, f, aux, wk, istats)
+    eval_rhs(0.0, y, p, cs, n, f, aux, wk, istats)
     fstats[F_E0] = mode_energy(y, p, cs)
-    e0 = max(abs(fstats[F_E0]), 1e-300)
-    lev = level_e[0] if nl > 0 else math.nan
-    event_values(y, aux, p, cs, u_tol, lev, g_old)
+    event_values(y, aux, p, cs, u_tol, level_e[0] if level_e.shape[0] > 0 else math.nan, wk[W_GOLD])
     outcome = -1
     if aux[X_PHI] <= 0.0:
         outcome = oc.CONTACT_LOST
@@ -419,32 +414,177 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     while int(trk[T_NEXT_SAMPLE]) < ns and sample_tau[int(trk[T_NEXT_SAMPLE])] <= 0.0:
         record_sample(y, aux, p, cs, n, samples[int(trk[T_NEXT_SAMPLE])])
         trk[T_NEXT_SAMPLE] += 1.0
-    if want_traj:
-        record_traj(t, y, aux[X_PHI], cs, n, traj, istats)
+    if traj.shape[0] > 0:
+        record_traj(0.0, y, aux[X_PHI], cs, n, traj, istats)
     trk[T_PHI_B] = aux[X_PHI]
     trk[T_RATES_OLD] = 0.0
-    if peaks_on:
+    if settings[S_PEAKS] > 0.0:
         freq_start(y[Y_THETA], aux[X_PHI], fq)
-    h = initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats)
-    after_reject = False
-    h = min(h, h_max)
+    h = initial_step(0.0, y, f, n, p, cs, settings[S_RTOL], settings[S_ATOL], wk, istats)
+    return outcome, min(h, settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf)
 
-    h_after = math.inf
-    t_after_limit = math.inf
+
+@kernel
+def step_after_end(t, h, trk):
+    """The step size after the scene's end, where the steps only resolve the Phi maxima just after
+    the levels: not past the last step before the end, nor past twice the end's tau (a steady
+    motion, e.g. rolling at a tilt held by a stuck moment, has no maxima, and its steps would grow
+    tenfold each until t overflowed). Returns -1 where they stop."""
+    trk[T_AFTER_HALT] += 1.0
+    if trk[T_H_AFTER] == 0.0:
+        trk[T_H_AFTER] = h
+        trk[T_T_AFTER] = 2.0 * t
+    if t >= trk[T_T_AFTER]:
+        return -1.0
+    return min(h, trk[T_H_AFTER])
+
+
+@kernel
+def retract_step(cs, istats):
+    """An accepted step rejected after all (its kept part retried shorter)."""
+    tally_step(cs, istats, True, -1)
+    tally_step(cs, istats, False, 1)
+
+
+@kernel
+def segment_end(t, y, h, seg_end, event, check, n, p, cs, F, e0, t_max, rtol, wk):
+    """The state where the accepted step's kept part ends (wk[W_YSEG]): the step end, or the dense
+    output at an event. Returns its energy (mode_energy) and, for an event's segment where `check`,
+    the energy balance error of the kept part (held like a step's: > 1 retries the step shorter),
+    else 0."""
+    y_seg = wk[W_YSEG]
+    if not event:
+        for i in range(n):
+            y_seg[i] = wk[W_YNEW, i]
+        return mode_energy_at(y_seg, wk[W_AUXNEW], p, cs), 0.0
+    dense_eval(F, 0, y, t, h, seg_end, n, y_seg)
+    e_seg = mode_energy(y_seg, p, cs)
+    if not check:
+        return e_seg, 0.0
+    # the kept part ends on the dense output (7th order)
+    return e_seg, state_balance_error(y, y_seg, mode_energy_at(y, wk[W_AUX], p, cs), e_seg, seg_end - t, p, e0,
+                                      t_max, rtol)
+
+
+@kernel
+def segment_phi(seg_end, event, n, p, cs, wk, istats):
+    """Phi at the segment end (the step end's from its last stage; an event's from the dense state)."""
+    if event:
+        eval_rhs(seg_end, wk[W_YSEG], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+        return wk[W_AUXBUF, X_PHI]
+    return wk[W_AUXNEW, X_PHI]
+
+
+@kernel
+def advance(t, seg_end, event, running, ended, y, n, cs, trk, wk, fstats):
+    """Move the start to the segment end: its state, and where no event restarts there the step
+    end's f, aux and event rates; the time spent sliding (to the scene's end)."""
+    if cs[CS_MODE] != ROLL and running:
+        fstats[F_SLIDETIME] += (seg_end if not ended else fstats[F_TEND]) - t
+    for i in range(n):
+        y[i] = wk[W_YSEG, i]
+    if not event:
+        for i in range(n):
+            wk[W_F, i] = wk[W_FNEW, i]
+        for i in range(N_AUX):
+            wk[W_AUX, i] = wk[W_AUXNEW, i]
+    # the event rates at the new start are this step's end rates, unless an event restarts here
+    trk[T_RATES_OLD] = 1.0 if not event and trk[T_RATES_NEW] == 1.0 else 0.0
+    if trk[T_RATES_OLD] == 1.0:
+        for k in range(N_DYN_EVENTS):
+            wk[W_RATEOLD, k] = wk[W_RATENEW, k]
+
+
+@kernel
+def restart_after_event(k, t, y, p, cs, n, u_tol, lev, wk, istats, fstats):
+    """The discrete update of event k at t (contact.apply_event); then the new contact state's
+    slaved direction, right-hand side (wk[W_F], wk[W_AUX]) and event values (wk[W_GOLD]).
+    Returns the outcome that ends the scene here (FACE_CONTACT: the disk lies flat), else -1."""
+    istats[I_EVENTS] += 1
+    code = apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats)
+    if code >= 0:
+        return code
+    if cs[CS_MODE] == SLAVED:
+        # the slaved direction of the contact state the update left, continued across the event
+        # (steps that end in events would otherwise leave it behind the moving root)
+        code = confirm_slaved(t, y, p, cs, n, wk, istats)
+        if code >= 0:
+            return code
+    aux = wk[W_AUX]
+    eval_rhs(t, y, p, cs, n, wk[W_F], aux, wk, istats)
+    if aux[X_OK] != 1.0:
+        return failure_outcome(aux[X_OK])
+    if aux[X_PHI] <= 0.0:
+        # the update (an impact) leaves the disk with no compressive normal force: it leaves the
+        # table here (its own event, Phi falling through 0, cannot happen)
+        return oc.CONTACT_LOST
+    event_values(y, aux, p, cs, u_tol, lev, wk[W_GOLD])
+    return -1
+
+
+@kernel
+def carry_step_end(t, y, p, cs, n, lev, level_pending, wk, istats):
+    """A step that ended without an event: its end's event values start the next step (the
+    level's from the energy, +inf once every level is crossed), and a slaved direction is
+    continued to its end."""
+    for k in range(N_DYN_EVENTS + 1):
+        wk[W_GOLD, k] = wk[W_GNEW, k]
+    wk[W_GOLD, EV_LEVEL] = mode_energy_at(y, wk[W_AUX], p, cs) - lev if level_pending else math.inf
+    if cs[CS_MODE] == SLAVED:
+        cs[CS_NU] = slaved_direction(cs[CS_NU], math.hypot(y[Y_U1], y[Y_U2]), t, y, p, cs, n,
+                                     wk[W_DYBUF], wk[W_AUXBUF], wk[W_YBUF], istats)
+
+
+@kernel
+def finish(outcome, t, h, y, n, p, cs, trk, istats, fstats, y_end, level_out, fq, peaks_on):
+    """The scene's outputs once the loop stops: outcome, the event counts, end state and energy at
+    its end (kept by mark_end, else the last state), the levels' frequencies."""
+    if outcome < 0:
+        outcome = oc.STEP_LIMIT
+    ended = trk[T_END_TRANS] >= 0.0
+    if ended:
+        istats[I_TRANS] = int(trk[T_END_TRANS])
+        istats[I_STICK] = int(trk[T_END_STICK])
+        istats[I_IMPACTS] = int(trk[T_END_IMPACTS])
+    if peaks_on:
+        finish_levels(fq, level_out)
+    if ended:
+        fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the end
+    else:
+        fstats[F_TEND] = t
+        for i in range(n):
+            y_end[i] = y[i]
+        fstats[F_EEND] = mode_energy(y_end, p, cs)
+    istats[I_OUTCOME] = outcome
+    fstats[F_HLAST] = h
+
+
+@kernel
+def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, level_out, samples, traj,
+        peaks, y_end, fq):
+    """Integrate one scene in place of the given buffers (see integrate for their shapes): step,
+    scan the accepted step for the earliest event, record, restart at the event."""
+    rtol = settings[S_RTOL]
+    atol = settings[S_ATOL]
+    h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
+    t_max = settings[S_TMAX]
+    u_tol = settings[S_UTOL]
+    max_steps = int(settings[S_MAXSTEPS])
+    extra_steps = int(settings[S_EXTRA])
+    peaks_on = settings[S_PEAKS] > 0.0
+    n = state_size(settings)
+    nl = level_e.shape[0]
+    lev = level_e[0] if nl > 0 else math.nan
+    outcome, h = begin(y, p, settings, level_e, sample_tau, cs, wk, trk, istats, fstats, samples, traj, fq)
+    e0 = max(abs(fstats[F_E0]), 1e-300)
+    t = 0.0
+    after_reject = False
     while outcome < 0 or (trk[T_PENDING] > 0.0 and trk[T_AFTER_HALT] < extra_steps):
         running = outcome < 0
         if not running:
-            trk[T_AFTER_HALT] += 1.0
-            if h_after == math.inf:
-                # the steps after the end only resolve the Phi maxima just after the levels: they
-                # neither grow past the last step nor run longer than the scene did (a steady
-                # motion, e.g. rolling at a tilt held by a stuck moment, has no maxima, and its
-                # steps would grow tenfold each until t overflowed)
-                h_after = h
-                t_after_limit = 2.0 * t
-            if t >= t_after_limit:
+            h = step_after_end(t, h, trk)
+            if h < 0.0:
                 break
-            h = min(h, h_after)
         if istats[I_STEPS] + istats[I_REJECTED] >= max_steps:
             if running:
                 outcome = oc.STEP_LIMIT
@@ -459,62 +599,46 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if running:
                 outcome = oc.T_MAX if hit_tmax else oc.STEP_SIZE_UNDERFLOW
             break
-        err = try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, t_max)
+        err = try_step(t, y, wk[W_F], h, n, p, cs, K, wk, istats, rtol, atol, e0, t_max)
         if not err <= 1.0:
             h *= step_factor(err)
             after_reject = True
             continue
         h_next = min(h * accepted_step_factor(err, after_reject), h_max)
         after_reject = False
-        if aux_new[X_OK] != 1.0 and running:
-            outcome = failure_outcome(aux_new[X_OK])
+        if wk[W_AUXNEW, X_OK] != 1.0 and running:
+            outcome = failure_outcome(wk[W_AUXNEW, X_OK])
             break
 
-        # --- events, levels, samples, peaks on [t, seg_end] -------------------------------------
-        event_values(y_new, aux_new, p, cs, u_tol, lev, g_new)
-        first_k, first_t, have_dense = first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, istats)
-        if first_k >= 0 and running and trk[T_DIP_END] > t and trk[T_DIP_END] < t + h:
+        # --- the earliest event on the step: the kept part ends there --------------------------
+        event_values(wk[W_YNEW], wk[W_AUXNEW], p, cs, u_tol, lev, wk[W_GNEW])
+        first_k, seg_end, have_dense = first_event(t, y, wk[W_F], h, wk[W_YNEW], wk[W_FNEW], n, p, cs, u_tol, lev,
+                                                   K, F, wk, trk, istats)
+        event = first_k >= 0
+        if event and running and t < trk[T_DIP_END] < t + h:
             # an event of the forces that only the dense output shows (both step ends on the safe
             # side): its value inside the step carries the interpolant's error, amplified where a
             # held moment's balance reads the slip direction; the dip stands only if the integrated
             # state at its minimum confirms it, so the step is retried to end there
-            tally_step(cs, istats, True, -1)
-            tally_step(cs, istats, False, 1)
+            retract_step(cs, istats)
             h = trk[T_DIP_END] - t
             after_reject = True
             continue
-        seg_end = first_t if first_k >= 0 else t + h
+        if not event:
+            seg_end = t + h
+        e_seg, seg_err = segment_end(t, y, h, seg_end, event, running, n, p, cs, F, e0, t_max, rtol, wk)
+        if seg_err > 1.0:
+            retract_step(cs, istats)
+            h *= step_factor(seg_err)
+            after_reject = True
+            continue
         y_seg = wk[W_YSEG]
-        if first_k >= 0:
-            dense_eval(F, 0, y, t, h, seg_end, n, y_seg)
-            # the segment end's energy (the level recorders below read it too)
-            e_seg = mode_energy(y_seg, p, cs)
-            if running:
-                # the kept part of the step ends on the dense output (7th order): its energy
-                # balance is held like a step's, else the step is retried shorter
-                seg_err = state_balance_error(y, y_seg, mode_energy_at(y, aux, p, cs), e_seg, seg_end - t, p,
-                                              e0, t_max, rtol)
-                if seg_err > 1.0:
-                    # try_step accepted it: rejected after all
-                    tally_step(cs, istats, True, -1)
-                    tally_step(cs, istats, False, 1)
-                    h *= step_factor(seg_err)
-                    after_reject = True
-                    continue
-        else:
-            for i in range(n):
-                y_seg[i] = y_new[i]
-            e_seg = mode_energy_at(y_seg, aux_new, p, cs)
-        phi_c = 0.0
-        if peaks_on:
-            if first_k >= 0:
-                eval_rhs(seg_end, y_seg, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
-                phi_c = wk[W_AUXBUF, X_PHI]
-            else:
-                phi_c = aux_new[X_PHI]
+
+        # --- levels, samples, Phi maxima on [t, seg_end] ------------------------------------------
+        phi_c = segment_phi(seg_end, event, n, p, cs, wk, istats) if peaks_on else 0.0
         if not have_dense and dense_wanted(running, seg_end, e_seg, y_seg[Y_THETA], level_e, sample_tau, trk, fq,
                                            phi_c, peaks_on):
-            dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
+            dense_coeffs(t, y, h, wk[W_YNEW], wk[W_FNEW], n, p, cs, K, F, wk, istats)
             have_dense = True
         if running:
             t_halt = record_levels(t, y, h, seg_end, e_seg, F, n, p, cs, level_e, level_out, trk, peaks_on,
@@ -522,105 +646,40 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             if t_halt >= 0.0:
                 outcome = oc.HALTED
                 dense_eval(F, 0, y, t, h, t_halt, n, wk[W_YBUF])
-                end_trans, end_stick, end_impacts = mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end, istats)
+                mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end, istats)
             elif int(trk[T_NEXT_LEVEL]) < nl:
                 lev = level_e[int(trk[T_NEXT_LEVEL])]
         record_samples(t, y, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, F, n, p, cs, sample_tau,
                        samples, trk, wk, istats)
         if peaks_on:
-            lattice_step(t, y, h, seg_end, y_seg[Y_THETA], F, n, p, cs, fq, level_out, trk, wk, istats)
-            if peak_bracketed(phi_c, trk):
-                previous_dense(y, n, p, K, F, trk, wk, istats)
-            track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running,
-                        fq)
-            shift_peak_window(t, y, h, seg_end, phi_c, K, F, have_dense, n, cs, trk, wk)
+            track_frequency(t, y, h, seg_end, phi_c, K, F, have_dense, n, p, cs, level_out, peaks, trk, wk, istats,
+                            fstats, running, fq)
 
-        # --- advance ------------------------------------------------------------------------------
-        if cs[CS_MODE] != ROLL and running:
-            fstats[F_SLIDETIME] += (seg_end if outcome < 0 else fstats[F_TEND]) - t
-        for i in range(n):
-            y[i] = y_seg[i]
+        # --- restart at the segment end -----------------------------------------------------------
+        advance(t, seg_end, event, running, outcome >= 0, y, n, cs, trk, wk, fstats)
         t = seg_end
-        if first_k < 0:
-            for i in range(n):
-                f[i] = f_new[i]
-            for i in range(N_AUX):
-                aux[i] = aux_new[i]
-        # the event rates at the new start are this step's end rates, unless an event restarts here
-        trk[T_RATES_OLD] = 1.0 if first_k < 0 and trk[T_RATES_NEW] == 1.0 else 0.0
-        if trk[T_RATES_OLD] == 1.0:
-            for k in range(N_DYN_EVENTS):
-                wk[W_RATEOLD, k] = wk[W_RATENEW, k]
-        if want_traj and outcome < 0:
-            record_traj(t, y, aux_new[X_PHI] if first_k < 0 else math.nan, cs, n, traj, istats)
-
-        if first_k >= 0:
-            istats[I_EVENTS] += 1
-            code = apply_event(first_k, t, y, p, cs, n, u_tol, wk, istats, fstats)
-            if code == oc.FACE_CONTACT and running:
-                # the disk lies flat: it has halted (docs/model.md, 'Halt')
-                halt_flat(t, level_out, trk, level_e)
-                istats[I_FLAT] = 1
-                outcome = oc.HALTED
-                end_trans, end_stick, end_impacts = mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)
-            elif code >= 0:
-                if running:
+        if traj.shape[0] > 0 and outcome < 0:
+            record_traj(t, y, math.nan if event else wk[W_AUXNEW, X_PHI], cs, n, traj, istats)
+        if event:
+            code = restart_after_event(first_k, t, y, p, cs, n, u_tol, lev, wk, istats, fstats)
+            if code >= 0:
+                if running and code == oc.FACE_CONTACT:
+                    # the disk lies flat: it has halted (docs/model.md, 'Halt')
+                    halt_flat(t, level_out, trk, level_e)
+                    istats[I_FLAT] = 1
+                    outcome = oc.HALTED
+                    mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)
+                elif running:
                     outcome = code
                     fstats[F_TEND] = t
                 break
-            if code >= 0:
-                break
-            if cs[CS_MODE] == SLAVED:
-                # the slaved direction of the contact state the update left, continued across the
-                # event (steps that end in events would otherwise leave it behind the moving root)
-                code = confirm_slaved(t, y, p, cs, n, wk, istats)
-                if code >= 0:
-                    if running:
-                        outcome = code
-                        fstats[F_TEND] = t
-                    break
-            eval_rhs(t, y, p, cs, n, f, aux, wk, istats)
-            if aux[X_OK] != 1.0:
-                if running:
-                    outcome = failure_outcome(aux[X_OK])
-                    fstats[F_TEND] = t
-                break
-            if aux[X_PHI] <= 0.0:
-                # the discrete update (an impact) leaves the disk with no compressive normal force:
-                # it leaves the table here (its own event, Phi falling through 0, cannot happen)
-                if running:
-                    outcome = oc.CONTACT_LOST
-                    fstats[F_TEND] = t
-                break
-            event_values(y, aux, p, cs, u_tol, lev, g_old)
         else:
-            for k in range(N_DYN_EVENTS + 1):
-                g_old[k] = g_new[k]
-            g_old[EV_LEVEL] = mode_energy_at(y, aux, p, cs) - lev if int(trk[T_NEXT_LEVEL]) < nl else math.inf
-            if cs[CS_MODE] == SLAVED:
-                # continuation of the slaved direction from this step end
-                cs[CS_NU] = slaved_direction(cs[CS_NU], math.hypot(y[Y_U1], y[Y_U2]), t, y, p, cs, n,
-                                             wk[W_DYBUF], wk[W_AUXBUF], wk[W_YBUF], istats)
-        if hit_tmax and outcome < 0 and first_k < 0:
-            outcome = oc.T_MAX
-            end_trans, end_stick, end_impacts = mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)
+            carry_step_end(t, y, p, cs, n, lev, int(trk[T_NEXT_LEVEL]) < nl, wk, istats)
+            if hit_tmax and outcome < 0:
+                outcome = oc.T_MAX
+                mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)
         h = h_next
-
-    if outcome < 0:
-        outcome = oc.STEP_LIMIT
-    if end_trans >= 0:
-        istats[I_TRANS], istats[I_STICK], istats[I_IMPACTS] = end_trans, end_stick, end_impacts
-    if peaks_on:
-        finish_levels(fq, level_out)
-    if end_trans >= 0:
-        fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the end
-    else:
-        fstats[F_TEND] = t
-        for i in range(n):
-            y_end[i] = y[i]
-        fstats[F_EEND] = mode_energy(y_end, p, cs)
-    istats[I_OUTCOME] = outcome
-    fstats[F_HLAST] = h
+    finish(outcome, t, h, y, n, p, cs, trk, istats, fstats, y_end, level_out, fq, peaks_on)
 
 
 def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):

@@ -86,7 +86,11 @@ T_RATES_OLD = 15  # 1: wk[W_RATEOLD] holds the event rates at the current step s
 T_RATES_NEW = 16  # 1: this step's scan computed wk[W_RATENEW] (the rates at its end)
 T_DIP_END = 17    # the first event found by an interior dip of an event of the forces: the time of the
                   # dense output's minimum there, where an integrated step confirms it; -1 else
-N_TRACK = 18
+T_END_TRANS, T_END_STICK, T_END_IMPACTS = 18, 19, 20   # event counts at the scene's end (halt or
+                  # t_max; -1 before it): the steps after it only resolve Phi maxima
+T_H_AFTER = 21    # the last step size before the end (the steps after it do not grow past it; 0 before)
+T_T_AFTER = 22    # ... nor run past this tau (twice the end's)
+N_TRACK = 23
 
 # --- RK stage buffer ----------------------------------------------------------------------------
 K_PREV = N_STAGES_EXTENDED      # first row of the previous step's stages

@@ -10,11 +10,11 @@ import math
 
 from .contact import EV_LEVEL, eval_rhs, mode_energy
 from .dop853 import N_DENSE, dense_coeffs, dense_eval
-from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, open_level, peak_candidate, peak_confirmed
+from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_step, open_level, peak_candidate, peak_confirmed
 from .jit import kernel
 from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_CS, T_NEXT_LEVEL, T_PREV_DENSE,
                      T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
-                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND)
+                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, W_YSEG, F_NFMAX, F_TEND)
 from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
@@ -142,6 +142,19 @@ def record_traj(t, y, phi, cs, n, traj, istats):
     traj[i, 1 + N_FULL] = phi
     traj[i, 2 + N_FULL] = cs[CS_MODE]
     istats[I_TRAJ] = i + 1
+
+
+@kernel
+def track_frequency(t, y, h, seg_end, phi_c, K, F, have_dense, n, p, cs, level_out, peaks, trk, wk, istats, fstats,
+                    running, fq):
+    """The frequency recorders on the segment [t, seg_end] (its end state in wk[W_YSEG], Phi there
+    phi_c): the precession lattice, the Phi maxima (the previous step's dense output where a maximum
+    is bracketed), and the window of the last two segments kept for the next bracket."""
+    lattice_step(t, y, h, seg_end, wk[W_YSEG, Y_THETA], F, n, p, cs, fq, level_out, trk, wk, istats)
+    if peak_bracketed(phi_c, trk):
+        previous_dense(y, n, p, K, F, trk, wk, istats)
+    track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running, fq)
+    shift_peak_window(t, y, h, seg_end, phi_c, K, F, have_dense, n, cs, trk, wk)
 
 
 @kernel
