@@ -649,8 +649,42 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
             assert ist[L.I_RHS] == rhs_before
     expected = {C.EV_SIDE, C.EV_FACE, C.EV_LEVEL} | (
         {C.EV_SIGN1, C.EV_SIGN2, C.EV_SIGN3, C.EV_SPIN1, C.EV_SPIN2, C.EV_SPIN3} if mode == L.ROLL
-        else {C.EV_SLIP_SLOW} if mode == L.SLIDE else {C.EV_SLIP_STOP})
+        else {C.EV_SLIP_SLOW} if mode == L.SLIDE else set())
     assert expected <= checked
+
+
+def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
+    """EV_SLIP_STOP, u.s(nu) = 0, reads nu at the state where it is evaluated: the slaved root
+    that the right-hand side finds there (aux[X_NU]), not the direction stored in cs[CS_NU], which
+    the kernel sets at a step end (where the step size puts it). Stored directions on either side
+    of the root give the same value, u.s at the root."""
+    p, y0, cs0 = setup
+    n = M.N_CORE
+    wk, ist = _work()
+    sl = cs0.copy()
+    sl[L.CS_MODE] = L.SLAVED
+    u = 1e-9
+    root = C.attracting_direction(0.3, u, 0.0, y0, p, sl, n, wk, ist)
+    assert math.isfinite(root)
+    # the slip vector a little off the root (its component across s is what the impulse removes)
+    y = y0.copy()
+    y[M.Y_U1], y[M.Y_U2] = u * math.cos(root + 0.2), u * math.sin(root + 0.2)
+    values = []
+    for stored in (root - 0.02, root + 0.02):
+        cs = sl.copy()
+        cs[L.CS_NU] = stored
+        dy, aux, g = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
+        C.eval_rhs(0.0, y, p, cs, n, dy, aux, wk, ist)
+        assert aux[M.X_OK] == 1.0
+        C.event_values(y, aux, p, cs, 1e-12, math.nan, g)
+        values.append(g[C.EV_SLIP_STOP])
+        # the stored direction would have given another value
+        assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[C.EV_SLIP_STOP]) > 1e-3 * u
+    nu = C.slaved_direction(root, math.hypot(y[M.Y_U1], y[M.Y_U2]), 0.0, y, p, sl, n, np.zeros(M.N_FULL),
+                            np.zeros(M.N_AUX), np.zeros(M.N_FULL), ist)
+    expected = y[M.Y_U1] * math.cos(nu) + y[M.Y_U2] * math.sin(nu)
+    assert values[0] == pytest.approx(expected, rel=1e-12, abs=1e-24)
+    assert values[1] == pytest.approx(expected, rel=1e-12, abs=1e-24)
 
 
 def test_an_impulse_releases_a_stuck_component_only_beyond_spin_tol(setup):

@@ -28,7 +28,7 @@ from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
-from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, Y_ALPHA,
+from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
                     Y_DSLIDE, Y_U1, Y_U2, Y_W1, energy_from_trig, moment_axes_rates, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
@@ -183,6 +183,7 @@ def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
                                istats)
         friction_along(nu, t, y, p, cs, n, dy, aux, wk, istats)
         aux[X_DCROSS] = (cross1 - cross0) / DCROSS_DNU
+        aux[X_NU] = nu
         if ok < 0.0:
             aux[X_OK] = ok
         elif ok == 0.0:
@@ -532,11 +533,12 @@ def consistent_signs(t, y, p, cs, n, wk, istats):
 
 @kernel
 def reads_forces(k):
-    """Does event k's function read the contact forces (the RHS's aux)? The others (moment signs
-    and spin_tol, slip speed, slaved slip, side, face, level) are functions of the state alone:
-    on a step's dense output they cost no right-hand-side evaluation (state_event_value)."""
-    return (EV_UNSTICK1 <= k <= EV_UNSTICK3 or k == EV_CONE or k == EV_SLIP_FAST or k == EV_SLAVE
-            or k == EV_CONTACT or k == EV_SLAVE_LOST)
+    """Does event k's function read the right-hand side's aux (the contact forces, or the slaved
+    direction at the state: the slip's end, EV_SLIP_STOP)? The others (moment signs and spin_tol,
+    slip speed, side, face, level) are functions of the state alone: on a step's dense output
+    they cost no right-hand-side evaluation (state_event_value)."""
+    return (EV_UNSTICK1 <= k <= EV_UNSTICK3 or k == EV_CONE or k == EV_SLIP_STOP or k == EV_SLIP_FAST
+            or k == EV_SLAVE or k == EV_CONTACT or k == EV_SLAVE_LOST)
 
 
 @kernel
@@ -549,9 +551,6 @@ def state_event_value(k, y, p, cs, u_tol, level_e):
         return g if k <= EV_SIGN3 else g - p[P_WTOL]
     if k == EV_SLIP_SLOW:
         return math.hypot(y[Y_U1], y[Y_U2]) - u_tol
-    if k == EV_SLIP_STOP:
-        # the slip along the slaved direction: reaches 0 where the slip ends
-        return y[Y_U1] * math.cos(cs[CS_NU]) + y[Y_U2] * math.sin(cs[CS_NU])
     if k == EV_SIDE:
         return cs[CS_SIDE] * y[Y_ALPHA]
     if k == EV_FACE:
@@ -587,7 +586,8 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
             # slip's exit; a slip that reverses and later decays is handed over then
             g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
     else:
-        g[EV_SLIP_STOP] = state_event_value(EV_SLIP_STOP, y, p, cs, u_tol, level_e)
+        # the slip along the slaved direction at this state (the RHS's): reaches 0 where the slip ends
+        g[EV_SLIP_STOP] = y[Y_U1] * math.cos(aux[X_NU]) + y[Y_U2] * math.sin(aux[X_NU])
         g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
         g[EV_SLAVE_LOST] = -aux[X_DCROSS]
     g[EV_CONTACT] = aux[X_PHI]

@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import outcomes as oc
 from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SLAVE, EV_SLIP_SLOW, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved,
-                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, slaved_direction, start_slip)
+                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
@@ -25,7 +25,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
-from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
+from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes, slip_closest_approach
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, record_levels, record_sample, record_samples, record_traj,
@@ -531,8 +531,8 @@ def carry_step_end(t, y, p, cs, n, lev, level_pending, wk, istats):
         wk[W_GOLD, k] = wk[W_GNEW, k]
     wk[W_GOLD, EV_LEVEL] = mode_energy_at(y, wk[W_AUX], p, cs) - lev if level_pending else math.inf
     if cs[CS_MODE] == SLAVED:
-        cs[CS_NU] = slaved_direction(cs[CS_NU], math.hypot(y[Y_U1], y[Y_U2]), t, y, p, cs, n,
-                                     wk[W_DYBUF], wk[W_AUXBUF], wk[W_YBUF], istats)
+        # the step end's right-hand side continued it there (the root from cs[CS_NU] at y_new)
+        cs[CS_NU] = wk[W_AUX, X_NU]
 
 
 @kernel

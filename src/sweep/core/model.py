@@ -45,7 +45,8 @@ X_DCROSS = 10   # SLAVED only (contact.eval_rhs): d cross/d nu at the slaved dir
 # sin(alpha), cos(alpha) of the state the right-hand side was evaluated at: the energy kernels of
 # the step control and the events read them (*_trig) instead of evaluating the pair again
 X_SINA, X_COSA = 11, 12
-N_AUX = 13
+X_NU = 13       # SLAVED only (contact.eval_rhs): the slaved slip direction at this state (rad)
+N_AUX = 14
 
 ROLL, SLIDE = 0, 1
 
