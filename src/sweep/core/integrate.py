@@ -125,15 +125,14 @@ def lift_off(k, t, y, h, g0, d0, g1, d1, F, n, p, cs, u_tol, lev, wk, istats):
 
 
 @kernel
-def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, istats):
-    """Earliest event on the accepted step [t, t + h]: (k, restart time, dense output made?).
+def first_event(t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats):
+    """Earliest event on the accepted step [t, t + h] (its end state, derivatives and event values
+    in wk: W_YNEW, W_F, W_FNEW, W_GOLD, W_GNEW): (k, restart time, dense output made?).
 
-    An event function that is positive at both ends can still cross zero twice inside the step: the
-    cubic Hermite interpolant of g (its end derivatives from the state for the signs and the side,
-    by a forward difference along f for every other event: roots.event_rates) flags an interior
-    minimum, the dense output there confirms it. The rates at the step end are kept for the next
-    step's start (trk[T_RATES_OLD]), so a step costs one RHS evaluation for them. A spin event
-    (free component slower than spin_tol at both ends) is searched for a rise past spin_tol and back.
+    An event function that is positive at both ends can still cross zero twice inside the step
+    (dip_bracket); one that starts on its surface can leave it and come back (surface_bracket,
+    spin_bracket). The rates at the step end are kept for the next step's start
+    (trk[T_RATES_OLD]), so a step costs one RHS evaluation for them.
     """
     g_old = wk[W_GOLD]
     g_new = wk[W_GNEW]
@@ -155,88 +154,19 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
             # the step starts on the surface (alpha = 0 after a side change; a moment component
             # released at an un-stick, omega.a_i = 0 up to its drift while held) and ends on or
             # past it: it left and came back within the step (a rocking bounce), or it never left
-            if not have_dense:
-                dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
-                have_dense = True
-            if k == EV_SIDE:
-                d0 = cs[CS_SIDE] * y[Y_W1] * h
-                d1 = cs[CS_SIDE] * y_new[Y_W1] * h
-            else:
-                d0, d1 = sign_slopes(k, cs[CS_SIG + k], y, f, y_new, f_new, h)
-            ta, ga = lift_off(k, t, y, h, g_old[k], d0, g_new[k], d1, F, n, p, cs, u_tol, lev, wk, istats)
-            tb, gb = t + h, g_new[k]
-            if ta < 0.0 and k <= EV_SIGN3 and g_old[k] < 0.0 and d0 > 0.0:
-                # released with omega.a_i on the far side of its new sign (an impulse's
-                # residual, below spin_tol) and moving towards it, as its sign says: no event while
-                # it rises (however short the step); turned back below the surface inside the
-                # step, it moves against its sign from that turning point on
-                x_turn = hermite_peak(g_old[k], d0, g_new[k], d1) if d1 <= 0.0 else -1.0
-                if x_turn > 0.0:
-                    ta, tb = t + x_turn * h, t + x_turn * h
-                    k_event = EV_AGAINST1 + k
-            elif ta < 0.0:
-                # it never leaves: at once (a moment component moving against its new sign
-                # means the un-stick only grazed |sigma| = 1: contact.apply_event sticks it)
-                ta, tb = t, t
-                if k <= EV_SIGN3:
-                    k_event = EV_AGAINST1 + k
+            have_dense = dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats)
+            ta, ga, tb, gb, k_event = surface_bracket(k, t, y, h, n, p, cs, u_tol, lev, F, wk, istats)
         elif EV_SPIN1 <= k <= EV_SPIN3 and g_old[k] <= 0.0 and g_new[k] <= 0.0:
-            # a free component slower than spin_tol at both ends (e.g. just released at an
-            # un-stick) can speed past spin_tol and slow to it again within the step: the peak of
-            # the Hermite interpolant of g_k (exact end slopes), confirmed on the dense output
-            i = k - EV_SPIN1
-            d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, f, y_new, f_new, h)
-            peak = hermite_peak(g_old[k], d0, g_new[k], d1)
-            if peak > 0.0:
-                if not have_dense:
-                    dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
-                    have_dense = True
-                gm = event_value_at(k, t + peak * h, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
-                if gm > 0.0:
-                    ta, ga, tb, gb = t + peak * h, gm, t + h, g_new[k]
+            ta, ga, have_dense = spin_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, istats, have_dense)
+            tb, gb = t + h, g_new[k]
         elif g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf and g_new[k] != math.inf:
-            # positive at both ends, g_k can still reach 0 and come back within the step: a
-            # bounce off alpha = 0, a brief slip demand, a needed moment that touches its limit, a
-            # dip of the normal force. The cubic Hermite interpolant of g_k flags the dip.
-            if k == EV_SIDE:
-                # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
-                dip = hermite_dip(g_old[k], cs[CS_SIDE] * y[Y_W1] * h, g_new[k], cs[CS_SIDE] * y_new[Y_W1] * h)
-            elif k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
-                # sigma_i omega.a_i (less spin_tol): exact slopes from the state
-                i = k if k <= EV_SIGN3 else k - EV_SPIN1
-                d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, f, y_new, f_new, h)
-                dip = hermite_dip(g_old[k], d0, g_new[k], d1)
-            elif k == EV_SLIP_SLOW or k == EV_SLAVE:
-                # |u| less a speed: a V where the slip passes by u = 0, placed from the slip's own
-                # smooth components (a cubic in g, or its difference quotient, can step over it)
-                dip = slip_closest_approach(y, f, y_new, f_new, h)
-            else:
-                if trk[T_RATES_OLD] == 0.0:
-                    event_rates(t, y, f, g_old, p, cs, n, u_tol, lev, wk, istats, wk[W_RATEOLD])
-                    trk[T_RATES_OLD] = 1.0
-                if trk[T_RATES_NEW] == 0.0:
-                    event_rates(t + h, y_new, f_new, g_new, p, cs, n, u_tol, lev, wk, istats, wk[W_RATENEW])
-                    trk[T_RATES_NEW] = 1.0
-                dip = hermite_dip(g_old[k], wk[W_RATEOLD, k] * h, g_new[k], wk[W_RATENEW, k] * h)
-            if dip > 0.0:
-                # confirm on the dense output at the interpolant's minimum
-                if not have_dense:
-                    dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
-                    have_dense = True
-                tm = t + dip * h
-                gm = event_value_at(k, tm, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
-                if 0.0 < gm < DIP_REFINE * min(g_old[k], g_new[k]):
-                    # the cubic's minimum is only near the dense output's: a shallow dip (a
-                    # grazing double crossing) is decided by the minimum of g_k itself
-                    tm, gm = brent_min(k, t, t + h, 0.0, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
-                if gm <= 0.0:
-                    ta, ga, tb, gb = t, g_old[k], tm, gm
-                    if reads_forces(k):
-                        dip_end = tm
+            tm, gm, have_dense = dip_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats, have_dense)
+            if tm >= 0.0:
+                ta, ga, tb, gb = t, g_old[k], tm, gm
+                if reads_forces(k):
+                    dip_end = tm
         if ta >= 0.0 and ta < first_t:
-            if not have_dense:
-                dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats)
-                have_dense = True
+            have_dense = dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats)
             ra, rb = locate(k, ta, ga, tb, gb, F, y, t, h, n, p, cs, u_tol, lev, wk, istats)
             if (rb < first_t or first_k < 0) and (k < EV_SPIN1 or k > EV_SPIN3
                                                   or spin_holds(k - EV_SPIN1, rb, F, y, t, h, n, p, cs, wk, istats)):
@@ -244,6 +174,112 @@ def first_event(t, y, f, h, y_new, f_new, n, p, cs, u_tol, lev, K, F, wk, trk, i
                 first_t = rb
                 trk[T_DIP_END] = dip_end
     return first_k, first_t, have_dense
+
+
+@kernel
+def dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats):
+    """The accepted step's dense output in F[0:7], built once per step: returns True."""
+    if not have_dense:
+        dense_coeffs(t, y, h, wk[W_YNEW], wk[W_FNEW], n, p, cs, K, F, wk, istats)
+    return True
+
+
+@kernel
+def surface_bracket(k, t, y, h, n, p, cs, u_tol, lev, F, wk, istats):
+    """Event k (the side, or a moment sign) on a step that starts on its surface and ends on or
+    past it (dense output built): a bracket (ta, ga, tb, gb) of its return to the surface, and the
+    event to apply there (k, or EV_AGAINST1 + i for a component moving against its sign)."""
+    g0 = wk[W_GOLD, k]
+    g1 = wk[W_GNEW, k]
+    y_new = wk[W_YNEW]
+    if k == EV_SIDE:
+        # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
+        d0 = cs[CS_SIDE] * y[Y_W1] * h
+        d1 = cs[CS_SIDE] * y_new[Y_W1] * h
+    else:
+        d0, d1 = sign_slopes(k, cs[CS_SIG + k], y, wk[W_F], y_new, wk[W_FNEW], h)
+    ta, ga = lift_off(k, t, y, h, g0, d0, g1, d1, F, n, p, cs, u_tol, lev, wk, istats)
+    tb, gb = t + h, g1
+    k_event = k
+    if ta < 0.0 and k <= EV_SIGN3 and g0 < 0.0 and d0 > 0.0:
+        # released with omega.a_i on the far side of its new sign (an impulse's residual, below
+        # spin_tol) and moving towards it, as its sign says: no event while it rises (however
+        # short the step); turned back below the surface inside the step, it moves against its
+        # sign from that turning point on
+        x_turn = hermite_peak(g0, d0, g1, d1) if d1 <= 0.0 else -1.0
+        if x_turn > 0.0:
+            ta, tb = t + x_turn * h, t + x_turn * h
+            k_event = EV_AGAINST1 + k
+    elif ta < 0.0:
+        # it never leaves: at once (a moment component moving against its new sign means the
+        # un-stick only grazed |sigma| = 1: contact.apply_event sticks it)
+        ta, tb = t, t
+        if k <= EV_SIGN3:
+            k_event = EV_AGAINST1 + k
+    return ta, ga, tb, gb, k_event
+
+
+@kernel
+def spin_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, istats, have_dense):
+    """A free component slower than spin_tol at both ends (e.g. just released at an un-stick) can
+    speed past spin_tol and slow to it again within the step: the peak of the Hermite
+    interpolant of g_k (exact end slopes), confirmed on the dense output. Returns (the peak's time,
+    g_k there, have_dense); the time is -1 where g_k stays below spin_tol."""
+    i = k - EV_SPIN1
+    d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], wk[W_YNEW], wk[W_FNEW], h)
+    peak = hermite_peak(wk[W_GOLD, k], d0, wk[W_GNEW, k], d1)
+    if peak > 0.0:
+        have_dense = dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats)
+        gm = event_value_at(k, t + peak * h, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+        if gm > 0.0:
+            return t + peak * h, gm, have_dense
+    return -1.0, 0.0, have_dense
+
+
+@kernel
+def dip_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats, have_dense):
+    """Event k positive at both ends of the step can still reach 0 and come back within it: a
+    bounce off alpha = 0, a brief slip demand, a needed moment that touches its limit, a dip of the
+    normal force. The cubic Hermite interpolant of g_k flags the dip; the dense output confirms it.
+    Returns (the time of the dip's minimum where g_k <= 0 there, g_k there, have_dense); the time
+    is -1 where there is no such dip."""
+    g0 = wk[W_GOLD, k]
+    g1 = wk[W_GNEW, k]
+    f = wk[W_F]
+    y_new = wk[W_YNEW]
+    f_new = wk[W_FNEW]
+    if k == EV_SIDE:
+        # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
+        dip = hermite_dip(g0, cs[CS_SIDE] * y[Y_W1] * h, g1, cs[CS_SIDE] * y_new[Y_W1] * h)
+    elif k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
+        # sigma_i omega.a_i (less spin_tol): exact slopes from the state
+        i = k if k <= EV_SIGN3 else k - EV_SPIN1
+        d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, f, y_new, f_new, h)
+        dip = hermite_dip(g0, d0, g1, d1)
+    elif k == EV_SLIP_SLOW or k == EV_SLAVE:
+        # |u| less a speed: a V where the slip passes by u = 0, placed from the slip's own smooth
+        # components (a cubic in g, or its difference quotient, can step over it)
+        dip = slip_closest_approach(y, f, y_new, f_new, h)
+    else:
+        if trk[T_RATES_OLD] == 0.0:
+            event_rates(t, y, f, wk[W_GOLD], p, cs, n, u_tol, lev, wk, istats, wk[W_RATEOLD])
+            trk[T_RATES_OLD] = 1.0
+        if trk[T_RATES_NEW] == 0.0:
+            event_rates(t + h, y_new, f_new, wk[W_GNEW], p, cs, n, u_tol, lev, wk, istats, wk[W_RATENEW])
+            trk[T_RATES_NEW] = 1.0
+        dip = hermite_dip(g0, wk[W_RATEOLD, k] * h, g1, wk[W_RATENEW, k] * h)
+    if not dip > 0.0:
+        return -1.0, 0.0, have_dense
+    have_dense = dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats)
+    tm = t + dip * h
+    gm = event_value_at(k, tm, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+    if 0.0 < gm < DIP_REFINE * min(g0, g1):
+        # the cubic's minimum is only near the dense output's: a shallow dip (a grazing double
+        # crossing) is decided by the minimum of g_k itself
+        tm, gm = brent_min(k, t, t + h, 0.0, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+    if gm <= 0.0:
+        return tm, gm, have_dense
+    return -1.0, 0.0, have_dense
 
 
 @kernel
@@ -612,8 +648,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
 
         # --- the earliest event on the step: the kept part ends there --------------------------
         event_values(wk[W_YNEW], wk[W_AUXNEW], p, cs, u_tol, lev, wk[W_GNEW])
-        first_k, seg_end, have_dense = first_event(t, y, wk[W_F], h, wk[W_YNEW], wk[W_FNEW], n, p, cs, u_tol, lev,
-                                                   K, F, wk, trk, istats)
+        first_k, seg_end, have_dense = first_event(t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats)
         event = first_k >= 0
         if event and running and t < trk[T_DIP_END] < t + h:
             # an event of the forces that only the dense output shows (both step ends on the safe
