@@ -421,10 +421,11 @@ def state_size(settings):
 
 
 @kernel
-def begin(y, p, settings, level_e, sample_tau, cs, wk, trk, istats, fstats, samples, traj, fq):
+def begin(y, p, settings, lev, sample_tau, cs, wk, trk, istats, fstats, samples, traj, fq):
     """The scene at tau = 0: its contact state, f and aux (wk[W_F], wk[W_AUX]), E(0), the event
-    values (wk[W_GOLD]), the samples and trajectory row at 0, the trackers. Returns (the outcome that
-    ends the scene at once, else -1; the first step size)."""
+    values (wk[W_GOLD]; lev: the first level's energy), the samples and trajectory row at 0, the
+    trackers. Returns (the outcome that ends the scene at once, else -1; the starting step size,
+    before the ceiling h_max)."""
     n = state_size(settings)
     u_tol = settings[S_UTOL]
     f = wk[W_F]
@@ -438,7 +439,7 @@ def begin(y, p, settings, level_e, sample_tau, cs, wk, trk, istats, fstats, samp
     start_code = start(y, p, cs, n, u_tol, wk, istats)
     eval_rhs(0.0, y, p, cs, n, f, aux, wk, istats)
     fstats[F_E0] = mode_energy(y, p, cs)
-    event_values(y, aux, p, cs, u_tol, level_e[0] if level_e.shape[0] > 0 else math.nan, wk[W_GOLD])
+    event_values(y, aux, p, cs, u_tol, lev, wk[W_GOLD])
     outcome = -1
     if aux[X_PHI] <= 0.0:
         outcome = oc.CONTACT_LOST
@@ -456,8 +457,7 @@ def begin(y, p, settings, level_e, sample_tau, cs, wk, trk, istats, fstats, samp
     trk[T_RATES_OLD] = 0.0
     if settings[S_PEAKS] > 0.0:
         freq_start(y[Y_THETA], aux[X_PHI], fq)
-    h = initial_step(0.0, y, f, n, p, cs, settings[S_RTOL], settings[S_ATOL], wk, istats)
-    return outcome, min(h, settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf)
+    return outcome, initial_step(0.0, y, f, n, p, cs, settings[S_RTOL], settings[S_ATOL], wk, istats)
 
 
 @kernel
@@ -611,7 +611,8 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     n = state_size(settings)
     nl = level_e.shape[0]
     lev = level_e[0] if nl > 0 else math.nan
-    outcome, h = begin(y, p, settings, level_e, sample_tau, cs, wk, trk, istats, fstats, samples, traj, fq)
+    outcome, h = begin(y, p, settings, lev, sample_tau, cs, wk, trk, istats, fstats, samples, traj, fq)
+    h = min(h, h_max)
     e0 = max(abs(fstats[F_E0]), 1e-300)
     t = 0.0
     after_reject = False
