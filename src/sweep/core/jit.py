@@ -104,7 +104,12 @@ register_locator(_caching.CacheImpl)
 
 
 def kernel(fn=None, **options):
-    """`@kernel` or `@kernel(nogil=True)`: compile fn with njit and CPU_OPTIONS (plus options)."""
+    """`@kernel` or `@kernel(nogil=True)`: compile fn with njit and CPU_OPTIONS (plus options).
+
+    `@kernel(inline="always")` has numba inline fn into each caller before LLVM sees it: the parts of
+    `model.rhs` use it, since LLVM alone kept the larger ones as calls, and a call that returns a
+    tuple through memory made a right-hand side ~20 % slower than the one-function version it
+    replaced (docs/performance.md, 'Stop 32')."""
     opts = {**CPU_OPTIONS, **options}
     if fn is None:
         return njit(**opts)

@@ -239,6 +239,147 @@ def _solve2(m11, m12, m21, m22, b1, b2):
     return (m22 * b1 - m12 * b2) / det, (m11 * b2 - m21 * b1) / det
 
 
+@kernel(inline="always")
+def geometry(y, p, side):
+    """(h, s, c, t, e, f, thd) at y's inclination alpha: the contact rim's offset h = side |H|/R,
+    sin, cos and tan of alpha, the centre's height e = c + h s (eq. 4.9), f = de/dalpha = h c - s,
+    and the precession rate dtheta/dtau = w3 sec(alpha) (eq. 2.3)."""
+    h = side * p[P_H]
+    s = math.sin(y[Y_ALPHA])
+    c = math.cos(y[Y_ALPHA])
+    return h, s, c, s / c, c + h * s, h * c - s, y[Y_W3] / c
+
+
+@kernel(inline="always")
+def slip_direction(y, p, mode, n0x, n0y):
+    """(u1, u2, n1, n2): the slip on a1, a2 and the unit direction n that friction opposes
+    (F = -mud Phi n, eq. 4.7); (n0x, n0y) at slip speeds <= p[P_UFREEZE]; all zero when rolling."""
+    if mode != SLIDE:
+        return 0.0, 0.0, 0.0, 0.0
+    u1 = y[Y_U1]
+    u2 = y[Y_U2]
+    un = math.hypot(u1, u2)
+    if un > p[P_UFREEZE]:
+        return u1, u2, u1 / un, u2 / un
+    return u1, u2, n0x, n0y
+
+
+@kernel(inline="always")
+def tilt_balance(y, p, mode, geo, n2, sig, stuck):
+    """(dw1, Phi, sigma_1, ok): d omega_1/d tau and the normal force from the e1 moment balance and
+    the vertical balance, Phi = phi0 + f dw1 (eq. 4.6; rolling: eq. 5.3_2 with Phi kept). A stuck
+    omega.a_1 (stuck[0], k1 > 0) is held at 0 and its effective sign sigma_1 solved instead.
+    ok = -1 where no acceleration satisfies the contact law (a Painleve inconsistency), else 1."""
+    G, A, C, k1 = p[P_G], p[P_A], p[P_C], p[P_K1]
+    h, s, c, t, e, f, thd = geo
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    phi0 = G - e * w1 * w1
+    if mode == SLIDE:
+        # A dw1 = C w2 w3 - A w3^2 t + Phi (e F2/Phi - f - k1 sig1), F = -mud Phi n
+        a1 = A
+        r1 = C * w2 * w3 - A * w3 * w3 * t
+        q1 = -p[P_MUD] * e * n2 - f
+    else:
+        a1 = A + 1.0 + h * h
+        r1 = C * w2 * w3 - A * w3 * w3 * t + e * thd * (w2 - h * w3) - G * f
+        q1 = 0.0
+    if stuck[0] == 1 and k1 > 0.0:
+        return 0.0, phi0, (r1 + q1 * phi0) / (k1 * phi0), 1.0
+    qq = q1 - k1 * sig[0]
+    den = a1 - qq * f
+    dw1 = (r1 + qq * phi0) / den
+    return dw1, phi0 + f * dw1, sig[0], -1.0 if den <= 0.0 else 1.0
+
+
+@kernel(inline="always")
+def spin_balance(y, p, mode, geo, phi, n1, sig, stuck):
+    """(dw2, dw3, sigma_2, sigma_3) from the e2, e3 moment balances, M [dw2, dw3] = b - Phi [kb2,
+    kb3] (eq. 4.8; rolling: eq. 5.3 with the constraint's force); held_spin_rates where a stuck
+    omega.a_2 or omega.a_3 (k > 0) is held at 0."""
+    A, C, k2, k3, mud = p[P_A], p[P_C], p[P_K2], p[P_K3], p[P_MUD]
+    h, s, c, t, e, f, thd = geo
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    if mode == SLIDE:
+        m = (C, 0.0, 0.0, A)
+        b = (mud * phi * n1, -C * w1 * w2 + A * w1 * w3 * t - h * mud * phi * n1)
+    else:
+        m = (C + 1.0, -h, -h, A + h * h)
+        b = (-e * w1 * thd, -C * w1 * w2 + A * w1 * w3 * t + h * e * w1 * thd)
+    if (stuck[1] == 1 and k2 > 0.0) or (stuck[2] == 1 and k3 > 0.0):
+        return held_spin_rates(y, p, geo, phi, m, b, sig, stuck)
+    sig2 = sig[1]
+    sig3 = sig[2]
+    kb2 = k2 * sig2 * c + k3 * sig3 * s
+    kb3 = k3 * sig3 * c - k2 * sig2 * s
+    dw2, dw3 = _solve2(m[0], m[1], m[2], m[3], b[0] - phi * kb2, b[1] - phi * kb3)
+    return dw2, dw3, sig2, sig3
+
+
+@kernel(inline="always")
+def held_spin_rates(y, p, geo, phi, m, b, sig, stuck):
+    """spin_balance's (dw2, dw3, sigma_2, sigma_3) with omega.a_2 and/or omega.a_3 held at 0 by the
+    dry-friction moment (stuck, k > 0: Filippov sliding); m = (m11, m12, m21, m22) and b = (b2, b3)
+    its system without the moment. The rates are dw = W0 + sig2 W2 + sig3 W3, and each held sigma
+    is solved from d/dtau(w2 c - w3 s) = dw2 c - dw3 s - w1 (w2 s + w3 c) = 0, respectively
+    d/dtau(w2 s + w3 c) = dw2 s + dw3 c + w1 (w2 c - w3 s) = 0."""
+    k2, k3 = p[P_K2], p[P_K3]
+    s, c = geo[1], geo[2]
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    m11, m12, m21, m22 = m
+    sig2 = sig[1]
+    sig3 = sig[2]
+    st2 = stuck[1] == 1 and k2 > 0.0
+    st3 = stuck[2] == 1 and k3 > 0.0
+    x0, y0 = _solve2(m11, m12, m21, m22, b[0], b[1])
+    x2, y2 = _solve2(m11, m12, m21, m22, -phi * k2 * c, phi * k2 * s)
+    x3, y3 = _solve2(m11, m12, m21, m22, -phi * k3 * s, -phi * k3 * c)
+    r2 = w1 * (w2 * s + w3 * c)
+    r3 = -w1 * (w2 * c - w3 * s)
+    if st2 and st3:
+        sig2, sig3 = _solve2(x2 * c - y2 * s, x3 * c - y3 * s, x2 * s + y2 * c, x3 * s + y3 * c,
+                             r2 - (x0 * c - y0 * s), r3 - (x0 * s + y0 * c))
+    elif st2:
+        sig2 = (r2 - (x0 * c - y0 * s) - sig3 * (x3 * c - y3 * s)) / (x2 * c - y2 * s)
+    else:
+        sig3 = (r3 - (x0 * s + y0 * c) - sig2 * (x2 * s + y2 * c)) / (x3 * s + y3 * c)
+    return x0 + sig2 * x2 + sig3 * x3, y0 + sig2 * y2 + sig3 * y3, sig2, sig3
+
+
+@kernel(inline="always")
+def contact_rates(y, p, mode, geo, phi, n, dw):
+    """(F1, F2, du1, du2): the friction on a1, a2 and the slip's rates, given Phi, the slip
+    direction n = (n1, n2) and dw = (dw1, dw2, dw3). Sliding: F = -mud Phi n and eq. 4.7_1,2;
+    rolling: the friction the constraint needs (eq. 5.2_1), and no slip."""
+    h, s, c, t, e, f, thd = geo
+    w1 = y[Y_W1]
+    dw1, dw2, dw3 = dw
+    q = y[Y_W2] - h * y[Y_W3]      # (centre velocity + slip) . a1 in rolling
+    if mode == SLIDE:
+        F1 = -p[P_MUD] * phi * n[0]
+        F2 = -p[P_MUD] * phi * n[1]
+        return (F1, F2, thd * y[Y_U2] + F1 - dw2 + h * dw3 - e * w1 * thd,
+                -thd * y[Y_U1] + F2 + e * dw1 - thd * q + f * w1 * w1)
+    return dw2 - h * dw3 + e * w1 * thd, -e * dw1 + thd * q - f * w1 * w1, 0.0, 0.0
+
+
+@kernel(inline="always")
+def kinematics_rates(y, geo, u1, u2, nstate, dy):
+    """The precession angle's rate dtheta/dtau (eq. 2.3) for nstate > N_CORE; for nstate >
+    N_CORE + 1 also the spin angle psi's and the centre's velocity on the table's E1, E2 (eq. 2.5
+    solved for the centre's velocity)."""
+    h, s, c, t, e, f, thd = geo
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    dy[Y_THETA] = thd
+    if nstate > N_CORE + 1:
+        vx = u1 + (w2 - h * w3)     # centre velocity on a1
+        vy = u2 - e * w1            # centre velocity on a2
+        ct = math.cos(y[Y_THETA])
+        st = math.sin(y[Y_THETA])
+        dy[Y_PSI] = w2 - w3 * t
+        dy[Y_X] = vx * ct - vy * st
+        dy[Y_Y] = vx * st + vy * ct
+
+
 @kernel
 def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     """Time derivatives d y/d tau of the state, and contact quantities in `aux`.
@@ -252,110 +393,13 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     aux: Phi, F1, F2 (friction on a1, a2), effective sigma_1..3, omega.a_1..3, ok-flag (1; -1 where the
     e1 balance's coefficient of Phi is not positive: a Painleve inconsistency), sin and cos of alpha.
     """
-    G = p[P_G]
-    h = side * p[P_H]
-    A = p[P_A]
-    C = p[P_C]
-    k1, k2, k3 = p[P_K1], p[P_K2], p[P_K3]
-    mud = p[P_MUD]
-    a = y[Y_ALPHA]
+    geo = geometry(y, p, side)
+    s, c = geo[1], geo[2]
+    u1, u2, n1, n2 = slip_direction(y, p, mode, n0x, n0y)
+    dw1, phi, sig1, ok = tilt_balance(y, p, mode, geo, n2, sig, stuck)
+    dw2, dw3, sig2, sig3 = spin_balance(y, p, mode, geo, phi, n1, sig, stuck)
+    F1, F2, du1, du2 = contact_rates(y, p, mode, geo, phi, (n1, n2), (dw1, dw2, dw3))
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
-    s = math.sin(a)
-    c = math.cos(a)
-    t = s / c
-    e = c + h * s              # centre height / R (eq. 4.9)
-    f = h * c - s              # de/dalpha
-    q = w2 - h * w3            # (centre velocity + slip) . a1 in rolling: w2 - h w3
-    thd = w3 / c               # dtheta/dtau = w3 sec(alpha), eq. (2.3)
-    phi0 = G - e * w1 * w1     # Phi = phi0 + f dw1/dtau  (vertical balance, eq. 4.6)
-
-    sig1 = sig[0]
-    sig2 = sig[1]
-    sig3 = sig[2]
-    u1 = 0.0
-    u2 = 0.0
-    n1 = 0.0
-    n2 = 0.0
-    if mode == SLIDE:
-        u1 = y[Y_U1]
-        u2 = y[Y_U2]
-        un = math.hypot(u1, u2)
-        if un > p[P_UFREEZE]:
-            n1 = u1 / un
-            n2 = u2 / un
-        else:
-            n1 = n0x
-            n2 = n0y
-        # e1 balance: A dw1 = C w2 w3 - A w3^2 t + Phi (e F2/Phi - f - k1 sig1), F = -mud Phi n
-        a1 = A
-        r1 = C * w2 * w3 - A * w3 * w3 * t
-        q1 = -mud * e * n2 - f
-    else:
-        # e1 balance with the rolling constraint substituted (eq. 5.3_2 with Phi kept)
-        a1 = A + 1.0 + h * h
-        r1 = C * w2 * w3 - A * w3 * w3 * t + e * thd * q - G * f
-        q1 = 0.0
-    ok = 1.0
-    if stuck[0] == 1 and k1 > 0.0:
-        dw1 = 0.0
-        phi = phi0
-        sig1 = (r1 + q1 * phi) / (k1 * phi)
-    else:
-        qq = q1 - k1 * sig1
-        den = a1 - qq * f
-        if den <= 0.0:
-            ok = -1.0   # Painleve-type inconsistency: no acceleration satisfies the contact law
-        dw1 = (r1 + qq * phi0) / den
-        phi = phi0 + f * dw1
-
-    # e2, e3 balances: M [dw2, dw3] = b0 - Phi [kb2, kb3], kb from eq. (4.8)
-    if mode == SLIDE:
-        m11, m12, m21, m22 = C, 0.0, 0.0, A
-        b2 = mud * phi * n1
-        b3 = -C * w1 * w2 + A * w1 * w3 * t - h * mud * phi * n1
-    else:
-        m11, m12, m21, m22 = C + 1.0, -h, -h, A + h * h
-        b2 = -e * w1 * thd
-        b3 = -C * w1 * w2 + A * w1 * w3 * t + h * e * w1 * thd
-    st2 = stuck[1] == 1 and k2 > 0.0
-    st3 = stuck[2] == 1 and k3 > 0.0
-    if st2 or st3:
-        # dw = W0 + sig2 W2 + sig3 W3; hold d/dtau(omega.a2) and/or d/dtau(omega.a3) at 0.
-        x0, y0 = _solve2(m11, m12, m21, m22, b2, b3)
-        x2, y2 = _solve2(m11, m12, m21, m22, -phi * k2 * c, phi * k2 * s)
-        x3, y3 = _solve2(m11, m12, m21, m22, -phi * k3 * s, -phi * k3 * c)
-        # d/dtau(w2 c - w3 s) = dw2 c - dw3 s - w1 (w2 s + w3 c)
-        # d/dtau(w2 s + w3 c) = dw2 s + dw3 c + w1 (w2 c - w3 s)
-        r2 = w1 * (w2 * s + w3 * c)
-        r3 = -w1 * (w2 * c - w3 * s)
-        if st2 and st3:
-            sig2, sig3 = _solve2(x2 * c - y2 * s, x3 * c - y3 * s, x2 * s + y2 * c, x3 * s + y3 * c,
-                                 r2 - (x0 * c - y0 * s), r3 - (x0 * s + y0 * c))
-        elif st2:
-            sig2 = (r2 - (x0 * c - y0 * s) - sig3 * (x3 * c - y3 * s)) / (x2 * c - y2 * s)
-        else:
-            sig3 = (r3 - (x0 * s + y0 * c) - sig2 * (x2 * s + y2 * c)) / (x3 * s + y3 * c)
-        dw2 = x0 + sig2 * x2 + sig3 * x3
-        dw3 = y0 + sig2 * y2 + sig3 * y3
-    else:
-        kb2 = k2 * sig2 * c + k3 * sig3 * s
-        kb3 = k3 * sig3 * c - k2 * sig2 * s
-        dw2, dw3 = _solve2(m11, m12, m21, m22, b2 - phi * kb2, b3 - phi * kb3)
-
-    if mode == SLIDE:
-        F1 = -mud * phi * n1
-        F2 = -mud * phi * n2
-        # derivatives of the slip components on a1, a2 (eq. 4.7_1,2)
-        du1 = thd * u2 + F1 - dw2 + h * dw3 - e * w1 * thd
-        du2 = -thd * u1 + F2 + e * dw1 - thd * q + f * w1 * w1
-    else:
-        # friction needed to roll (eq. 5.2_1)
-        F1 = dw2 - h * dw3 + e * w1 * thd
-        F2 = -e * dw1 + thd * q - f * w1 * w1
-        du1 = 0.0
-        du2 = 0.0
-
-    g1 = w1
     g2 = w2 * c - w3 * s
     g3 = w2 * s + w3 * c
     dy[Y_ALPHA] = w1
@@ -366,28 +410,19 @@ def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     dy[Y_U2] = du2
     # power of each dissipative mechanism (>= 0 when the signs are consistent):
     # -F.v_P = mud Phi |u|;  -M_f.omega = Phi sum k_i sig_i (omega.a_i)
-    dy[Y_DSLIDE] = mud * phi * (u1 * n1 + u2 * n2)
-    dy[Y_DK1] = k1 * phi * sig1 * g1
-    dy[Y_DK2] = k2 * phi * sig2 * g2
-    dy[Y_DK3] = k3 * phi * sig3 * g3
+    dy[Y_DSLIDE] = p[P_MUD] * phi * (u1 * n1 + u2 * n2)
+    dy[Y_DK1] = p[P_K1] * phi * sig1 * w1
+    dy[Y_DK2] = p[P_K2] * phi * sig2 * g2
+    dy[Y_DK3] = p[P_K3] * phi * sig3 * g3
     if nstate > N_CORE:
-        dy[Y_THETA] = thd
-    if nstate > N_CORE + 1:
-        th = y[Y_THETA]
-        vx = u1 + q          # centre velocity on a1 (eq. 2.5 solved for v-bar)
-        vy = u2 - e * w1     # centre velocity on a2
-        ct = math.cos(th)
-        stt = math.sin(th)
-        dy[Y_PSI] = w2 - w3 * t
-        dy[Y_X] = vx * ct - vy * stt
-        dy[Y_Y] = vx * stt + vy * ct
+        kinematics_rates(y, geo, u1, u2, nstate, dy)
     aux[X_PHI] = phi
     aux[X_F1] = F1
     aux[X_F2] = F2
     aux[X_SIG1] = sig1
     aux[X_SIG2] = sig2
     aux[X_SIG3] = sig3
-    aux[X_G1] = g1
+    aux[X_G1] = w1
     aux[X_G2] = g2
     aux[X_G3] = g3
     aux[X_OK] = ok
