@@ -103,7 +103,7 @@ def _mode_energy_trig(y, p, cs, s, c):
     return energy_from_trig(y, p, side, u1, u2, s, c)
 
 
-@kernel
+@kernel(inline="always")
 def _model(t, y, p, cs, n, dy, aux, n0x, n0y, istats):
     """The model's right-hand side for the contact state cs (SLAVED evaluates as sliding)."""
     mode = SLIDE if cs[CS_MODE] != ROLL else ROLL

@@ -380,7 +380,7 @@ def kinematics_rates(y, geo, u1, u2, nstate, dy):
         dy[Y_Y] = vx * st + vy * ct
 
 
-@kernel
+@kernel(inline="always")
 def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
     """Time derivatives d y/d tau of the state, and contact quantities in `aux`.
 
