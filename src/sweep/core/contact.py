@@ -608,17 +608,16 @@ def end_slip(y, p, cs, wk, istats):
 
 
 @kernel
-def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
-    """Discrete update at a located event k (state y at the event, changed in place).
-
-    Returns the outcome code that ends the scene, or -1 to continue. The caller re-evaluates the
-    right-hand side and the event functions afterwards.
-    """
-    g_before = moment_axes_rates(y)
-    own = -1   # the component this event puts on its surface (settle_signs)
+def moment_event(k, t, y, p, cs, n, wk, istats):
+    """The update of one dry-friction moment component at its event k: a sign flip or a stick
+    (EV_SIGN*), a stick where neither sign holds (EV_AGAINST*), a stick at spin_tol (EV_SPIN*) or a
+    release (EV_UNSTICK*). Returns (own, held): own, the component this event put on its surface
+    (settle_signs leaves it; -1: none); held, True where a stop at spin_tol holds the stuck
+    components, so that the rates after it are those that release_moved compares with."""
     if k <= EV_SIGN3:
         stick_or_flip(k, t, y, p, cs, n, wk, istats)
-    elif k >= EV_AGAINST1:
+        return -1, False
+    if k >= EV_AGAINST1:
         # neither sign holds (the one just set fails at once, the other opposes the motion):
         # the Filippov solution stays on omega.a_i = 0
         i = k - EV_AGAINST1
@@ -627,18 +626,23 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         if cs[CS_STUCK + i] == 0.0 and cs[CS_SIG + i] == sig_failed:
             cs[CS_STUCK + i] = 1.0
             istats[I_STICK] += 1
-            own = i
-    elif EV_SPIN1 <= k <= EV_SPIN3:
-        i = k - EV_SPIN1
-        if stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
-            g_before = moment_axes_rates(y)   # the stop holds the stuck components: they stay stuck
-    elif k <= EV_UNSTICK3:
-        i = k - EV_UNSTICK1
-        eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
-        cs[CS_SIG + i] = 1.0 if wk[W_AUXTMP, X_SIG1 + i] > 0.0 else -1.0
-        cs[CS_STUCK + i] = 0.0
-        own = i
-    elif k == EV_CONE:
+            return i, False
+        return -1, False
+    if EV_SPIN1 <= k <= EV_SPIN3:
+        return -1, stick_at_spin_tol(k - EV_SPIN1, t, y, p, cs, n, wk, istats)
+    i = k - EV_UNSTICK1
+    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+    cs[CS_SIG + i] = 1.0 if wk[W_AUXTMP, X_SIG1 + i] > 0.0 else -1.0
+    cs[CS_STUCK + i] = 0.0
+    return i, False
+
+
+@kernel
+def slip_event(k, t, y, p, cs, n, wk, istats):
+    """The update of the contact's slip at its event k (EV_CONE .. EV_SLAVE, EV_SLAVE_LOST): the
+    onset of a slip, its end by slip_tol or along the slaved direction, the hand-over to and from
+    the slaved direction. Returns the outcome code that ends the scene, or -1."""
+    if k == EV_CONE:
         start_slip(t, y, p, cs, n, wk, istats)
         cs[CS_SLAVE_OFF] = 0.0
     elif k == EV_SLIP_SLOW:
@@ -654,19 +658,49 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         cs[CS_MODE] = SLIDE
         cs[CS_SLAVE_OFF] = 0.0
     elif k == EV_SLAVE:
-        code = try_slave(t, y, p, cs, n, wk, istats)
-        if code >= 0:
-            return code
+        return try_slave(t, y, p, cs, n, wk, istats)
     elif k == EV_SLAVE_LOST:
         # the quasi-static direction folds away: the slip direction follows its own dynamics
         cs[CS_MODE] = SLIDE
         cs[CS_SLAVE_OFF] = 1.0
+    return -1
+
+
+@kernel
+def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
+    """Discrete update at a located event k (state y at the event, changed in place): the event's
+    own update (moment_event, slip_event, side_change), then what every update owes the state
+    (settle_event).
+
+    Returns the outcome code that ends the scene, or -1 to continue. The caller re-evaluates the
+    right-hand side and the event functions afterwards.
+    """
+    g_before = moment_axes_rates(y)
+    own = -1   # the component this event puts on its surface (settle_signs)
+    if k <= EV_UNSTICK3 or EV_SPIN1 <= k <= EV_SPIN3 or k >= EV_AGAINST1:
+        own, held = moment_event(k, t, y, p, cs, n, wk, istats)
+        if held:
+            g_before = moment_axes_rates(y)   # the stop holds the stuck components: they stay stuck
     elif k == EV_CONTACT:
         return 1   # outcomes.CONTACT_LOST
     elif k == EV_FACE:
         return 8   # outcomes.FACE_CONTACT (the caller records it as a halt)
     elif k == EV_SIDE:
         return side_change(t, y, p, cs, n, u_tol, wk, istats, fstats)
+    else:
+        code = slip_event(k, t, y, p, cs, n, wk, istats)
+        if code >= 0:
+            return code
+    settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own)
+    return -1
+
+
+@kernel
+def settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own):
+    """What every discrete update owes the state: a slip at or below slip_tol ends; the moment
+    components that the update moved are released (release_moved: g_before, omega.a_i before it)
+    and every sign made consistent (settle_signs, leaving component own); a rolling state left
+    outside the static cone starts to slip."""
     if cs[CS_MODE] == SLIDE and math.hypot(y[Y_U1], y[Y_U2]) <= u_tol:
         # the slip reached slip_tol within the located event's bracket (a stiff slip decays by
         # orders of magnitude in 1e-11 tau): its own event can no longer happen
@@ -680,7 +714,6 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         # the slip changes the moments the stuck components need
         # (a component the Filippov rule held is tested again: the slip changed its dynamics)
         settle_signs(t, y, p, cs, n, wk, istats, own if own >= 0 and cs[CS_STUCK + own] == 0.0 else -1)
-    return -1
 
 
 @kernel
