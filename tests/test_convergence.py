@@ -401,3 +401,21 @@ def test_the_peer_comparison_counts_totals_only_in_calm_scenes():
     sensitive = sa.compare(record(2.0 * (1 + 1e-5)))
     assert not sensitive["calm"] and sensitive["ill"] == 4
     assert [q[0] for q in sensitive["wc"]] == ["t_level_0.1"]
+
+
+def test_events_restart_at_their_roots_so_many_impacts_add_no_error_that_rtol_leaves():
+    """Seed 20261130, scene 8: a disk rocking near upright through 1268 rim impacts and 891 stick
+    phases to tau 300, where alpha = -6.381e-4 rad. Each event restarts at the right end of its
+    located bracket. With brackets of 1e-12 tau that one-sided offset summed to 4.7e-11 rad: the
+    kernel's runs at rtol 1e-12..1e-14 agreed to 3e-12, and the SciPy peer's (located to 4 ulp) to
+    2e-12, but the two converged 7e-8 of the value apart. Brackets of 4 ulp (roots.location_tol)
+    give the peer's value: the peer at its tightest rtol (SciPy clamps it to 2.2e-14) and the
+    kernel at 1e-13 now agree to 3e-13 rad (5e-11 before the change)."""
+    from scipy_agreement import _driver
+
+    cfg = harness._valid_levels(harness.harness_scene(20261130, 8))
+    kernel = harness._one_run(cfg, 1e-13)
+    peer = _driver(cfg, 2.3e-14, 600.0)
+    assert kernel["events"] == peer["events"] == [0, 891, 1268], (kernel["events"], peer["events"])
+    a_kernel, a_peer = kernel["q"]["alpha_tau_300"], peer["q"]["alpha_tau_300"]
+    assert abs(a_kernel - a_peer) <= 1e-8 * abs(a_peer), (a_kernel, a_peer)

@@ -27,7 +27,7 @@ from .jit import kernel
 from .layout import (F_TEND, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
                      N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS)
 from .model import N_FULL, N_PARAMS
-from .roots import EVENT_TOL_TAU
+from .roots import location_tol
 from .dop853 import N_DENSE
 
 # Levels per scene on the batch path (the per-thread buffers have a fixed size on CUDA).
@@ -153,7 +153,7 @@ def summary_fits(level_t, prec_hz, levels, nl, lay_flat, t_end_tau, chi, out):
     first nl entries. A disk that lay flat halted at the located event t_end_tau."""
     if lay_flat:
         out[D_THALT] = t_end_tau * chi
-        out[D_THALT_ERR] = EVENT_TOL_TAU * chi
+        out[D_THALT_ERR] = location_tol(t_end_tau, t_end_tau) * chi
         out[D_HALT_FINITE] = 1.0
         out[D_APPROACH] = math.nan
     else:

@@ -2,7 +2,7 @@
 
 Events are roots of g_k (g > 0 before the event). Roots are bracketed on the accepted step and
 refined with the Illinois variant of regula falsi on the 7th-order dense output until the bracket
-is shorter than EVENT_TOL_TAU (or 4 ulp of tau); the restart point is the right end of the
+is no wider than 4 ulp of tau (location_tol); the restart point is the right end of the
 bracket, where the event has certainly happened, so a restart can never re-detect the crossing.
 The maxima of the normal force Phi are found by Brent's method on the same dense output.
 """
@@ -16,8 +16,13 @@ from .jit import kernel
 from .layout import W_AUXBUF, W_DYBUF, W_GBUF, W_YBUF
 from .model import X_PHI, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 
-# Location tolerance on tau; below 4 ulp of tau the bracket cannot shrink further.
-EVENT_TOL_TAU = 1e-12
+# Events are located to 4 ulp of tau, where the bracket cannot shrink further, with this floor near
+# tau = 0. The restart point is the bracket's right end, so each event restarts up to the tolerance
+# past its root: a one-sided error that no rtol removes. At the former tolerance of 1e-12 tau it
+# summed, over the 2159 events of harness seed 20261130 scene 8 (a disk rocking near upright, alpha
+# at tau 300 = -6.4e-4 rad), to 4.7e-11 rad, 7e-8 of the value, on which the kernel's runs at rtol
+# 1e-12..1e-14 agreed to 3e-12 (docs/performance.md, 'Stop 32').
+EVENT_TOL_TAU = 1e-15
 # Step (tau) of the forward difference that gives the rate of an event function without a closed form.
 RATE_STEP = 1e-7
 
@@ -167,6 +172,13 @@ def event_value_at(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk,
 
 
 @kernel
+def location_tol(ta, tb):
+    """The width (tau) to which locate shrinks an event's bracket [ta, tb]: 4 ulp of tau, at least
+    EVENT_TOL_TAU."""
+    return max(EVENT_TOL_TAU, 4.0 * 2.220446049250313e-16 * max(abs(ta), abs(tb)))
+
+
+@kernel
 def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
     """Illinois regula falsi for g_k on [ta, tb] with g(ta) > 0 >= g(tb). Returns (ta, tb) bracket.
 
@@ -175,7 +187,7 @@ def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, 
     """
     side_kept = 0
     for _ in range(200):
-        tol = max(EVENT_TOL_TAU, 4.0 * 2.220446049250313e-16 * max(abs(ta), abs(tb)))
+        tol = location_tol(ta, tb)
         if tb - ta <= tol:
             break
         width = tb - ta
