@@ -344,7 +344,7 @@ def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
     g1 = R.event_value_at(k, h, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
     assert g0 > 0.0 >= g1, (g0, g1)
     ta, tb = R.locate(k, 0.0, g0, h, g1, F, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
-    assert tb - ta <= R.location_tol(ta, tb)
+    assert tb - ta <= R.location_tol(tb)
     assert R.event_value_at(k, ta, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist) > 0.0
     assert R.event_value_at(k, tb, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist) <= 0.0
 

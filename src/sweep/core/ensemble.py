@@ -153,7 +153,7 @@ def summary_fits(level_t, prec_hz, levels, nl, lay_flat, t_end_tau, chi, out):
     first nl entries. A disk that lay flat halted at the located event t_end_tau."""
     if lay_flat:
         out[D_THALT] = t_end_tau * chi
-        out[D_THALT_ERR] = location_tol(t_end_tau, t_end_tau) * chi
+        out[D_THALT_ERR] = location_tol(t_end_tau) * chi
         out[D_HALT_FINITE] = 1.0
         out[D_APPROACH] = math.nan
     else:

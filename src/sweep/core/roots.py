@@ -23,6 +23,7 @@ from .model import X_PHI, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 # at tau 300 = -6.4e-4 rad), to 4.7e-11 rad, 7e-8 of the value, on which the kernel's runs at rtol
 # 1e-12..1e-14 agreed to 3e-12 (docs/performance.md, 'Stop 32').
 EVENT_TOL_TAU = 1e-15
+EPS = 2.220446049250313e-16
 # Step (tau) of the forward difference that gives the rate of an event function without a closed form.
 RATE_STEP = 1e-7
 
@@ -172,10 +173,10 @@ def event_value_at(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk,
 
 
 @kernel
-def location_tol(ta, tb):
-    """The width (tau) to which locate shrinks an event's bracket [ta, tb]: 4 ulp of tau, at least
-    EVENT_TOL_TAU."""
-    return max(EVENT_TOL_TAU, 4.0 * 2.220446049250313e-16 * max(abs(ta), abs(tb)))
+def location_tol(tau):
+    """The width (tau) to which locate shrinks an event's bracket at time tau: 4 ulp of tau, at
+    least EVENT_TOL_TAU."""
+    return max(EVENT_TOL_TAU, 4.0 * EPS * abs(tau))
 
 
 @kernel
@@ -187,7 +188,7 @@ def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, 
     """
     side_kept = 0
     for _ in range(200):
-        tol = location_tol(ta, tb)
+        tol = location_tol(max(abs(ta), abs(tb)))
         if tb - ta <= tol:
             break
         width = tb - ta
