@@ -3,6 +3,7 @@
 
     .venv/bin/pip install -r requirements-cuda.txt          # NVVM, libdevice, NVRTC, ptxas wheels
     .venv/bin/python benchmarks/cuda_compile_offline.py [--cc 9.0] [--ptx out.ptx] [--no-ptxas]
+    .venv/bin/python benchmarks/cuda_compile_offline.py --cc 9.0 --save-kernel kernel_sm90.pkl.xz
 
 Checks that numba-cuda compiles the whole integrator (sweep.core.ensemble.solve_scene and every
 @njit function below it) as device code of sweep.gpu's kernel, and prints the compile time, the
@@ -11,6 +12,11 @@ nvidia-cuda-nvcc wheel ships it), the registers, stack frame (local memory) and 
 and the resident threads per SM that the registers allow. On a machine without a driver, numba-cuda
 asks for the current device's compute capability when it compiles a device function; this script
 answers with --cc instead (nothing else is patched).
+
+--save-kernel PATH compiles and links the kernel for --cc (numba-cuda's own compile path: NVVM, then
+nvJitLink) and saves it with its cubin (`sweep.gpu.save_prebuilt`); on a GPU machine with the same
+sources and numba-cuda, `SWEEP_CUDA_KERNEL=PATH` (or `gpu_throughput.py --kernel PATH`) then runs it
+without compiling.
 """
 from __future__ import annotations
 
@@ -44,8 +50,18 @@ def main(argv=None) -> int:
     ap.add_argument("--cc", default="9.0", help="compute capability (9.0: H100, 8.0: A100)")
     ap.add_argument("--ptx", default=None, help="write the PTX here")
     ap.add_argument("--no-ptxas", action="store_true")
+    ap.add_argument("--save-kernel", default=None, metavar="PATH", help="save the compiled kernel and its cubin here")
     args = ap.parse_args(argv)
     cc = tuple(int(x) for x in args.cc.split("."))
+    if args.save_kernel:
+        from sweep import gpu
+
+        facts = gpu.save_prebuilt(args.save_kernel, cc)
+        print(f"numba-cuda + NVVM: {facts['seconds_nvvm']:.0f} s; PTX {facts['ptx_bytes'] / 1e6:.1f} MB; "
+              f"link (nvJitLink): {facts['seconds_link']:.0f} s; cubin {facts['cubin_bytes'] / 1e6:.1f} MB")
+        print(f"kernel {facts['entry_name'][:80]}... saved to {args.save_kernel} "
+              f"({Path(args.save_kernel).stat().st_size / 1e6:.1f} MB)")
+        return 0
 
     from numba import cuda, types
     import numba.cuda.dispatcher as dispatcher

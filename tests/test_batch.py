@@ -109,6 +109,54 @@ def test_cuda_without_gpu_fails_at_once_and_nothing_imports_numba_cuda():
     assert out.startswith("ERR device='cuda'") and "device='cpu'" in out
 
 
+def test_a_prebuilt_kernel_from_other_sources_or_numba_cuda_is_refused_naming_what_differs(tmp_path):
+    """gpu.install_prebuilt checks the stamp of a kernel compiled elsewhere (save_prebuilt) before it
+    registers it: the core's and the kernel's source fingerprint, numba-cuda and compute capability."""
+    code = textwrap.dedent("""
+        import lzma, pickle, sys
+        from sweep import gpu
+        disp = gpu.kernel()
+        cc = tuple(gpu.cuda.get_current_device().compute_capability)
+        good = {"format": gpu.PREBUILT_FORMAT, "fingerprint": gpu._core_fingerprint(), "cc": cc,
+                "numba_cuda": gpu._numba_cuda_version(), "kernel": None}
+        for key, bad in (("fingerprint", "0" * 64), ("numba_cuda", "0.1.0"), ("cc", (1, 0)), ("format", 0)):
+            path = sys.argv[1] + "/k_" + key + ".pkl.xz"
+            with lzma.open(path, "wb") as f:
+                pickle.dump(dict(good, **{key: bad}), f)
+            try:
+                gpu.install_prebuilt(disp, path)
+            except ValueError as exc:
+                print(key, "|", exc)
+            else:
+                print(key, "| ACCEPTED")
+    """)
+    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
+    res = subprocess.run([sys.executable, "-c", code, str(tmp_path)], env=env, capture_output=True, text=True,
+                         cwd=ROOT, timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    lines = dict(line.split(" | ", 1) for line in res.stdout.strip().splitlines())
+    assert set(lines) == {"fingerprint", "numba_cuda", "cc", "format"}
+    for key, msg in lines.items():
+        assert msg.startswith("SWEEP_CUDA_KERNEL=") and f"prebuilt kernel's {key} is" in msg, msg
+        assert "cuda_compile_offline.py --cc" in msg and "--save-kernel" in msg
+
+
+def test_the_prebuilt_kernel_stamp_follows_the_kernel_source():
+    """An edit of the kernel body (sweep.gpu._build_kernel) or of the core changes the stamp."""
+    from sweep import gpu
+
+    base = gpu._core_fingerprint()
+    original = gpu._build_kernel
+    try:
+        def _build_kernel(cuda_module):   # another kernel source
+            return None
+        gpu._build_kernel = _build_kernel
+        assert gpu._core_fingerprint() != base
+    finally:
+        gpu._build_kernel = original
+    assert gpu._core_fingerprint() == base
+
+
 def test_bad_device_and_workers_are_rejected():
     with pytest.raises(sweep.ConfigError, match="device"):
         sweep.simulate_batch([{}], device="tpu")

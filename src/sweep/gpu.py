@@ -82,12 +82,114 @@ def simulator_enabled() -> bool:
         return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0")
 
 
+# a kernel compiled ahead of time (save_prebuilt) that kernel() installs instead of compiling
+PREBUILT_ENV = "SWEEP_CUDA_KERNEL"
+PREBUILT_FORMAT = 1
+
+
 def kernel():
-    """The batch kernel (built once per process)."""
+    """The batch kernel (built once per process). Where the environment variable SWEEP_CUDA_KERNEL
+    names a file written by `save_prebuilt`, its compiled kernel is installed (no compilation)."""
     global _kernel
     if _kernel is None:
         _kernel = _build_kernel(require_cuda())
+        path = os.environ.get(PREBUILT_ENV)
+        if path and not simulator_enabled():
+            install_prebuilt(_kernel, path)
     return _kernel
+
+
+def kernel_argtypes():
+    """The numba types of the batch kernel's arguments, as `run_cuda` passes them (C-contiguous)."""
+    from numba import types
+
+    f1, f2, f3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
+    i1, i2 = types.int64[::1], types.int64[:, ::1]
+    # order, Y0, P, S, LE, LV, NL, CHI, counter, ISTATS, FSTATS, LEV, YEND, DER
+    return (i1, f2, f2, f2, f2, f2, i1, f1, i1, i2, f2, f3, f2, f2)
+
+
+def save_prebuilt(path, cc: tuple[int, int]) -> dict:
+    """Compile the batch kernel for compute capability `cc` on this machine (no GPU needed: NVVM and
+    nvJitLink/ptxas from the requirements-cuda.txt wheels) and write it, with its cubin, to `path`
+    (lzma-compressed pickle), stamped with the core's fingerprint and the numba-cuda version. A GPU
+    machine then runs it at once (`install_prebuilt`, or SWEEP_CUDA_KERNEL=path) instead of compiling
+    for minutes. Returns {seconds_nvvm, seconds_link, ptx_bytes, cubin_bytes, entry_name}."""
+    import lzma
+    import pickle
+    import time
+    import types as pytypes
+
+    import numba.cuda.codegen as codegen
+    import numba.cuda.dispatcher as dispatcher
+    from numba import cuda as cuda_module
+
+    cc = tuple(cc)
+    # the key under which numba-cuda looks the cubin up on such a device (CUDACodeLibrary._ensure_cc:
+    # the architecture-specific target, sm_90a, from compute capability 9.0 on)
+    target = (cc[0], cc[1], "a" if cc >= (9, 0) else "")
+    # without a GPU, numba-cuda asks the current device for the compute capability: answer with cc
+    dispatcher.get_current_device = lambda: pytypes.SimpleNamespace(compute_capability=cc)
+    codegen.CUDACodeLibrary._ensure_cc = lambda self, want=None: target if want is None else want
+    disp = _build_kernel(cuda_module)
+    t0 = time.perf_counter()
+    kern = dispatcher._Kernel(disp.py_func, kernel_argtypes(), **disp.targetoptions)
+    t1 = time.perf_counter()
+    cubin = kern._codelibrary.get_cubin(cc=target)
+    t2 = time.perf_counter()
+    blob = {"format": PREBUILT_FORMAT, "fingerprint": _core_fingerprint(), "cc": cc,
+            "numba_cuda": _numba_cuda_version(), "kernel": kern}
+    tmp = f"{path}.tmp"
+    with lzma.open(tmp, "wb", preset=6) as f:
+        pickle.dump(blob, f, protocol=pickle.HIGHEST_PROTOCOL)
+    os.replace(tmp, path)
+    return {"seconds_nvvm": t1 - t0, "seconds_link": t2 - t1,
+            "ptx_bytes": len(kern._codelibrary.get_asm_str(cc=target)), "cubin_bytes": len(bytes(cubin)),
+            "entry_name": kern.entry_name}
+
+
+def install_prebuilt(disp, path) -> None:
+    """Register the kernel saved by `save_prebuilt` at `path` as `disp`'s specialization for
+    run_cuda's argument types on the current GPU; ValueError naming what differs where it was built
+    from other sources, another numba-cuda or for another compute capability."""
+    import lzma
+    import pickle
+
+    with lzma.open(path, "rb") as f:
+        blob = pickle.load(f)
+    cc = tuple(cuda.get_current_device().compute_capability)
+    want = {"format": PREBUILT_FORMAT, "fingerprint": _core_fingerprint(), "cc": cc,
+            "numba_cuda": _numba_cuda_version()}
+    for key, value in want.items():
+        if blob.get(key) != value:
+            raise ValueError(f"{PREBUILT_ENV}={path}: prebuilt kernel's {key} is {blob.get(key)!r}, this "
+                             f"machine needs {value!r}; rebuild it with benchmarks/cuda_compile_offline.py "
+                             f"--cc {cc[0]}.{cc[1]} --save-kernel {path}")
+    from numba.cuda.dispatcher import CUDADispatcher
+
+    kern = blob["kernel"]
+    argtypes = tuple(kern.argument_types)
+    spec = CUDADispatcher(disp.py_func, targetoptions=disp.targetoptions)
+    spec.add_overload(kern, argtypes)
+    spec.disable_compile()
+    spec._specialized = True
+    disp.specializations[cc, argtypes] = spec
+
+
+def _core_fingerprint() -> str:
+    """The core's fingerprint and the kernel's own source (`_build_kernel`, here)."""
+    import hashlib
+    import inspect
+
+    from .grid import core_fingerprint
+
+    return hashlib.sha256(core_fingerprint().encode() + b"\0" + inspect.getsource(_build_kernel).encode()).hexdigest()
+
+
+def _numba_cuda_version() -> str:
+    from importlib.metadata import version
+
+    return version("numba-cuda")
 
 
 def _build_kernel(cuda_module):

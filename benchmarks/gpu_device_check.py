@@ -1,0 +1,198 @@
+#!/usr/bin/env python3
+"""GPU figures of the batch path within a short lease of a GPU machine: compile and reference here,
+only the runs there.
+
+    # here (no GPU): the kernel, compiled for the GPU's compute capability (~20 min of one core) ...
+    .venv/bin/python benchmarks/cuda_compile_offline.py --cc 9.0 --save-kernel gpucheck/kernel_sm90.pkl.xz
+    # ... and the scenes with their one-core CPU summaries (the reference)
+    .venv/bin/python benchmarks/gpu_device_check.py prepare --dir gpucheck --n 100000 --n-ref 1000
+    # there (python3 with numba-cuda; no compilation, no schema package needed):
+    python3 benchmarks/gpu_device_check.py run --dir gpucheck --budget-s 420 --out $OUT
+
+The scenes are gpu_throughput.py's: the default grid's ranges, random inside them (seed 0). `run`
+installs the prebuilt kernel (sweep.gpu.install_prebuilt), runs the n-ref reference scenes on the GPU
+and compares every summary with the CPU's (`summaries_equal`, 1e-9 and 1e-6 relative), then runs the
+largest batch of the other scenes that its measured rate fits into half the time left (at least
+one scene per resident thread), and last, while time is left, the reference scenes on all CPU cores
+of that machine (numba compiles the CPU kernels first; the compile is timed apart). It prints scenes/s,
+the launch (threads, registers, local memory) and writes everything to OUT/gpu_check.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import lzma
+import os
+import pickle
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+T_START = time.perf_counter()
+
+
+def prepare(args) -> int:
+    from gpu_throughput import scenes
+
+    import sweep
+
+    d = Path(args.dir)
+    d.mkdir(parents=True, exist_ok=True)
+    sc = scenes(args.n, args.seed)
+    sweep.simulate_batch(sc[:1], device="cpu", workers=1)   # compile or load the CPU kernels first
+    t0 = time.perf_counter()
+    ref = sweep.simulate_batch(sc[:args.n_ref], device="cpu", workers=args.workers)
+    dt = time.perf_counter() - t0
+    with lzma.open(d / "scenes.pkl.xz", "wb") as f:
+        pickle.dump({"seed": args.seed, "scenes": sc, "n_ref": args.n_ref, "reference": ref,
+                     "reference_seconds": dt, "reference_workers": args.workers}, f)
+    walls = np.array([s["wall_time"] for s in ref])
+    print(f"{args.n} scenes (seed {args.seed}); reference: {args.n_ref} scenes on {args.workers} CPU thread(s) in "
+          f"{dt:.1f} s; per scene median {np.median(walls):.3f} s, mean {walls.mean():.3f} s, max {walls.max():.2f} s")
+    return 0
+
+
+def left(args) -> float:
+    return args.budget_s - (time.perf_counter() - T_START)
+
+
+def run_gpu(gpu, Batch, scs):
+    """(summaries or None where the kernel flagged a peak-ring overflow, launch facts, host seconds)."""
+    from sweep.core.layout import I_OVERFLOW
+
+    t0 = time.perf_counter()
+    batch = Batch(scs)
+    t_pack = time.perf_counter() - t0
+    info = gpu.run_cuda(batch.order, *batch.inputs, batch.outputs)
+    batch.wall[:] = info["gpu_seconds"] / len(scs)
+    t0 = time.perf_counter()
+    out = [None if batch.ISTATS[j, I_OVERFLOW] != 0 else batch.summary(j) for j in range(len(scs))]
+    return out, info, t_pack + time.perf_counter() - t0
+
+
+def run(args) -> int:
+    np.row_stack = getattr(np, "row_stack", np.vstack)   # numba-cuda 0.30.4 calls it; numpy 2.5 removed it
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    res: dict = {"budget_s": args.budget_s}
+
+    def save():
+        res["elapsed_s"] = time.perf_counter() - T_START
+        (out_dir / "gpu_check.json").write_text(json.dumps(res, indent=1, default=str))
+
+    d = Path(args.dir)
+    with lzma.open(d / "scenes.pkl.xz", "rb") as f:
+        data = pickle.load(f)
+    os.environ.setdefault("SWEEP_CUDA_KERNEL", str(args.kernel or d / "kernel_sm90.pkl.xz"))
+    t0 = time.perf_counter()
+    from sweep import gpu
+    from sweep.ensemble import Batch, summaries_equal
+    from sweep.scene import load_scene
+
+    cuda = gpu.require_cuda()
+    dev = cuda.get_current_device()
+    name = getattr(dev, "name", "numba's CUDA simulator")
+    res["device"] = {"name": name.decode() if isinstance(name, bytes) else str(name),
+                     "cc": list(dev.compute_capability), "sms": getattr(dev, "MULTIPROCESSOR_COUNT", 1)}
+    res["import_s"] = time.perf_counter() - t0
+    n_ref = data["n_ref"]
+    ref = data["reference"]
+    t0 = time.perf_counter()
+    scs = [load_scene(s) for s in data["scenes"][:n_ref]]
+    res["load_scene_ms_per_scene"] = 1e3 * (time.perf_counter() - t0) / n_ref
+    print(f"{res['device']}; import {res['import_s']:.1f} s; {n_ref} scenes loaded "
+          f"({res['load_scene_ms_per_scene']:.2f} ms each)", flush=True)
+
+    t0 = time.perf_counter()
+    _, info, _ = run_gpu(gpu, Batch, scs[:8])   # installs the prebuilt kernel, loads its module
+    res["warm_s"] = time.perf_counter() - t0
+    res["launch"] = {k: info[k] for k in ("threads_per_block", "regs_per_thread", "local_mem_per_thread")}
+    print(f"warm-up (kernel install + module load + 8 scenes): {res['warm_s']:.1f} s; {res['launch']}", flush=True)
+    save()
+
+    got, info, host = run_gpu(gpu, Batch, scs[:n_ref])
+    cmp = {"n": n_ref, "overflow": sum(g is None for g in got)}
+    for tol in (1e-9, 1e-6, 1e-3):
+        cmp[f"equal_{tol:g}"] = sum(g is not None and summaries_equal(r, g, rtol=tol) == [] for r, g in zip(ref, got))
+    cmp["same_outcome"] = sum(g is not None and g["outcome"] == r["outcome"] for r, g in zip(ref, got))
+    diffs = [summaries_equal(r, g, rtol=1e-9)[:3] for r, g in zip(ref, got) if g is not None]
+    cmp["examples"] = [x for x in diffs if x][:8]
+    cpu_walls = np.array([r["wall_time"] for r in ref])
+    res["reference_run"] = {"gpu_kernel_s": info["gpu_seconds"], "host_s": host, "blocks": info["blocks"],
+                            "threads": info["threads"], "scenes_per_s": n_ref / info["gpu_seconds"],
+                            "cpu_one_core_scenes_per_s_here": 1.0 / cpu_walls.mean(), "agreement": cmp}
+    print(f"reference scenes on the GPU: {info['gpu_seconds']:.1f} s kernel ({n_ref / info['gpu_seconds']:.1f} scenes/s, "
+          f"{info['threads']} threads); agreement {cmp}", flush=True)
+    save()
+
+    # the big batch: per-thread time per scene estimated from the reference run (its kernel lasts as
+    # long as its slowest scene, whose CPU share of the mean is known)
+    per_scene_gpu = info["gpu_seconds"] * cpu_walls.mean() / cpu_walls.max()
+    resident = gpu.launch_shape(cuda, 10**9, info["regs_per_thread"])
+    threads = resident[0] * resident[1]
+    rest = data["scenes"][n_ref:]
+    budget = 0.5 * left(args) - info["gpu_seconds"]
+    n_big = int(min(len(rest), max(threads, threads * budget / max(per_scene_gpu, 1e-9))))
+    res["big_plan"] = {"threads": threads, "per_scene_gpu_est_s": per_scene_gpu, "n": n_big, "left_s": left(args)}
+    if left(args) > 3 * info["gpu_seconds"] + 60 and n_big > 0:
+        t0 = time.perf_counter()
+        big = [load_scene(s) for s in rest[:n_big]]
+        t_load = time.perf_counter() - t0
+        got, info, host = run_gpu(gpu, Batch, big)
+        steps = np.array([g["n_steps"] + g["n_rejected"] for g in got if g is not None], float)
+        res["big_run"] = {"n": n_big, "gpu_kernel_s": info["gpu_seconds"], "host_s": host + t_load,
+                          "scenes_per_s": n_big / info["gpu_seconds"], "threads": info["threads"],
+                          "overflow": sum(g is None for g in got),
+                          "steps_percentiles_0_50_90_99_100": np.percentile(steps, [0, 50, 90, 99, 100]).tolist(),
+                          "outcomes": {str(k): int(v) for k, v in zip(*np.unique(
+                              [g["outcome"] for g in got if g is not None], return_counts=True))}}
+        print(f"big batch: {res['big_run']}", flush=True)
+        save()
+
+    if left(args) > args.cpu_min_s:
+        import sweep
+
+        t0 = time.perf_counter()
+        sweep.simulate_batch(scs[:1], device="cpu", workers=1)
+        res["cpu_compile_s"] = time.perf_counter() - t0
+        workers = len(os.sched_getaffinity(0))
+        n_cpu = n_ref
+        t0 = time.perf_counter()
+        cpu = sweep.simulate_batch(scs[:n_cpu], device="cpu", workers=workers)
+        dt = time.perf_counter() - t0
+        res["cpu_run"] = {"n": n_cpu, "workers": workers, "seconds": dt, "scenes_per_s": n_cpu / dt,
+                          "equal_reference_1e-9": sum(summaries_equal(r, c, rtol=1e-9) == [] for r, c in zip(ref, cpu))}
+        print(f"CPU compile {res['cpu_compile_s']:.1f} s; {res['cpu_run']}", flush=True)
+    else:
+        res["cpu_run"] = f"skipped: {left(args):.0f} s left < {args.cpu_min_s} s"
+    save()
+    print(json.dumps(res, indent=1, default=str))
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    p = sub.add_parser("prepare")
+    p.add_argument("--dir", default="gpucheck")
+    p.add_argument("--n", type=int, default=100_000)
+    p.add_argument("--n-ref", type=int, default=1000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=1)
+    r = sub.add_parser("run")
+    r.add_argument("--dir", default="gpucheck")
+    r.add_argument("--kernel", default=None, help="prebuilt kernel (default DIR/kernel_sm90.pkl.xz)")
+    r.add_argument("--budget-s", type=float, default=420.0, help="wall seconds this run may take")
+    r.add_argument("--cpu-min-s", type=float, default=120.0, help="run the CPU comparison only with this much left")
+    r.add_argument("--out", default=os.environ.get("OUT", "gpucheck/out"))
+    args = ap.parse_args(argv)
+    return prepare(args) if args.cmd == "prepare" else run(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
