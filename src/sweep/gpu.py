@@ -137,6 +137,9 @@ def save_prebuilt(path, cc: tuple[int, int]) -> dict:
     t1 = time.perf_counter()
     cubin = kern._codelibrary.get_cubin(cc=target)
     t2 = time.perf_counter()
+    cubin_bytes = bytes(getattr(cubin, "code", cubin))
+    # plain bytes in the file, not cuda.core's ObjectCode: the GPU machine's cuda.core may differ
+    kern._codelibrary._cubin_cache[target] = cubin_bytes
     blob = {"format": PREBUILT_FORMAT, "fingerprint": _core_fingerprint(), "cc": cc,
             "numba_cuda": _numba_cuda_version(), "kernel": kern}
     tmp = f"{path}.tmp"
@@ -144,7 +147,7 @@ def save_prebuilt(path, cc: tuple[int, int]) -> dict:
         pickle.dump(blob, f, protocol=pickle.HIGHEST_PROTOCOL)
     os.replace(tmp, path)
     return {"seconds_nvvm": t1 - t0, "seconds_link": t2 - t1,
-            "ptx_bytes": len(kern._codelibrary.get_asm_str(cc=target)), "cubin_bytes": len(bytes(cubin)),
+            "ptx_bytes": len(kern._codelibrary.get_asm_str(cc=target)), "cubin_bytes": len(cubin_bytes),
             "entry_name": kern.entry_name}
 
 
@@ -165,9 +168,14 @@ def install_prebuilt(disp, path) -> None:
             raise ValueError(f"{PREBUILT_ENV}={path}: prebuilt kernel's {key} is {blob.get(key)!r}, this "
                              f"machine needs {value!r}; rebuild it with benchmarks/cuda_compile_offline.py "
                              f"--cc {cc[0]}.{cc[1]} --save-kernel {path}")
+    from numba.cuda.cudadrv.driver import ObjectCode
     from numba.cuda.dispatcher import CUDADispatcher
 
     kern = blob["kernel"]
+    cubins = kern._codelibrary._cubin_cache
+    for key, image in cubins.items():
+        if isinstance(image, bytes):
+            cubins[key] = ObjectCode.from_cubin(image)
     argtypes = tuple(kern.argument_types)
     spec = CUDADispatcher(disp.py_func, targetoptions=disp.targetoptions)
     spec.add_overload(kern, argtypes)
