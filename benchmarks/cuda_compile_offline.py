@@ -57,7 +57,7 @@ def main(argv=None) -> int:
         from sweep import gpu
 
         facts = gpu.save_prebuilt(args.save_kernel, cc)
-        print(f"numba-cuda + NVVM: {facts['seconds_nvvm']:.0f} s; PTX {facts['ptx_bytes'] / 1e6:.1f} MB; "
+        print(f"numba-cuda typing + NVVM: {facts['seconds_compile']:.0f} s; PTX {facts['ptx_bytes'] / 1e6:.1f} MB; "
               f"link (nvJitLink): {facts['seconds_link']:.0f} s; cubin {facts['cubin_bytes'] / 1e6:.1f} MB")
         print(f"kernel {facts['entry_name'][:80]}... saved to {args.save_kernel} "
               f"({Path(args.save_kernel).stat().st_size / 1e6:.1f} MB)")

@@ -84,7 +84,7 @@ def simulator_enabled() -> bool:
 
 # a kernel compiled ahead of time (save_prebuilt) that kernel() installs instead of compiling
 PREBUILT_ENV = "SWEEP_CUDA_KERNEL"
-PREBUILT_FORMAT = 1
+PREBUILT_FORMAT = 2
 
 
 def kernel():
@@ -111,10 +111,11 @@ def kernel_argtypes():
 
 def save_prebuilt(path, cc: tuple[int, int]) -> dict:
     """Compile the batch kernel for compute capability `cc` on this machine (no GPU needed: NVVM and
-    nvJitLink/ptxas from the requirements-cuda.txt wheels) and write it, with its cubin, to `path`
-    (lzma-compressed pickle), stamped with the core's fingerprint and the numba-cuda version. A GPU
-    machine then runs it at once (`install_prebuilt`, or SWEEP_CUDA_KERNEL=path) instead of compiling
-    for minutes. Returns {seconds_nvvm, seconds_link, ptx_bytes, cubin_bytes, entry_name}."""
+    nvJitLink from the requirements-cuda.txt wheels) and write its cubin and launch facts to `path`
+    (lzma-compressed pickle of plain values only, readable by another Python), stamped with the core's
+    and the kernel's source fingerprint and the numba-cuda version. A GPU machine then runs it at
+    once (`install_prebuilt`, or SWEEP_CUDA_KERNEL=path) instead of compiling for minutes. Returns
+    {seconds_compile, seconds_link, ptx_bytes, cubin_bytes, entry_name}."""
     import lzma
     import pickle
     import time
@@ -135,20 +136,23 @@ def save_prebuilt(path, cc: tuple[int, int]) -> dict:
     t0 = time.perf_counter()
     kern = dispatcher._Kernel(disp.py_func, kernel_argtypes(), **disp.targetoptions)
     t1 = time.perf_counter()
-    cubin = kern._codelibrary.get_cubin(cc=target)
+    lib = kern._codelibrary
+    cubin = lib.get_cubin(cc=target)
     t2 = time.perf_counter()
-    cubin_bytes = bytes(getattr(cubin, "code", cubin))
-    # plain bytes in the file, not cuda.core's ObjectCode: the GPU machine's cuda.core may differ
-    kern._codelibrary._cubin_cache[target] = cubin_bytes
+    if lib._linking_files or lib.needs_cudadevrt or kern.cooperative or kern.extensions:
+        raise RuntimeError("the batch kernel links other files, needs cudadevrt, a cooperative launch or "
+                           "extensions: save_prebuilt does not carry those")
     blob = {"format": PREBUILT_FORMAT, "fingerprint": _core_fingerprint(), "cc": cc,
-            "numba_cuda": _numba_cuda_version(), "kernel": kern}
+            "numba_cuda": _numba_cuda_version(), "target": target, "library_name": lib.name,
+            "entry_name": kern.entry_name, "cubin": bytes(getattr(cubin, "code", cubin)),
+            "max_registers": lib._max_registers, "nvvm_options": dict(lib._nvvm_options), "lto": lib._lto,
+            "debug": kern.debug, "lineinfo": kern.lineinfo}
     tmp = f"{path}.tmp"
     with lzma.open(tmp, "wb", preset=6) as f:
-        pickle.dump(blob, f, protocol=pickle.HIGHEST_PROTOCOL)
+        pickle.dump(blob, f, protocol=4)
     os.replace(tmp, path)
-    return {"seconds_nvvm": t1 - t0, "seconds_link": t2 - t1,
-            "ptx_bytes": len(kern._codelibrary.get_asm_str(cc=target)), "cubin_bytes": len(cubin_bytes),
-            "entry_name": kern.entry_name}
+    return {"seconds_compile": t1 - t0, "seconds_link": t2 - t1, "ptx_bytes": len(lib.get_asm_str(cc=target)),
+            "cubin_bytes": len(blob["cubin"]), "entry_name": kern.entry_name}
 
 
 def install_prebuilt(disp, path) -> None:
@@ -168,15 +172,22 @@ def install_prebuilt(disp, path) -> None:
             raise ValueError(f"{PREBUILT_ENV}={path}: prebuilt kernel's {key} is {blob.get(key)!r}, this "
                              f"machine needs {value!r}; rebuild it with benchmarks/cuda_compile_offline.py "
                              f"--cc {cc[0]}.{cc[1]} --save-kernel {path}")
+    from numba import types
+    from numba.cuda.codegen import CUDACodeLibrary
+    from numba.cuda.core.callconv import _MinimalCallHelper
     from numba.cuda.cudadrv.driver import ObjectCode
-    from numba.cuda.dispatcher import CUDADispatcher
+    from numba.cuda.dispatcher import CUDADispatcher, _Kernel
 
-    kern = blob["kernel"]
-    cubins = kern._codelibrary._cubin_cache
-    for key, image in cubins.items():
-        if isinstance(image, bytes):
-            cubins[key] = ObjectCode.from_cubin(image)
-    argtypes = tuple(kern.argument_types)
+    # what numba-cuda's own kernel cache restores (_Kernel._rebuild), from plain values
+    lib = CUDACodeLibrary._rebuild(
+        codegen=None, name=blob["library_name"], entry_name=blob["entry_name"], llvm_strs=[], ptx_cache={},
+        cubin_cache={tuple(blob["target"]): ObjectCode.from_cubin(blob["cubin"])}, linkerinfo_cache={},
+        max_registers=blob["max_registers"], nvvm_options=blob["nvvm_options"], needs_cudadevrt=False, nrt=False,
+        use_cooperative=False, lto=blob["lto"])
+    argtypes = kernel_argtypes()
+    kern = _Kernel._rebuild(cooperative=False, name=blob["entry_name"], signature=types.void(*argtypes),
+                            codelibrary=lib, debug=blob["debug"], lineinfo=blob["lineinfo"],
+                            call_helper=_MinimalCallHelper(), extensions=[])
     spec = CUDADispatcher(disp.py_func, targetoptions=disp.targetoptions)
     spec.add_overload(kern, argtypes)
     spec.disable_compile()
