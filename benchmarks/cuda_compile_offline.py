@@ -70,10 +70,7 @@ def main(argv=None) -> int:
     from sweep import gpu
 
     kern = gpu._build_kernel(cuda)
-    f1, f2, f3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
-    i1, i2 = types.int64[::1], types.int64[:, ::1]
-    # order, Y0, P, S, LE, LV, NL, CHI, counter, ISTATS, FSTATS, LEV, YEND, DER
-    sig = types.void(i1, f2, f2, f2, f2, f2, i1, f1, i1, i2, f2, f3, f2, f2)
+    sig = types.void(*gpu.kernel_argtypes())
     t0 = time.perf_counter()
     ptx, _ = cuda.compile(kern.py_func, sig, device=False, cc=cc, output="ptx", abi="numba")
     t_nvvm = time.perf_counter() - t0

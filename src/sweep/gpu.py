@@ -115,7 +115,10 @@ def save_prebuilt(path, cc: tuple[int, int]) -> dict:
     (lzma-compressed pickle of plain values only, readable by another Python), stamped with the core's
     and the kernel's source fingerprint and the numba-cuda version. A GPU machine then runs it at
     once (`install_prebuilt`, or SWEEP_CUDA_KERNEL=path) instead of compiling for minutes. Returns
-    {seconds_compile, seconds_link, ptx_bytes, cubin_bytes, entry_name}."""
+    {seconds_compile, seconds_link, ptx_bytes, cubin_bytes, entry_name}.
+
+    It answers numba-cuda's device queries with `cc` for the rest of the process (there is no
+    device to ask): run it in a process of its own (benchmarks/cuda_compile_offline.py)."""
     import lzma
     import pickle
     import time
