@@ -157,6 +157,31 @@ def test_the_prebuilt_kernel_stamp_follows_the_kernel_source():
     assert gpu._core_fingerprint() == base
 
 
+def test_launch_shape_spreads_a_small_batch_over_every_multiprocessor(monkeypatch):
+    """A batch smaller than the resident threads gets a block on every SM (an H100 ran 1000 scenes
+    on 16 of 132 SMs before); a large one fills the GPU with full blocks; never more threads than
+    the registers allow, never fewer than the scenes that fit."""
+    from types import SimpleNamespace
+
+    from sweep import gpu
+
+    monkeypatch.setattr(gpu, "simulator_enabled", lambda: False)
+    h100 = SimpleNamespace(MULTIPROCESSOR_COUNT=132, MAX_THREADS_PER_MULTIPROCESSOR=2048,
+                           MAX_REGISTERS_PER_MULTIPROCESSOR=65536)
+    fake = SimpleNamespace(get_current_device=lambda: h100)
+    tpb = gpu.THREADS_PER_BLOCK
+    resident_blocks = 132 * ((65536 // 255) // tpb)          # 4 blocks of 64 per SM at 255 registers
+    assert gpu.launch_shape(fake, 1000, 255) == (132, 8)
+    assert gpu.launch_shape(fake, 8, 255) == (8, 1)
+    assert gpu.launch_shape(fake, 10**6, 255) == (resident_blocks, tpb)
+    for n in (1, 2, 131, 132, 133, 1000, 8447, 8448, 8449, 20000, 33792, 33793, 10**6):
+        blocks, threads = gpu.launch_shape(fake, n, 255)
+        assert 1 <= threads <= tpb and blocks <= resident_blocks, n
+        assert blocks >= min(n, 132), n                       # every SM busy while there are scenes for it
+        assert blocks * threads >= min(n, resident_blocks * tpb), n
+        assert blocks * threads < n + blocks, n               # no block of idle threads only
+
+
 def test_bad_device_and_workers_are_rejected():
     with pytest.raises(sweep.ConfigError, match="device"):
         sweep.simulate_batch([{}], device="tpu")
