@@ -129,13 +129,25 @@ def test_a_prebuilt_kernel_from_other_sources_or_numba_cuda_is_refused_naming_wh
                 print(key, "|", exc)
             else:
                 print(key, "| ACCEPTED")
+        for name, content in (("missing", None), ("garbage", b"not lzma")):
+            path = sys.argv[1] + "/" + name + ".pkl.xz"
+            if content is not None:
+                open(path, "wb").write(content)
+            try:
+                gpu.install_prebuilt(disp, path)
+            except ValueError as exc:
+                print(name, "|", exc)
     """)
     env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
     res = subprocess.run([sys.executable, "-c", code, str(tmp_path)], env=env, capture_output=True, text=True,
                          cwd=ROOT, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
     lines = dict(line.split(" | ", 1) for line in res.stdout.strip().splitlines())
-    assert set(lines) == {"fingerprint", "numba_cuda", "cc", "format"}
+    assert set(lines) == {"fingerprint", "numba_cuda", "cc", "format", "missing", "garbage"}
+    for name in ("missing", "garbage"):   # an unreadable file: said so, with the way out
+        msg = lines.pop(name)
+        assert msg.startswith("SWEEP_CUDA_KERNEL=") and "cannot read a prebuilt kernel" in msg, msg
+        assert "--save-kernel" in msg and "unset SWEEP_CUDA_KERNEL" in msg, msg
     for key, msg in lines.items():
         assert msg.startswith("SWEEP_CUDA_KERNEL=") and f"prebuilt kernel's {key} is" in msg, msg
         assert "cuda_compile_offline.py --cc" in msg and "--save-kernel" in msg

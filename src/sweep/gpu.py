@@ -165,8 +165,15 @@ def install_prebuilt(disp, path) -> None:
     import lzma
     import pickle
 
-    with lzma.open(path, "rb") as f:
-        blob = pickle.load(f)
+    try:
+        with lzma.open(path, "rb") as f:
+            blob = pickle.load(f)
+    except (OSError, EOFError, lzma.LZMAError, pickle.UnpicklingError) as exc:
+        raise ValueError(f"{PREBUILT_ENV}={path}: cannot read a prebuilt kernel there ({exc}); write one with "
+                         f"benchmarks/cuda_compile_offline.py --cc <X.Y> --save-kernel {path}, or unset "
+                         f"{PREBUILT_ENV} to compile here") from None
+    if not isinstance(blob, dict):
+        raise ValueError(f"{PREBUILT_ENV}={path}: not a prebuilt kernel file (save_prebuilt writes a dict)")
     cc = tuple(cuda.get_current_device().compute_capability)
     want = {"format": PREBUILT_FORMAT, "fingerprint": _core_fingerprint(), "cc": cc,
             "numba_cuda": _numba_cuda_version()}
