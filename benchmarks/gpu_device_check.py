@@ -33,6 +33,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from sweep.ensemble import RUN_STATISTICS  # noqa: E402  (sweep imports no numba-cuda)
 T_START = time.perf_counter()
 
 
@@ -75,8 +77,7 @@ def run_gpu(gpu, Batch, scs):
     return out, info, t_pack + time.perf_counter() - t0
 
 
-# what a summary says of the run, not of the disk: differs with any change of the step sequence
-RUN_FIELDS = ("wall_time", "n_steps", "n_rejected", "n_steps_sliding", "n_rejected_sliding", "n_rhs", "n_events")
+RUN_FIELDS = ("wall_time",) + RUN_STATISTICS
 COUNT_FIELDS = ("outcome", "n_transitions", "n_stick", "n_impacts")
 
 

@@ -194,6 +194,23 @@ def test_launch_shape_spreads_a_small_batch_over_every_multiprocessor(monkeypatc
         assert blocks * threads < n + blocks, n               # no block of idle threads only
 
 
+def test_summaries_compared_without_the_run_statistics_see_only_the_motion():
+    """A GPU's round-off moves steps: summaries_equal(..., run_statistics=False) sets the step and
+    evaluation counts aside, and still reports any value of the motion beyond rtol."""
+    from sweep.ensemble import RUN_STATISTICS
+
+    a = {"outcome": "halted", "t_halt": 19.3836, "n_transitions": 126, "levels": [{"t": 15.0902}],
+         "wall_time": 1.0, **{k: 1000 for k in RUN_STATISTICS}}
+    b = dict(a, wall_time=2.0, **{k: 1001 for k in RUN_STATISTICS})
+    assert sorted(x.split(":")[0] for x in summaries_equal(a, b)) == sorted(RUN_STATISTICS)
+    assert summaries_equal(a, b, run_statistics=False) == []
+    c = dict(b, t_halt=19.3836 * (1 + 1e-8), levels=[{"t": 15.0902}])
+    assert summaries_equal(a, c, rtol=1e-6, run_statistics=False) == []
+    assert summaries_equal(a, c, rtol=1e-9, run_statistics=False) == ["t_halt: 19.3836 != 19.383600193836"]
+    d = dict(b, n_transitions=127)   # an event count is the motion's, not the run's
+    assert summaries_equal(a, d, run_statistics=False) == ["n_transitions: 126 != 127"]
+
+
 def test_bad_device_and_workers_are_rejected():
     with pytest.raises(sweep.ConfigError, match="device"):
         sweep.simulate_batch([{}], device="tpu")

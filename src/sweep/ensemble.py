@@ -193,8 +193,14 @@ def _simulate_or_error(sc: Scene) -> dict:
         return _io.error_summary(len(sc.levels), outcomes.NUMERICAL_ERROR, time.perf_counter() - t0)
 
 
-def summaries_equal(a: Mapping, b: Mapping, rtol: float = 1e-9) -> list[str]:
-    """Keys where two summaries differ beyond rtol (relative; NaN equals NaN; wall_time ignored)."""
+# what a summary says of the run, not of the disk: any change of the step sequence (another
+# device's round-off) moves these, while the motion agrees to the tolerance
+RUN_STATISTICS = ("n_steps", "n_rejected", "n_steps_sliding", "n_rejected_sliding", "n_rhs", "n_events")
+
+
+def summaries_equal(a: Mapping, b: Mapping, rtol: float = 1e-9, run_statistics: bool = True) -> list[str]:
+    """Keys where two summaries differ beyond rtol (relative; NaN equals NaN; wall_time ignored;
+    the step and evaluation counts of RUN_STATISTICS too where run_statistics is False)."""
     bad: list[str] = []
 
     def cmp(x, y, key):
@@ -216,7 +222,7 @@ def summaries_equal(a: Mapping, b: Mapping, rtol: float = 1e-9) -> list[str]:
             bad.append(f"{key}: {x!r} != {y!r}")
 
     for k in a:
-        if k != "wall_time":
+        if k != "wall_time" and (run_statistics or k not in RUN_STATISTICS):
             cmp(a[k], b[k], k)
     return bad
 
