@@ -25,7 +25,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from . import outcomes
-from .core.ensemble import MAX_LEVELS, N_DERIVED, solve_index, work_buffers
+from .core.ensemble import MAX_LEVELS, N_DERIVED, BatchInputs, BatchOutputs, solve_index, work_buffers
 from .core.layout import I_OVERFLOW, LEVEL_COLS, N_FSTATS, N_ISTATS, N_SETTINGS
 from .core.model import N_FULL, N_PARAMS
 from .errors import ConfigError
@@ -78,12 +78,12 @@ class Batch:
         self.wall = np.zeros(n)
 
     @property
-    def inputs(self):
-        return (self.Y0, self.P, self.S, self.LE, self.LV, self.NL, self.CHI)
+    def inputs(self) -> BatchInputs:
+        return BatchInputs(self.Y0, self.P, self.S, self.LE, self.LV, self.NL, self.CHI)
 
     @property
-    def outputs(self):
-        return (self.ISTATS, self.FSTATS, self.LEV, self.YEND, self.DER)
+    def outputs(self) -> BatchOutputs:
+        return BatchOutputs(self.ISTATS, self.FSTATS, self.LEV, self.YEND, self.DER)
 
     def summary(self, i: int) -> dict:
         nl = int(self.NL[i])
@@ -99,9 +99,8 @@ def run_cpu(batch: Batch, workers: int) -> dict:
     errors: dict[int, BaseException] = {}
 
     def worker():
-        inbuf = (np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_SETTINGS), np.zeros(MAX_LEVELS),
-                 np.zeros(MAX_LEVELS))
         bufs = work_buffers()
+        inputs, outputs = batch.inputs, batch.outputs
         while True:
             with lock:
                 k = nxt[0]
@@ -111,7 +110,7 @@ def run_cpu(batch: Batch, workers: int) -> dict:
             i = int(batch.order[k])
             t0 = time.perf_counter()
             try:
-                solve_index(i, *batch.inputs, *inbuf, *bufs, *batch.outputs)
+                solve_index(i, inputs, outputs, bufs)
             except Exception as exc:  # noqa: BLE001  (numba raises e.g. ZeroDivisionError; rerun per scene)
                 errors[i] = exc
             batch.wall[i] = time.perf_counter() - t0

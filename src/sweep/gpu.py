@@ -23,10 +23,10 @@ from numba import float64, int64
 from .core.dop853 import N_DENSE
 from .core.jit import register_locator
 from .core.frequency import FQ_COLS, FQ_LEVEL0
-from .core.ensemble import (MAX_LEVELS, N_DERIVED, N_SCRATCH, PEAK_RING, load_inputs, solve_scene,
-                            store_outputs)
+from .core.ensemble import (MAX_LEVELS, N_DERIVED, N_SCRATCH, PEAK_RING, BatchInputs, BatchOutputs, Fits, SceneInputs,
+                            load_inputs, solve_loaded, store_outputs)
 from .core.layout import (LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK, N_WCOLS, N_WORK,
-                          PEAK_COLS, SAMPLE_COLS, TRAJ_COLS)
+                          PEAK_COLS, SAMPLE_COLS, TRAJ_COLS, Record, Work)
 from .core.model import N_FULL, N_PARAMS
 
 # numba-cuda release the lock pins (requirements.lock); named in the error message
@@ -240,39 +240,29 @@ def _build_kernel(cuda_module):
     # cache: the first compilation of the whole integrator for the GPU takes minutes (docs/performance.md)
     @cuda.jit(cache=not sim)
     def batch_kernel(order, Y0, P, S, LE, LV, NL, CHI, counter, ISTATS, FSTATS, LEV, YEND, DER):
-        y0 = cuda.local.array(N_FULL, float64)
-        p0 = cuda.local.array(N_PARAMS, float64)
-        s = cuda.local.array(N_SETTINGS, float64)
-        le = cuda.local.array(MAX_LEVELS, float64)
-        lv = cuda.local.array(MAX_LEVELS, float64)
-        y = cuda.local.array(N_FULL, float64)
-        p = cuda.local.array(N_PARAMS, float64)
-        cs = cuda.local.array(N_CS, float64)
-        wk = cuda.local.array((N_WORK, N_WCOLS), float64)
-        K = cuda.local.array((N_KROWS, N_FULL), float64)
-        F = cuda.local.array((F_ROWS, N_FULL), float64)
-        trk = cuda.local.array(N_TRACK, float64)
-        lev = cuda.local.array((MAX_LEVELS, LEV_COLS), float64)
-        samples = cuda.local.array((1, SAMPLE_COLS), float64)
-        traj = cuda.local.array((1, TRAJ_COLS), float64)
-        peaks = cuda.local.array((PEAK_RING, PEAK_COLS), float64)
-        y_end = cuda.local.array(N_FULL, float64)
-        fq = cuda.local.array((FQ_ROWS, FQ_COLS), float64)
-        scratch = cuda.local.array((N_SCRATCH, MAX_LEVELS), float64)
-        istats = cuda.local.array(N_ISTATS, int64)
-        fstats = cuda.local.array(N_FSTATS, float64)
-        derived = cuda.local.array(N_DERIVED, float64)
+        inp = SceneInputs(cuda.local.array(N_FULL, float64), cuda.local.array(N_PARAMS, float64),
+                          cuda.local.array(N_SETTINGS, float64), cuda.local.array(MAX_LEVELS, float64),
+                          cuda.local.array(MAX_LEVELS, float64))
+        work = Work(cuda.local.array(N_FULL, float64), cuda.local.array(N_PARAMS, float64),
+                    cuda.local.array(N_CS, float64), cuda.local.array((N_WORK, N_WCOLS), float64),
+                    cuda.local.array((N_KROWS, N_FULL), float64), cuda.local.array((F_ROWS, N_FULL), float64),
+                    cuda.local.array(N_TRACK, float64))
+        rec = Record(cuda.local.array(N_ISTATS, int64), cuda.local.array(N_FSTATS, float64),
+                     cuda.local.array((MAX_LEVELS, LEV_COLS), float64), cuda.local.array((1, SAMPLE_COLS), float64),
+                     cuda.local.array((1, TRAJ_COLS), float64), cuda.local.array((PEAK_RING, PEAK_COLS), float64),
+                     cuda.local.array(N_FULL, float64), cuda.local.array((FQ_ROWS, FQ_COLS), float64))
+        fits = Fits(cuda.local.array((N_SCRATCH, MAX_LEVELS), float64), cuda.local.array(N_DERIVED, float64))
+        batch_in = BatchInputs(Y0, P, S, LE, LV, NL, CHI)
+        batch_out = BatchOutputs(ISTATS, FSTATS, LEV, YEND, DER)
         n = order.shape[0]
         while True:
             k = cuda.atomic.add(counter, 0, 1)   # the next scene, whichever thread is free
             if k >= n:
                 break
             i = order[k]
-            _load(i, Y0, P, S, LE, LV, y0, p0, s, le, lv)
-            nl = NL[i]
-            solve_scene(y0, p0, s, le[:nl], lv[:nl], CHI[i], y, p, cs, wk, K, F, trk, lev[:nl], samples[:0],
-                        traj[:0], peaks, y_end, fq, scratch, istats, fstats, derived)
-            _store(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER)
+            nl, chi = _load(i, batch_in, inp)
+            solve_loaded(inp, nl, chi, work, rec, fits)
+            _store(i, nl, rec, fits, batch_out)
 
     return batch_kernel
 

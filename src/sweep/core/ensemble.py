@@ -5,10 +5,15 @@ and computes the summary's fitted numbers (halt time and its error, approach and
 with `summary_fits`, which `sweep.simulate` calls too. Every buffer has a size fixed by layout.py
 and MAX_LEVELS / PEAK_RING, so the same functions run
 
-  * on the CPU: `solve_index` on buffers each thread allocates once (sweep.ensemble, threads);
-  * on CUDA: numba-cuda compiles these @kernel (numba njit) functions, and everything they call, as device
-    functions of the persistent-thread kernel (sweep.ensemble.cuda_kernel) with the buffers in
+  * on the CPU: `solve_index` on the buffers each thread allocates once (`work_buffers`;
+    sweep.ensemble's threads);
+  * on CUDA: numba-cuda compiles these @kernel (numba njit) functions, and everything they call, as
+    device functions of the persistent-thread kernel (sweep.gpu) with the same buffers in
     `cuda.local.array`s. There is no second copy of the physics or of the event logic.
+
+The arrays travel in named groups (namedtuples of arrays, which numba passes as their arrays): the
+batch's BatchInputs and BatchOutputs, a worker's SceneInputs and Fits, and the run's layout.Work and
+layout.Record.
 
 The only difference to `sweep.simulate` is the peak buffer: a ring of the last PEAK_RING normal-
 force maxima (layout.T_PEAK_RING) instead of every maximum, since the summary needs only the last
@@ -18,6 +23,7 @@ it with `sweep.simulate`.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 
@@ -25,7 +31,7 @@ from .frequency import FQ_COLS, FQ_LEVEL0
 from .integrate import run
 from .jit import kernel
 from .layout import (F_TEND, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
-                     N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS)
+                     N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS, Record, Work)
 from .model import N_FULL, N_PARAMS
 from .roots import location_tol
 from .dop853 import N_DENSE
@@ -34,6 +40,18 @@ from .dop853 import N_DENSE
 MAX_LEVELS = 16
 # Rows of the ring of normal-force maxima: the level frequencies look back at most ~3 maxima.
 PEAK_RING = 16
+
+# --- the batch's arrays and a worker's buffers, grouped (namedtuples of arrays, as layout.Work) ----
+# Inputs, one row per scene: Y0 (N_FULL), P (N_PARAMS), S (N_SETTINGS), LE level energies and LV
+# level inclinations (rad) (MAX_LEVELS, the first NL used), CHI the time scale (s).
+BatchInputs = namedtuple("BatchInputs", "Y0 P S LE LV NL CHI")
+# Outputs, one row per scene: ISTATS, FSTATS, LEV (MAX_LEVELS x LEVEL_COLS), YEND (N_FULL), DER (N_DERIVED).
+BatchOutputs = namedtuple("BatchOutputs", "ISTATS FSTATS LEV YEND DER")
+# One scene's inputs in a worker: the initial state, parameters, settings, level energies and
+# level inclinations (the first nl; a worker's buffers have MAX_LEVELS).
+SceneInputs = namedtuple("SceneInputs", "y0 p settings level_e levels")
+# What a worker fits after the run: scratch (N_SCRATCH x MAX_LEVELS), derived (N_DERIVED, D_*).
+Fits = namedtuple("Fits", "scratch derived")
 
 # --- the summary's fitted numbers (SI: s) ------------------------------------------------------
 D_THALT, D_THALT_ERR, D_HALT_FINITE, D_APPROACH, D_RAMP, D_RAMP_ERR = range(6)
@@ -171,100 +189,108 @@ def zero_rows(a, rows):
 
 
 @kernel
-def solve_scene(y0, p0, settings, level_e, levels, chi, y, p, cs, wk, K, F, trk, lev, samples, traj, peaks,
-                y_end, fq, scratch, istats, fstats, derived):
-    """Integrate one scene (inputs y0, p0, settings, level_e, levels: nl = level_e.shape[0]) on the
-    given buffers, as integrate.integrate does without samples or trajectory, then its fits.
-
-    lev (nl x LEVEL_COLS + 1) receives the levels (layout.LEVEL_COLS, then pending), fq the
-    frequency windows (core.frequency);
-    istats, fstats, y_end, derived (D_*) the rest. Every buffer is reset here."""
-    nl = level_e.shape[0]
+def solve_scene(inp, chi, work, rec, fits):
+    """Integrate one scene on a worker's buffers, as integrate.integrate does without samples or
+    trajectory, then its fits. inp (SceneInputs, nl = inp.level_e.shape[0] levels), chi (s); work
+    and rec (layout.Work, layout.Record) have a worker's sizes: rec.levels MAX_LEVELS rows, of
+    which the first nl receive the levels (layout.LEVEL_COLS, then pending), rec.fq the frequency
+    windows (core.frequency); fits.derived the D_* numbers. Every buffer is reset here."""
+    nl = inp.level_e.shape[0]
     for i in range(N_FULL):
-        y[i] = y0[i]
-        y_end[i] = 0.0
+        work.y[i] = inp.y0[i]
+        rec.y_end[i] = 0.0
     for i in range(N_PARAMS):
-        p[i] = p0[i]
+        work.p[i] = inp.p[i]
     for i in range(N_CS):
-        cs[i] = 0.0
-    zero_rows(wk, wk.shape[0])
-    zero_rows(K, K.shape[0])
-    zero_rows(F, F.shape[0])
-    zero_rows(peaks, peaks.shape[0])
-    zero_rows(fq, FQ_LEVEL0 + nl)
+        work.cs[i] = 0.0
+    zero_rows(work.wk, work.wk.shape[0])
+    zero_rows(work.K, work.K.shape[0])
+    zero_rows(work.F, work.F.shape[0])
+    zero_rows(rec.peaks, rec.peaks.shape[0])
+    zero_rows(rec.fq, FQ_LEVEL0 + nl)
     for i in range(N_TRACK):
-        trk[i] = 0.0
-    trk[T_PEAK_RING] = 1.0
+        work.trk[i] = 0.0
+    work.trk[T_PEAK_RING] = 1.0
     for i in range(N_ISTATS):
-        istats[i] = 0
+        rec.istats[i] = 0
     for i in range(N_FSTATS):
-        fstats[i] = 0.0
+        rec.fstats[i] = 0.0
+    lev = rec.levels
     for L in range(nl):
         for c in range(LEVEL_COLS):
             lev[L, c] = math.nan
         lev[L, LEVEL_COLS] = 0.0
-    run(y, p, settings, level_e, scratch[0, :0], cs, wk, K, F, trk, istats, fstats, lev, samples, traj, peaks,
-        y_end, fq[:FQ_LEVEL0 + nl])
+    # the scene's own sizes: nl levels, no samples, no trajectory
+    run(inp.settings, inp.level_e, fits.scratch[0, :0], work,
+        Record(rec.istats, rec.fstats, lev[:nl], rec.samples[:0], rec.traj[:0], rec.peaks, rec.y_end,
+               rec.fq[:FQ_LEVEL0 + nl]))
     # the fits on the level times (s) and precession frequencies (Hz), as sweep.simulate forms them
+    scratch = fits.scratch
     for L in range(nl):
         scratch[R_LEVEL_T, L] = lev[L, 0] * chi
         scratch[R_PREC_HZ, L] = abs(lev[L, 2]) / chi / TWO_PI
-    summary_fits(scratch[R_LEVEL_T], scratch[R_PREC_HZ], levels, nl, istats[I_FLAT] != 0, fstats[F_TEND], chi,
-                 derived)
+    summary_fits(scratch[R_LEVEL_T], scratch[R_PREC_HZ], inp.levels, nl, rec.istats[I_FLAT] != 0,
+                 rec.fstats[F_TEND], chi, fits.derived)
 
 
-# --- the batch's arrays ---------------------------------------------------------------------------
-# inputs, one row per scene: Y0 (N_FULL), P (N_PARAMS), S (N_SETTINGS), LE level energies and LV level
-# inclinations (MAX_LEVELS, the first NL used), CHI (s). Outputs: ISTATS, FSTATS, LEV (MAX_LEVELS x
-# LEVEL_COLS), YEND (N_FULL), DER (N_DERIVED).
-
+# --- a worker over the batch ---------------------------------------------------------------------
 def work_buffers():
-    """One worker's buffers (CPU): the shapes the CUDA kernel gives its local arrays."""
-    return (np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
-            np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK),
-            np.zeros((MAX_LEVELS, LEVEL_COLS + 1)), np.zeros((1, SAMPLE_COLS)), np.zeros((1, TRAJ_COLS)),
-            np.zeros((PEAK_RING, PEAK_COLS)), np.zeros(N_FULL), np.zeros((FQ_LEVEL0 + MAX_LEVELS, FQ_COLS)),
-            np.zeros((N_SCRATCH, MAX_LEVELS)),
-            np.zeros(N_ISTATS, np.int64), np.zeros(N_FSTATS), np.zeros(N_DERIVED))
+    """One worker's buffers (CPU), (SceneInputs, Work, Record, Fits): the shapes the CUDA kernel
+    gives its local arrays."""
+    inp = SceneInputs(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_SETTINGS), np.zeros(MAX_LEVELS),
+                      np.zeros(MAX_LEVELS))
+    work = Work(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
+                np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK))
+    rec = Record(np.zeros(N_ISTATS, np.int64), np.zeros(N_FSTATS), np.zeros((MAX_LEVELS, LEVEL_COLS + 1)),
+                 np.zeros((1, SAMPLE_COLS)), np.zeros((1, TRAJ_COLS)), np.zeros((PEAK_RING, PEAK_COLS)),
+                 np.zeros(N_FULL), np.zeros((FQ_LEVEL0 + MAX_LEVELS, FQ_COLS)))
+    return inp, work, rec, Fits(np.zeros((N_SCRATCH, MAX_LEVELS)), np.zeros(N_DERIVED))
 
 
 @kernel
-def load_inputs(i, Y0, P, S, LE, LV, y0, p0, s, le, lv):
-    """Copy scene i's inputs into a worker's buffers."""
+def load_inputs(i, batch_in, inp):
+    """Copy scene i's inputs (BatchInputs) into a worker's SceneInputs (MAX_LEVELS levels);
+    returns the scene's (number of levels, chi)."""
     for j in range(N_FULL):
-        y0[j] = Y0[i, j]
+        inp.y0[j] = batch_in.Y0[i, j]
     for j in range(N_PARAMS):
-        p0[j] = P[i, j]
+        inp.p[j] = batch_in.P[i, j]
     for j in range(N_SETTINGS):
-        s[j] = S[i, j]
+        inp.settings[j] = batch_in.S[i, j]
     for j in range(MAX_LEVELS):
-        le[j] = LE[i, j]
-        lv[j] = LV[i, j]
+        inp.level_e[j] = batch_in.LE[i, j]
+        inp.levels[j] = batch_in.LV[i, j]
+    return batch_in.NL[i], batch_in.CHI[i]
 
 
 @kernel
-def store_outputs(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER):
-    """Copy a worker's results for scene i into the batch's output arrays."""
+def store_outputs(i, nl, rec, fits, batch_out):
+    """Copy a worker's results for scene i (nl levels) into the batch's outputs (BatchOutputs)."""
     for j in range(N_ISTATS):
-        ISTATS[i, j] = istats[j]
+        batch_out.ISTATS[i, j] = rec.istats[j]
     for j in range(N_FSTATS):
-        FSTATS[i, j] = fstats[j]
+        batch_out.FSTATS[i, j] = rec.fstats[j]
     for L in range(nl):
         for c in range(LEVEL_COLS):
-            LEV[i, L, c] = lev[L, c]
+            batch_out.LEV[i, L, c] = rec.levels[L, c]
     for j in range(N_FULL):
-        YEND[i, j] = y_end[j]
+        batch_out.YEND[i, j] = rec.y_end[j]
     for j in range(N_DERIVED):
-        DER[i, j] = derived[j]
+        batch_out.DER[i, j] = fits.derived[j]
+
+
+@kernel
+def solve_loaded(inp, nl, chi, work, rec, fits):
+    """solve_scene on the first nl levels of a worker's loaded inputs."""
+    solve_scene(SceneInputs(inp.y0, inp.p, inp.settings, inp.level_e[:nl], inp.levels[:nl]), chi, work, rec, fits)
 
 
 @kernel(nogil=True)
-def solve_index(i, Y0, P, S, LE, LV, NL, CHI, y0, p0, s, le, lv, y, p, cs, wk, K, F, trk, lev, samples, traj,
-                peaks, y_end, fq, scratch, istats, fstats, derived, ISTATS, FSTATS, LEV, YEND, DER):
-    """Scene i of the batch on one CPU worker's buffers (releases the GIL: threads run in parallel)."""
-    load_inputs(i, Y0, P, S, LE, LV, y0, p0, s, le, lv)
-    nl = NL[i]
-    solve_scene(y0, p0, s, le[:nl], lv[:nl], CHI[i], y, p, cs, wk, K, F, trk, lev[:nl], samples[:0], traj[:0],
-                peaks, y_end, fq, scratch, istats, fstats, derived)
-    store_outputs(i, nl, istats, fstats, lev, y_end, derived, ISTATS, FSTATS, LEV, YEND, DER)
-    return istats[I_OVERFLOW]
+def solve_index(i, batch_in, batch_out, buffers):
+    """Scene i of the batch on one CPU worker's buffers (work_buffers()), from batch_in
+    (BatchInputs) into batch_out (BatchOutputs); releases the GIL: threads run in parallel."""
+    inp, work, rec, fits = buffers
+    nl, chi = load_inputs(i, batch_in, inp)
+    solve_loaded(inp, nl, chi, work, rec, fits)
+    store_outputs(i, nl, rec, fits, batch_out)
+    return rec.istats[I_OVERFLOW]

@@ -24,7 +24,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
-                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT)
+                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Record, Work)
 from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes, slip_closest_approach
 from .tableau import N_STAGES
@@ -421,11 +421,13 @@ def state_size(settings):
 
 
 @kernel
-def begin(y, p, settings, lev, sample_tau, cs, wk, trk, istats, fstats, samples, traj, fq):
+def begin(settings, lev, sample_tau, work, rec):
     """The scene at tau = 0: its contact state, f and aux (wk[W_F], wk[W_AUX]), E(0), the event
     values (wk[W_GOLD]; lev: the first level's energy), the samples and trajectory row at 0, the
     trackers. Returns (the outcome that ends the scene at once, else -1; the starting step size,
     before the ceiling h_max)."""
+    y, p, cs, wk = work.y, work.p, work.cs, work.wk
+    trk, istats, fstats = work.trk, rec.istats, rec.fstats
     n = state_size(settings)
     u_tol = settings[S_UTOL]
     f = wk[W_F]
@@ -449,14 +451,14 @@ def begin(y, p, settings, lev, sample_tau, cs, wk, trk, istats, fstats, samples,
         outcome = start_code
     ns = sample_tau.shape[0]
     while int(trk[T_NEXT_SAMPLE]) < ns and sample_tau[int(trk[T_NEXT_SAMPLE])] <= 0.0:
-        record_sample(y, aux, p, cs, n, samples[int(trk[T_NEXT_SAMPLE])])
+        record_sample(y, aux, p, cs, n, rec.samples[int(trk[T_NEXT_SAMPLE])])
         trk[T_NEXT_SAMPLE] += 1.0
-    if traj.shape[0] > 0:
-        record_traj(0.0, y, aux[X_PHI], cs, n, traj, istats)
+    if rec.traj.shape[0] > 0:
+        record_traj(0.0, y, aux[X_PHI], cs, n, rec.traj, istats)
     trk[T_PHI_B] = aux[X_PHI]
     trk[T_RATES_OLD] = 0.0
     if settings[S_PEAKS] > 0.0:
-        freq_start(y[Y_THETA], aux[X_PHI], fq)
+        freq_start(y[Y_THETA], aux[X_PHI], rec.fq)
     return outcome, initial_step(0.0, y, f, n, p, cs, settings[S_RTOL], settings[S_ATOL], wk, istats)
 
 
@@ -572,9 +574,11 @@ def carry_step_end(t, y, p, cs, n, lev, level_pending, wk, istats):
 
 
 @kernel
-def finish(outcome, t, h, y, n, p, cs, trk, istats, fstats, y_end, level_out, fq, peaks_on):
+def finish(outcome, t, h, n, peaks_on, work, rec):
     """The scene's outputs once the loop stops: outcome, the event counts, end state and energy at
     its end (kept by mark_end, else the last state), the levels' frequencies."""
+    y, p, cs, trk = work.y, work.p, work.cs, work.trk
+    istats, fstats, y_end = rec.istats, rec.fstats, rec.y_end
     if outcome < 0:
         outcome = oc.STEP_LIMIT
     ended = trk[T_END_TRANS] >= 0.0
@@ -583,7 +587,7 @@ def finish(outcome, t, h, y, n, p, cs, trk, istats, fstats, y_end, level_out, fq
         istats[I_STICK] = int(trk[T_END_STICK])
         istats[I_IMPACTS] = int(trk[T_END_IMPACTS])
     if peaks_on:
-        finish_levels(fq, level_out)
+        finish_levels(rec.fq, rec.levels)
     if ended:
         fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the end
     else:
@@ -596,10 +600,13 @@ def finish(outcome, t, h, y, n, p, cs, trk, istats, fstats, y_end, level_out, fq
 
 
 @kernel
-def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, level_out, samples, traj,
-        peaks, y_end, fq):
-    """Integrate one scene in place of the given buffers (see integrate for their shapes): step,
-    scan the accepted step for the earliest event, record, restart at the event."""
+def run(settings, level_e, sample_tau, work, rec):
+    """Integrate one scene (the initial state in work.y, its parameters in work.p) into rec
+    (layout.Work, layout.Record: the buffers' shapes): step, scan the accepted step for the
+    earliest event, record, restart at the event. settings (layout.S_*), level_e the levels'
+    energies (dimensionless), sample_tau the sample times (tau), ascending."""
+    y, p, cs, wk, K, F, trk = work
+    istats, fstats, level_out, traj, y_end, fq = rec.istats, rec.fstats, rec.levels, rec.traj, rec.y_end, rec.fq
     rtol = settings[S_RTOL]
     atol = settings[S_ATOL]
     h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
@@ -611,7 +618,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
     n = state_size(settings)
     nl = level_e.shape[0]
     lev = level_e[0] if nl > 0 else math.nan
-    outcome, h = begin(y, p, settings, lev, sample_tau, cs, wk, trk, istats, fstats, samples, traj, fq)
+    outcome, h = begin(settings, lev, sample_tau, work, rec)
     h = min(h, h_max)
     e0 = max(abs(fstats[F_E0]), 1e-300)
     t = 0.0
@@ -677,19 +684,16 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
             dense_coeffs(t, y, h, wk[W_YNEW], wk[W_FNEW], n, p, cs, K, F, wk, istats)
             have_dense = True
         if running:
-            t_halt = record_levels(t, y, h, seg_end, e_seg, F, n, p, cs, level_e, level_out, trk, peaks_on,
-                                   u_tol, wk, istats, fq)
+            t_halt = record_levels(t, h, seg_end, e_seg, level_e, peaks_on, u_tol, n, work, rec)
             if t_halt >= 0.0:
                 outcome = oc.HALTED
                 dense_eval(F, 0, y, t, h, t_halt, n, wk[W_YBUF])
                 mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end, istats)
             elif int(trk[T_NEXT_LEVEL]) < nl:
                 lev = level_e[int(trk[T_NEXT_LEVEL])]
-        record_samples(t, y, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, F, n, p, cs, sample_tau,
-                       samples, trk, wk, istats)
+        record_samples(t, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, sample_tau, n, work, rec)
         if peaks_on:
-            track_frequency(t, y, h, seg_end, phi_c, K, F, have_dense, n, p, cs, level_out, peaks, trk, wk, istats,
-                            fstats, running, fq)
+            track_frequency(t, h, seg_end, phi_c, have_dense, running, n, work, rec)
 
         # --- restart at the segment end -----------------------------------------------------------
         advance(t, seg_end, event, running, outcome >= 0, y, n, cs, trk, wk, fstats)
@@ -715,7 +719,7 @@ def run(y, p, settings, level_e, sample_tau, cs, wk, K, F, trk, istats, fstats, 
                 outcome = oc.T_MAX
                 mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)
         h = h_next
-    finish(outcome, t, h, y, n, p, cs, trk, istats, fstats, y_end, level_out, fq, peaks_on)
+    finish(outcome, t, h, n, peaks_on, work, rec)
 
 
 def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
@@ -738,9 +742,9 @@ def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
         y[:y0.shape[0]] = y0
         y_end = np.zeros(N_FULL)
         fq = np.zeros((FQ_LEVEL0 + level_e.shape[0], FQ_COLS))
-        run(y, p.copy(), settings, level_e, sample_tau, np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
-            np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK), istats, fstats, levels, samples,
-            traj, peaks, y_end, fq)
+        work = Work(y, p.copy(), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)), np.zeros((N_KROWS, N_FULL)),
+                    np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK))
+        run(settings, level_e, sample_tau, work, Record(istats, fstats, levels, samples, traj, peaks, y_end, fq))
         over = istats[I_OVERFLOW]
         if over == 0:
             break

@@ -17,6 +17,8 @@ the precession lattice, a Phi maximum.
 """
 from __future__ import annotations
 
+from collections import namedtuple
+
 from .model import N_AUX, N_FULL  # noqa: F401  (re-exported sizes)
 from .tableau import N_STAGES_EXTENDED
 
@@ -102,3 +104,17 @@ SAMPLE_COLS = N_FULL + 3       # y[0:N_FULL], energy, Phi, mode
 LEVEL_COLS = 6                 # tau, alpha, mean dtheta/dtau, f_hat, ringing ratio, window cycles
 L_PENDING = LEVEL_COLS         # column of the level buffer: 1 while the level's f_hat waits for a maximum
 PEAK_COLS = 3                  # tau, Phi, theta
+
+# --- the buffers of one run, grouped ------------------------------------------------------------
+# numba passes a namedtuple of arrays as its arrays (no copy, no cost), on the CPU and in CUDA
+# device code alike; a kernel takes the group and unpacks what it uses.
+# Work: what the integrator integrates and works in: the state y (N_FULL, in place: the initial
+# state in, the last state out), the parameters p (N_PARAMS), the contact state cs (N_CS), the work
+# buffer wk (N_WORK x N_WCOLS), the RK stages K (N_KROWS x N_FULL), the dense output F (14 x N_FULL)
+# and the recorders' tracking state trk (N_TRACK).
+Work = namedtuple("Work", "y p cs wk K F trk")
+# Record: what a run writes: istats (N_ISTATS, int64), fstats (N_FSTATS), levels (n_levels x
+# LEVEL_COLS + 1: the last column L_PENDING), samples (n_samples x SAMPLE_COLS), traj (cap x
+# TRAJ_COLS), peaks (cap x PEAK_COLS), y_end (N_FULL) and the frequency windows fq
+# (FQ_LEVEL0 + n_levels x FQ_COLS, core.frequency). A buffer of 0 rows switches its recorder off.
+Record = namedtuple("Record", "istats fstats levels samples traj peaks y_end fq")

@@ -59,13 +59,15 @@ def previous_dense(y, n, p, K, F, trk, wk, istats):
 
 
 @kernel
-def record_levels(t, y, h, seg_end, e_seg, F, n, p, cs, level_e, level_out, trk, track_peaks, u_tol, wk, istats,
-                  fq):
-    """Record the halt levels crossed on [t, seg_end] (energy is monotone: one root each); e_seg is
-    the energy (mode_energy) at seg_end.
+def record_levels(t, h, seg_end, e_seg, level_e, peaks_on, u_tol, n, work, rec):
+    """Record the halt levels crossed on [t, seg_end] of the step [t, t + h] from work.y (energy is
+    monotone: one root each); e_seg is the energy (mode_energy) at seg_end, level_e the levels'
+    energies; peaks_on: the levels' frequencies are tracked.
 
     Returns the tau of the last level if it was reached in this segment (the scene halts), else -1.
     """
+    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
+    level_out, istats = rec.levels, rec.istats
     nl = level_e.shape[0]
     while int(trk[T_NEXT_LEVEL]) < nl:
         L = int(trk[T_NEXT_LEVEL])
@@ -83,10 +85,10 @@ def record_levels(t, y, h, seg_end, e_seg, F, n, p, cs, level_e, level_out, trk,
         dense_eval(F, 0, y, t, h, tl, n, ybuf)
         level_out[L, 0] = tl
         level_out[L, 1] = ybuf[Y_ALPHA]
-        if track_peaks:
+        if peaks_on:
             level_out[L, L_PENDING] = 1.0
             trk[T_PENDING] += 1.0
-            open_level(L, tl, fq, trk)
+            open_level(L, tl, rec.fq, trk)
         trk[T_NEXT_LEVEL] = L + 1
         istats[I_LEVELS] = L + 1
         if L + 1 == nl:
@@ -115,8 +117,11 @@ def record_sample(y, aux, p, cs, n, row):
 
 
 @kernel
-def record_samples(t, y, h, seg_end, t_stop, F, n, p, cs, sample_tau, samples, trk, wk, istats):
-    """Samples with tau in (t, seg_end] (and <= t_stop) from the dense output."""
+def record_samples(t, h, seg_end, t_stop, sample_tau, n, work, rec):
+    """Samples with tau in (t, seg_end] (and <= t_stop) from the dense output of the step [t, t + h]
+    from work.y."""
+    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
+    samples, istats = rec.samples, rec.istats
     ns = sample_tau.shape[0]
     while int(trk[T_NEXT_SAMPLE]) < ns:
         j = int(trk[T_NEXT_SAMPLE])
@@ -145,24 +150,28 @@ def record_traj(t, y, phi, cs, n, traj, istats):
 
 
 @kernel
-def track_frequency(t, y, h, seg_end, phi_c, K, F, have_dense, n, p, cs, level_out, peaks, trk, wk, istats, fstats,
-                    running, fq):
-    """The frequency recorders on the segment [t, seg_end] (its end state in wk[W_YSEG], Phi there
-    phi_c): the precession lattice, the Phi maxima (the previous step's dense output where a maximum
-    is bracketed), and the window of the last two segments kept for the next bracket."""
+def track_frequency(t, h, seg_end, phi_c, have_dense, running, n, work, rec):
+    """The frequency recorders on the segment [t, seg_end] of the step [t, t + h] from work.y (its
+    end state in wk[W_YSEG], Phi there phi_c): the precession lattice, the Phi maxima (the previous
+    step's dense output where a maximum is bracketed), and the window of the last two segments kept
+    for the next bracket."""
+    y, p, cs, wk, K, F, trk = work
+    istats, level_out, fq = rec.istats, rec.levels, rec.fq
     lattice_step(t, y, h, seg_end, wk[W_YSEG, Y_THETA], F, n, p, cs, fq, level_out, trk, wk, istats)
     if peak_bracketed(phi_c, trk):
         previous_dense(y, n, p, K, F, trk, wk, istats)
-    track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running, fq)
+    track_peaks(t, h, seg_end, phi_c, running, n, work, rec)
     shift_peak_window(t, y, h, seg_end, phi_c, K, F, have_dense, n, cs, trk, wk)
 
 
 @kernel
-def track_peaks(t, y, h, seg_end, phi_c, F, n, p, cs, level_out, peaks, trk, wk, istats, fstats, running, fq):
+def track_peaks(t, h, seg_end, phi_c, running, n, work, rec):
     """Phi at the last three segment ends a < b >= c brackets a maximum: locate it (Brent) on the
-    two steps' dense outputs; if it stands out of its bracket it passes the hysteresis filter
-    (frequency.peak_candidate); Phi at this segment end may confirm the candidate, which is then
-    counted and resolves pending levels' f_hat."""
+    two steps' dense outputs (this one's from work.y over [t, t + h]); if it stands out of its
+    bracket it passes the hysteresis filter (frequency.peak_candidate); Phi at this segment end
+    (phi_c) may confirm the candidate, which is then counted and resolves pending levels' f_hat."""
+    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
+    level_out, peaks, istats, fstats, fq = rec.levels, rec.peaks, rec.istats, rec.fstats, rec.fq
     npk = int(trk[T_NPK])
     pa = trk[T_PHI_A]
     if peak_bracketed(phi_c, trk):
