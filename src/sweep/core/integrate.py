@@ -103,13 +103,15 @@ def start(y, p, cs, n, u_tol, wk, istats):
 
 
 @kernel
-def lift_off(k, t, y, h, g0, d0, g1, d1, F, n, p, cs, u_tol, lev, wk, istats):
-    """On a step that starts on event k's surface (g0 <= 0, just after a discrete update put the
-    state there) and ends with g1 <= 0: a time where g_k > 0 and its value, to bracket a return to
-    the surface within the step; (-1, 0) if there is none. d0, d1: exact end derivatives of g_k
-    per unit of the step. Starts at the peak of the cubic Hermite interpolant of g_k; where g_k
-    leaves the surface upwards (d0 > 0) it halves towards t, where g_k ~ g0 + d0 x > 0.
+def lift_off(k, t, h, g0, d0, g1, d1, n, u_tol, lev, work, istats):
+    """On a step [t, t + h] from work.y (dense output built) that starts on event k's surface
+    (g0 <= 0, just after a discrete update put the state there) and ends with g1 <= 0: a time where
+    g_k > 0 and its value, to bracket a return to the surface within the step; (-1, 0) if there is
+    none. d0, d1: exact end derivatives of g_k per unit of the step. Starts at the peak of the
+    cubic Hermite interpolant of g_k; where g_k leaves the surface upwards (d0 > 0) it halves
+    towards t, where g_k ~ g0 + d0 x > 0. u_tol, lev: the events' slip_tol and level energy.
     """
+    y, p, cs, wk, F = work.y, work.p, work.cs, work.wk, work.F
     x = hermite_peak(g0, d0, g1, d1)
     tries = 60 if d0 > 0.0 else 1
     if x <= 0.0:
@@ -125,15 +127,16 @@ def lift_off(k, t, y, h, g0, d0, g1, d1, F, n, p, cs, u_tol, lev, wk, istats):
 
 
 @kernel
-def first_event(t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats):
-    """Earliest event on the accepted step [t, t + h] (its end state, derivatives and event values
-    in wk: W_YNEW, W_F, W_FNEW, W_GOLD, W_GNEW): (k, restart time, dense output made?).
+def first_event(t, h, n, u_tol, lev, work, istats):
+    """Earliest event on the accepted step [t, t + h] from work.y (its end state, derivatives and
+    event values in wk: W_YNEW, W_F, W_FNEW, W_GOLD, W_GNEW): (k, restart time, dense output made?).
 
     An event function that is positive at both ends can still cross zero twice inside the step
     (dip_bracket); one that starts on its surface can leave it and come back (surface_bracket,
     spin_bracket). The rates at the step end are kept for the next step's start
     (trk[T_RATES_OLD]), so a step costs one RHS evaluation for them.
     """
+    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
     g_old = wk[W_GOLD]
     g_new = wk[W_GNEW]
     have_dense = False
@@ -154,19 +157,19 @@ def first_event(t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats):
             # the step starts on the surface (alpha = 0 after a side change; a moment component
             # released at an un-stick, omega.a_i = 0 up to its drift while held) and ends on or
             # past it: it left and came back within the step (a rocking bounce), or it never left
-            have_dense = dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats)
-            ta, ga, tb, gb, k_event = surface_bracket(k, t, y, h, n, p, cs, u_tol, lev, F, wk, istats)
+            have_dense = dense_built(have_dense, t, h, n, work, istats)
+            ta, ga, tb, gb, k_event = surface_bracket(k, t, h, n, u_tol, lev, work, istats)
         elif EV_SPIN1 <= k <= EV_SPIN3 and g_old[k] <= 0.0 and g_new[k] <= 0.0:
-            ta, ga, have_dense = spin_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, istats, have_dense)
+            ta, ga, have_dense = spin_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense)
             tb, gb = t + h, g_new[k]
         elif g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf and g_new[k] != math.inf:
-            tm, gm, have_dense = dip_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats, have_dense)
+            tm, gm, have_dense = dip_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense)
             if tm >= 0.0:
                 ta, ga, tb, gb = t, g_old[k], tm, gm
                 if reads_forces(k):
                     dip_end = tm
         if ta >= 0.0 and ta < first_t:
-            have_dense = dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats)
+            have_dense = dense_built(have_dense, t, h, n, work, istats)
             ra, rb = locate(k, ta, ga, tb, gb, F, y, t, h, n, p, cs, u_tol, lev, wk, istats)
             if (rb < first_t or first_k < 0) and (k < EV_SPIN1 or k > EV_SPIN3
                                                   or spin_holds(k - EV_SPIN1, rb, F, y, t, h, n, p, cs, wk, istats)):
@@ -177,18 +180,22 @@ def first_event(t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats):
 
 
 @kernel
-def dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats):
-    """The accepted step's dense output in F[0:7], built once per step: returns True."""
+def dense_built(have_dense, t, h, n, work, istats):
+    """The accepted step's dense output in F[0:7] (the step [t, t + h] from work.y), built once per
+    step: returns True."""
     if not have_dense:
-        dense_coeffs(t, y, h, wk[W_YNEW], wk[W_FNEW], n, p, cs, K, F, wk, istats)
+        wk = work.wk
+        dense_coeffs(t, work.y, h, wk[W_YNEW], wk[W_FNEW], n, work.p, work.cs, work.K, work.F, wk, istats)
     return True
 
 
 @kernel
-def surface_bracket(k, t, y, h, n, p, cs, u_tol, lev, F, wk, istats):
-    """Event k (the side, or a moment sign) on a step that starts on its surface and ends on or
-    past it (dense output built): a bracket (ta, ga, tb, gb) of its return to the surface, and the
-    event to apply there (k, or EV_AGAINST1 + i for a component moving against its sign)."""
+def surface_bracket(k, t, h, n, u_tol, lev, work, istats):
+    """Event k (the side, or a moment sign) on a step [t, t + h] from work.y that starts on its
+    surface and ends on or past it (dense output built): a bracket (ta, ga, tb, gb) of its return
+    to the surface, and the event to apply there (k, or EV_AGAINST1 + i for a component moving
+    against its sign)."""
+    y, cs, wk = work.y, work.cs, work.wk
     g0 = wk[W_GOLD, k]
     g1 = wk[W_GNEW, k]
     y_new = wk[W_YNEW]
@@ -198,7 +205,7 @@ def surface_bracket(k, t, y, h, n, p, cs, u_tol, lev, F, wk, istats):
         d1 = cs[CS_SIDE] * y_new[Y_W1] * h
     else:
         d0, d1 = sign_slopes(k, cs[CS_SIG + k], y, wk[W_F], y_new, wk[W_FNEW], h)
-    ta, ga = lift_off(k, t, y, h, g0, d0, g1, d1, F, n, p, cs, u_tol, lev, wk, istats)
+    ta, ga = lift_off(k, t, h, g0, d0, g1, d1, n, u_tol, lev, work, istats)
     tb, gb = t + h, g1
     k_event = k
     if ta < 0.0 and k <= EV_SIGN3 and g0 < 0.0 and d0 > 0.0:
@@ -220,16 +227,17 @@ def surface_bracket(k, t, y, h, n, p, cs, u_tol, lev, F, wk, istats):
 
 
 @kernel
-def spin_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, istats, have_dense):
-    """A free component slower than spin_tol at both ends (e.g. just released at an un-stick) can
-    speed past spin_tol and slow to it again within the step: the peak of the Hermite
-    interpolant of g_k (exact end slopes), confirmed on the dense output. Returns (the peak's time,
-    g_k there, have_dense); the time is -1 where g_k stays below spin_tol."""
+def spin_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
+    """A free component slower than spin_tol at both ends of the step [t, t + h] from work.y (e.g.
+    just released at an un-stick) can speed past spin_tol and slow to it again within the step: the
+    peak of the Hermite interpolant of g_k (exact end slopes), confirmed on the dense output.
+    Returns (the peak's time, g_k there, have_dense); the time is -1 where g_k stays below spin_tol."""
+    y, p, cs, wk, F = work.y, work.p, work.cs, work.wk, work.F
     i = k - EV_SPIN1
     d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], wk[W_YNEW], wk[W_FNEW], h)
     peak = hermite_peak(wk[W_GOLD, k], d0, wk[W_GNEW, k], d1)
     if peak > 0.0:
-        have_dense = dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats)
+        have_dense = dense_built(have_dense, t, h, n, work, istats)
         gm = event_value_at(k, t + peak * h, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
         if gm > 0.0:
             return t + peak * h, gm, have_dense
@@ -237,12 +245,13 @@ def spin_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, istats, have_dense)
 
 
 @kernel
-def dip_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats, have_dense):
-    """Event k positive at both ends of the step can still reach 0 and come back within it: a
-    bounce off alpha = 0, a brief slip demand, a needed moment that touches its limit, a dip of the
-    normal force. The cubic Hermite interpolant of g_k flags the dip; the dense output confirms it.
-    Returns (the time of the dip's minimum where g_k <= 0 there, g_k there, have_dense); the time
-    is -1 where there is no such dip."""
+def dip_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
+    """Event k positive at both ends of the step [t, t + h] from work.y can still reach 0 and come
+    back within it: a bounce off alpha = 0, a brief slip demand, a needed moment that touches its
+    limit, a dip of the normal force. The cubic Hermite interpolant of g_k flags the dip; the dense
+    output confirms it. Returns (the time of the dip's minimum where g_k <= 0 there, g_k there,
+    have_dense); the time is -1 where there is no such dip."""
+    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
     g0 = wk[W_GOLD, k]
     g1 = wk[W_GNEW, k]
     f = wk[W_F]
@@ -270,7 +279,7 @@ def dip_bracket(k, t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats, have_de
         dip = hermite_dip(g0, wk[W_RATEOLD, k] * h, g1, wk[W_RATENEW, k] * h)
     if not dip > 0.0:
         return -1.0, 0.0, have_dense
-    have_dense = dense_built(have_dense, t, y, h, n, p, cs, K, F, wk, istats)
+    have_dense = dense_built(have_dense, t, h, n, work, istats)
     tm = t + dip * h
     gm = event_value_at(k, tm, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
     if 0.0 < gm < DIP_REFINE * min(g0, g1):
@@ -656,7 +665,7 @@ def run(settings, level_e, sample_tau, work, rec):
 
         # --- the earliest event on the step: the kept part ends there --------------------------
         event_values(wk[W_YNEW], wk[W_AUXNEW], p, cs, u_tol, lev, wk[W_GNEW])
-        first_k, seg_end, have_dense = first_event(t, y, h, n, p, cs, u_tol, lev, K, F, wk, trk, istats)
+        first_k, seg_end, have_dense = first_event(t, h, n, u_tol, lev, work, istats)
         event = first_k >= 0
         if event and running and t < trk[T_DIP_END] < t + h:
             # an event of the forces that only the dense output shows (both step ends on the safe
