@@ -10,7 +10,8 @@ the results into the preallocated device arrays. float64 throughout.
 
 Under numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, used by the tests on machines without a GPU)
 the same kernel runs in Python threads; the copies in and out then run as plain Python (their
-`py_func`) on the simulator's arrays and `solve_scene` as its CPU compilation.
+`py_func`) on the simulator's arrays and `solve_loaded` (which calls `solve_scene`) as its CPU
+compilation, on the thread's local arrays grouped as on the GPU (core.ensemble's namedtuples).
 """
 from __future__ import annotations
 
