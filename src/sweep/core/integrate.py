@@ -347,16 +347,19 @@ def state_balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
 
 
 @kernel
-def try_step(t, y, f, h, n, p, cs, K, wk, istats, rtol, atol, e0, tau_span):
-    """One DOP853 step from y, f (wk[W_AUX]: the right-hand side's aux at y) into wk[W_YNEW],
-    wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for
-    a step with a non-finite stage or end state, or one that raises the energy by more than
-    ENERGY_GUARD rtol e0), at least its energy-balance error (balance_error), and counts it.
+def try_step(t, h, n, rtol, atol, e0, tau_span, work, istats):
+    """One DOP853 step of size h from work.y, f = wk[W_F] (wk[W_AUX]: the right-hand side's aux
+    there) into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for a step with a
+    non-finite stage or end state, or one that raises the energy by more than ENERGY_GUARD rtol e0),
+    at least its energy-balance error (balance_error, e0 the initial energy, tau_span the scene's
+    t_max), and counts it.
 
     Every stage is checked, also those whose tableau weight in y_new or the error estimate is zero
     (stages 1-4, and f_new): a right-hand side that failed there (a slaved direction that lost its
     root returns NaN) makes the step fail, so steps shrink until the event that ends the mode is
     located; accepted, its NaN f_new would poison every later step."""
+    y, p, cs, wk, K = work.y, work.p, work.cs, work.wk, work.K
+    f = wk[W_F]
     y_new = wk[W_YNEW]
     aux = wk[W_AUX]
     aux_new = wk[W_AUXNEW]
@@ -494,11 +497,12 @@ def retract_step(cs, istats):
 
 
 @kernel
-def segment_end(t, y, h, seg_end, event, check, n, p, cs, F, e0, t_max, rtol, wk):
-    """The state where the accepted step's kept part ends (wk[W_YSEG]): the step end, or the dense
-    output at an event. Returns its energy (mode_energy) and, for an event's segment where `check`,
-    the energy balance error of the kept part (held like a step's: > 1 retries the step shorter),
-    else 0."""
+def segment_end(t, h, seg_end, event, check, n, e0, t_max, rtol, work):
+    """The state where the kept part [t, seg_end] of the accepted step [t, t + h] from work.y ends
+    (wk[W_YSEG]): the step end, or the dense output at an event. Returns its energy (mode_energy)
+    and, for an event's segment where `check`, the energy balance error of the kept part (held like
+    a step's: > 1 retries the step shorter), else 0."""
+    y, p, cs, wk, F = work.y, work.p, work.cs, work.wk, work.F
     y_seg = wk[W_YSEG]
     if not event:
         for i in range(n):
@@ -652,7 +656,7 @@ def run(settings, level_e, sample_tau, work, rec):
             if running:
                 outcome = oc.T_MAX if hit_tmax else oc.STEP_SIZE_UNDERFLOW
             break
-        err = try_step(t, y, wk[W_F], h, n, p, cs, K, wk, istats, rtol, atol, e0, t_max)
+        err = try_step(t, h, n, rtol, atol, e0, t_max, work, istats)
         if not err <= 1.0:
             h *= step_factor(err)
             after_reject = True
@@ -678,7 +682,7 @@ def run(settings, level_e, sample_tau, work, rec):
             continue
         if not event:
             seg_end = t + h
-        e_seg, seg_err = segment_end(t, y, h, seg_end, event, running, n, p, cs, F, e0, t_max, rtol, wk)
+        e_seg, seg_err = segment_end(t, h, seg_end, event, running, n, e0, t_max, rtol, work)
         if seg_err > 1.0:
             retract_step(cs, istats)
             h *= step_factor(seg_err)
