@@ -37,6 +37,13 @@ def _work():
     return np.zeros((L.N_WORK, L.N_WCOLS)), np.zeros(L.N_ISTATS, np.int64)
 
 
+def _group(p, cs, wk, F, trk=None, y=None):
+    """The run's Work group (layout.Work) around the given buffers, as the roots and recorders take it."""
+    y = np.zeros(M.N_FULL) if y is None else y
+    trk = np.zeros(L.N_TRACK) if trk is None else trk
+    return L.Work(y, p, cs, wk, np.zeros((L.N_KROWS, M.N_FULL)), F, trk)
+
+
 def _f(t, y, p, cs, n=M.N_CORE):
     dy = np.zeros(M.N_FULL)
     aux = np.zeros(M.N_AUX)
@@ -340,13 +347,14 @@ def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
     cs = cs.copy()
     cs[L.CS_SIG] = -1.0
     F, wk, ist = _dense_step(p, y, cs, h)
-    g0 = R.event_value_at(k, 0.0, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
-    g1 = R.event_value_at(k, h, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
+    span, work = L.Span(0, y, 0.0, h, cs), _group(p, cs, wk, F)
+    g0 = R.event_value_at(k, 0.0, span, n, 1e-9, math.nan, work, ist)
+    g1 = R.event_value_at(k, h, span, n, 1e-9, math.nan, work, ist)
     assert g0 > 0.0 >= g1, (g0, g1)
-    ta, tb = R.locate(k, 0.0, g0, h, g1, F, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist)
+    ta, tb = R.locate(k, 0.0, g0, h, g1, span, n, 1e-9, math.nan, work, ist)
     assert tb - ta <= R.location_tol(tb)
-    assert R.event_value_at(k, ta, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist) > 0.0
-    assert R.event_value_at(k, tb, F, 0, y, 0.0, h, n, p, cs, 1e-9, math.nan, wk, ist) <= 0.0
+    assert R.event_value_at(k, ta, span, n, 1e-9, math.nan, work, ist) > 0.0
+    assert R.event_value_at(k, tb, span, n, 1e-9, math.nan, work, ist) <= 0.0
 
 
 def test_brent_finds_the_maximum_of_the_normal_force(setup):
@@ -360,7 +368,7 @@ def test_brent_finds_the_maximum_of_the_normal_force(setup):
         phi.append(_f(t, wk[L.W_YBUF], p, cs)[1][M.X_PHI])
     i = int(np.argmax(phi))
     assert 0 < i < len(grid) - 1, "the test step must contain an interior maximum of Phi"
-    tmax, pmax = R.brent_max_phi(0.0, h, F, 0, y, 0.0, h, n, p, cs, wk, ist)
+    tmax, pmax = R.brent_max_phi(0.0, h, L.Span(0, y, 0.0, h, cs), n, _group(p, cs, wk, F), ist)
     assert abs(tmax - grid[i]) < 2 * (grid[1] - grid[0])
     assert pmax >= max(phi) - 1e-12
 
@@ -382,6 +390,15 @@ def _two_steps(p, y0, cs, t0, t_mid, t_end, n=M.N_CORE):
     trk[L.T_TA], trk[L.T_TB], trk[L.T_TPREV], trk[L.T_HPREV] = t0, t_mid, t0, t_mid - t0
     trk[L.T_PHI_B] = _f(t_mid, ys[1], p, cs)[1][M.X_PHI]
     return F, trk, wk, ist, ys[1]
+
+
+def _spans(p, F, trk, wk, y_mid, t_mid, t1):
+    """The two steps of _two_steps, [T_TPREV, t_mid] and [t_mid, t1], as track_peaks reads them:
+    (before, this, work), both in the contact state stored in wk[W_CSPREV]."""
+    cs = wk[L.W_CSPREV, :L.N_CS].copy()
+    before = L.Span(D.N_DENSE, wk[L.W_YPREV], trk[L.T_TPREV], trk[L.T_HPREV], wk[L.W_CSPREV, :L.N_CS])
+    this = L.Span(0, y_mid, t_mid, t1 - t_mid, cs)
+    return before, this, _group(p, cs, wk, F, trk, y_mid)
 
 
 def test_peak_sides_picks_the_segment_that_holds_the_maximum_of_the_normal_force(setup):
@@ -406,8 +423,9 @@ def test_peak_sides_picks_the_segment_that_holds_the_maximum_of_the_normal_force
     def phi_max(t_mid):
         F, trk, wk, ist, y_mid = _two_steps(p, y0, cs, t0, t_mid, t1)
         grid = np.linspace(t0, t1, 4001)
-        phi = [R.phi_on_dense(t, F, 7, wk[L.W_YPREV], t0, t_mid - t0, n, p, cs, wk, ist) if t <= t_mid
-               else R.phi_on_dense(t, F, 0, y_mid, t_mid, t1 - t_mid, n, p, cs, wk, ist) for t in grid]
+        before, this, work = _spans(p, F, trk, wk, y_mid, t_mid, t1)
+        phi = [R.phi_on_dense(t, before, n, work, ist) if t <= t_mid
+               else R.phi_on_dense(t, this, n, work, ist) for t in grid]
         i = int(np.argmax(phi))
         assert 0 < i < len(grid) - 1, "the two steps must hold an interior maximum of Phi"
         return grid[i], F, trk, wk, ist, y_mid
@@ -415,16 +433,19 @@ def test_peak_sides_picks_the_segment_that_holds_the_maximum_of_the_normal_force
     for t_mid in (1.05, 1.1, 1.25, 1.3):
         t_star, F, trk, wk, ist, y_mid = phi_max(t_mid)
         expected = (t_star < t_mid, t_star > t_mid)
-        assert TR.peak_sides(t_mid, t1, F, y_mid, t1 - t_mid, n, p, cs, trk, wk, ist) == expected, (t_mid, t_star)
+        before, this, work = _spans(p, F, trk, wk, y_mid, t_mid, t1)
+        assert TR.peak_sides(t_mid, t1, before, this, n, work, ist) == expected, (t_mid, t_star)
         # the side it keeps is where the search of both segments finds the larger maximum
-        _, pv_left = R.brent_max_phi(t0, t_mid, F, 7, wk[L.W_YPREV], t0, t_mid - t0, n, p, cs, wk, ist)
-        _, pv_right = R.brent_max_phi(t_mid, t1, F, 0, y_mid, t_mid, t1 - t_mid, n, p, cs, wk, ist)
+        _, pv_left = R.brent_max_phi(t0, t_mid, before, n, work, ist)
+        _, pv_right = R.brent_max_phi(t_mid, t1, this, n, work, ist)
         assert (pv_left >= pv_right) == expected[0]
     # the common end at the maximum (located by Brent on the two steps with an end near it)
     t_star, F, trk, wk, ist, y_mid = phi_max(1.1)
-    t_exact, _ = R.brent_max_phi(1.1, t1, F, 0, y_mid, 1.1, t1 - 1.1, n, p, cs, wk, ist)
+    _, this, work = _spans(p, F, trk, wk, y_mid, 1.1, t1)
+    t_exact, _ = R.brent_max_phi(1.1, t1, this, n, work, ist)
     F, trk, wk, ist, y_mid = _two_steps(p, y0, cs, t0, t_exact, t1)
-    assert TR.peak_sides(t_exact, t1, F, y_mid, t1 - t_exact, n, p, cs, trk, wk, ist) == (True, True)
+    before, this, work = _spans(p, F, trk, wk, y_mid, t_exact, t1)
+    assert TR.peak_sides(t_exact, t1, before, this, n, work, ist) == (True, True)
 
 
 def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
@@ -584,7 +605,7 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
     g = np.zeros(L.N_WCOLS)
     C.event_values(y, aux, p, cs, 1e-9, math.nan, g)
     rates = np.zeros(L.N_WCOLS)
-    R.event_rates(0.0, y, f, g, p, cs, n, 1e-9, math.nan, wk, ist, rates)
+    R.event_rates(0.0, y, f, g, rates, n, 1e-9, math.nan, _group(p, cs, wk, np.zeros((14, M.N_FULL))), ist)
     for k in range(3):
         exact = cs[L.CS_SIG + k] * R.sign_rate(k, y, f)
         assert rates[C.EV_SIGN1 + k] == pytest.approx(exact, rel=1e-6, abs=1e-7)
@@ -645,7 +666,8 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
             # on a dense output whose every coefficient is 0, the value at any t is y itself
             rhs_before = ist[L.I_RHS]
             F = np.zeros((14, M.N_FULL))
-            assert R.event_value_at(k, 0.3, F, 0, y, 0.0, 1.0, M.N_CORE, p, cs, 1e-9, level, wk, ist) == g_true[k]
+            assert R.event_value_at(k, 0.3, L.Span(0, y, 0.0, 1.0, cs), M.N_CORE, 1e-9, level,
+                                    _group(p, cs, wk, F), ist) == g_true[k]
             assert ist[L.I_RHS] == rhs_before
     expected = {C.EV_SIDE, C.EV_FACE, C.EV_LEVEL} | (
         {C.EV_SIGN1, C.EV_SIGN2, C.EV_SIGN3, C.EV_SPIN1, C.EV_SPIN2, C.EV_SPIN3} if mode == L.ROLL

@@ -24,7 +24,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
-                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Record, Work)
+                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Record, Span, Work)
 from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes, slip_closest_approach
 from .tableau import N_STAGES
@@ -111,7 +111,7 @@ def lift_off(k, t, h, g0, d0, g1, d1, n, u_tol, lev, work, istats):
     cubic Hermite interpolant of g_k; where g_k leaves the surface upwards (d0 > 0) it halves
     towards t, where g_k ~ g0 + d0 x > 0. u_tol, lev: the events' slip_tol and level energy.
     """
-    y, p, cs, wk, F = work.y, work.p, work.cs, work.wk, work.F
+    span = Span(0, work.y, t, h, work.cs)
     x = hermite_peak(g0, d0, g1, d1)
     tries = 60 if d0 > 0.0 else 1
     if x <= 0.0:
@@ -119,7 +119,7 @@ def lift_off(k, t, h, g0, d0, g1, d1, n, u_tol, lev, work, istats):
             return -1.0, 0.0
         x = 0.5
     for _ in range(tries):
-        gm = event_value_at(k, t + x * h, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+        gm = event_value_at(k, t + x * h, span, n, u_tol, lev, work, istats)
         if gm > 0.0:
             return t + x * h, gm
         x *= 0.5
@@ -136,7 +136,8 @@ def first_event(t, h, n, u_tol, lev, work, istats):
     spin_bracket). The rates at the step end are kept for the next step's start
     (trk[T_RATES_OLD]), so a step costs one RHS evaluation for them.
     """
-    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
+    wk, trk = work.wk, work.trk
+    span = Span(0, work.y, t, h, work.cs)
     g_old = wk[W_GOLD]
     g_new = wk[W_GNEW]
     have_dense = False
@@ -170,9 +171,9 @@ def first_event(t, h, n, u_tol, lev, work, istats):
                     dip_end = tm
         if ta >= 0.0 and ta < first_t:
             have_dense = dense_built(have_dense, t, h, n, work, istats)
-            ra, rb = locate(k, ta, ga, tb, gb, F, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+            ra, rb = locate(k, ta, ga, tb, gb, span, n, u_tol, lev, work, istats)
             if (rb < first_t or first_k < 0) and (k < EV_SPIN1 or k > EV_SPIN3
-                                                  or spin_holds(k - EV_SPIN1, rb, F, y, t, h, n, p, cs, wk, istats)):
+                                                  or spin_holds(k - EV_SPIN1, rb, span, n, work, istats)):
                 first_k = k_event
                 first_t = rb
                 trk[T_DIP_END] = dip_end
@@ -232,13 +233,13 @@ def spin_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
     just released at an un-stick) can speed past spin_tol and slow to it again within the step: the
     peak of the Hermite interpolant of g_k (exact end slopes), confirmed on the dense output.
     Returns (the peak's time, g_k there, have_dense); the time is -1 where g_k stays below spin_tol."""
-    y, p, cs, wk, F = work.y, work.p, work.cs, work.wk, work.F
+    y, cs, wk = work.y, work.cs, work.wk
     i = k - EV_SPIN1
     d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], wk[W_YNEW], wk[W_FNEW], h)
     peak = hermite_peak(wk[W_GOLD, k], d0, wk[W_GNEW, k], d1)
     if peak > 0.0:
         have_dense = dense_built(have_dense, t, h, n, work, istats)
-        gm = event_value_at(k, t + peak * h, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+        gm = event_value_at(k, t + peak * h, Span(0, y, t, h, cs), n, u_tol, lev, work, istats)
         if gm > 0.0:
             return t + peak * h, gm, have_dense
     return -1.0, 0.0, have_dense
@@ -251,7 +252,7 @@ def dip_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
     limit, a dip of the normal force. The cubic Hermite interpolant of g_k flags the dip; the dense
     output confirms it. Returns (the time of the dip's minimum where g_k <= 0 there, g_k there,
     have_dense); the time is -1 where there is no such dip."""
-    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
+    y, cs, wk, trk = work.y, work.cs, work.wk, work.trk
     g0 = wk[W_GOLD, k]
     g1 = wk[W_GNEW, k]
     f = wk[W_F]
@@ -271,33 +272,37 @@ def dip_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
         dip = slip_closest_approach(y, f, y_new, f_new, h)
     else:
         if trk[T_RATES_OLD] == 0.0:
-            event_rates(t, y, f, wk[W_GOLD], p, cs, n, u_tol, lev, wk, istats, wk[W_RATEOLD])
+            event_rates(t, y, f, wk[W_GOLD], wk[W_RATEOLD], n, u_tol, lev, work, istats)
             trk[T_RATES_OLD] = 1.0
         if trk[T_RATES_NEW] == 0.0:
-            event_rates(t + h, y_new, f_new, wk[W_GNEW], p, cs, n, u_tol, lev, wk, istats, wk[W_RATENEW])
+            event_rates(t + h, y_new, f_new, wk[W_GNEW], wk[W_RATENEW], n, u_tol, lev, work, istats)
             trk[T_RATES_NEW] = 1.0
         dip = hermite_dip(g0, wk[W_RATEOLD, k] * h, g1, wk[W_RATENEW, k] * h)
     if not dip > 0.0:
         return -1.0, 0.0, have_dense
     have_dense = dense_built(have_dense, t, h, n, work, istats)
     tm = t + dip * h
-    gm = event_value_at(k, tm, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+    span = Span(0, y, t, h, cs)
+    gm = event_value_at(k, tm, span, n, u_tol, lev, work, istats)
     if 0.0 < gm < DIP_REFINE * min(g0, g1):
         # the cubic's minimum is only near the dense output's: a shallow dip (a grazing double
         # crossing) is decided by the minimum of g_k itself
-        tm, gm = brent_min(k, t, t + h, 0.0, F, 0, y, t, h, n, p, cs, u_tol, lev, wk, istats)
+        tm, gm = brent_min(k, t, t + h, 0.0, span, n, u_tol, lev, work, istats)
     if gm <= 0.0:
         return tm, gm, have_dense
     return -1.0, 0.0, have_dense
 
 
 @kernel
-def spin_holds(i, t_event, F, y, t, h, n, p, cs, wk, istats):
-    """Would free component i stick at its spin event at t_event (|sigma needed| < 1 there, the
-    test contact.stick_at_spin_tol makes)? Where it would not, the event changes nothing, and the
-    step goes on instead of restarting there (the same trajectory, fewer restarts)."""
-    dense_eval(F, 0, y, t, h, t_event, n, wk[W_YBUF])
-    return abs(needed_sigma(i, t_event, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)) < 1.0
+def spin_holds(i, t_event, span, n, work, istats):
+    """Would free component i stick at its spin event at t_event on span's dense output (|sigma
+    needed| < 1 there, the test contact.stick_at_spin_tol makes)? Where it would not, the event
+    changes nothing, and the step goes on instead of restarting there (the same trajectory, fewer
+    restarts)."""
+    wk = work.wk
+    dense_eval(work.F, span.row0, span.y0, span.t0, span.h, t_event, n, wk[W_YBUF])
+    return abs(needed_sigma(i, t_event, wk[W_YBUF], work.p, span.cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk,
+                            istats)) < 1.0
 
 
 @kernel
@@ -574,10 +579,11 @@ def restart_after_event(k, t, y, p, cs, n, u_tol, lev, wk, istats, fstats):
 
 
 @kernel
-def carry_step_end(t, y, p, cs, n, lev, level_pending, wk, istats):
-    """A step that ended without an event: its end's event values start the next step (the
-    level's from the energy, +inf once every level is crossed), and a slaved direction is
-    continued to its end."""
+def carry_step_end(lev, level_pending, work):
+    """A step that ended without an event (work.y now its end state): its end's event values start
+    the next step (the level's from the energy, +inf once every level is crossed), and a slaved
+    direction is continued to its end."""
+    y, p, cs, wk = work.y, work.p, work.cs, work.wk
     for k in range(N_DYN_EVENTS + 1):
         wk[W_GOLD, k] = wk[W_GNEW, k]
     wk[W_GOLD, EV_LEVEL] = mode_energy_at(y, wk[W_AUX], p, cs) - lev if level_pending else math.inf
@@ -727,7 +733,7 @@ def run(settings, level_e, sample_tau, work, rec):
                     fstats[F_TEND] = t
                 break
         else:
-            carry_step_end(t, y, p, cs, n, lev, int(trk[T_NEXT_LEVEL]) < nl, wk, istats)
+            carry_step_end(lev, int(trk[T_NEXT_LEVEL]) < nl, work)
             if hit_tmax and outcome < 0:
                 outcome = oc.T_MAX
                 mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)

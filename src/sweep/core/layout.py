@@ -118,3 +118,7 @@ Work = namedtuple("Work", "y p cs wk K F trk")
 # TRAJ_COLS), peaks (cap x PEAK_COLS), y_end (N_FULL) and the frequency windows fq
 # (FQ_LEVEL0 + n_levels x FQ_COLS, core.frequency). A buffer of 0 rows switches its recorder off.
 Record = namedtuple("Record", "istats fstats levels samples traj peaks y_end fq")
+# Span: the dense output that a search on it reads (roots.py): rows row0..row0 + 6 of work.F (0:
+# this step's, N_DENSE: the previous step's) hold the coefficients of the step from the state y0
+# (N_FULL) at tau t0 over h, which ran in the contact state cs (N_CS).
+Span = namedtuple("Span", "row0 y0 t0 h cs")

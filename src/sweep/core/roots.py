@@ -143,10 +143,11 @@ def hermite_peak(g0, d0, g1, d1):
 
 
 @kernel
-def event_rates(t, y, f, g_here, p, cs, n, u_tol, level_e, wk, istats, rates):
+def event_rates(t, y, f, g_here, rates, n, u_tol, level_e, work, istats):
     """d g_k/d tau along the solution at (t, y) for every event k (g_here: the values there,
-    derivative f), by a forward difference of step RATE_STEP along f: one RHS evaluation for all.
-    0 where g_k is inactive (inf)."""
+    derivative f) into rates, by a forward difference of step RATE_STEP along f: one RHS evaluation
+    for all, in work.cs. 0 where g_k is inactive (inf)."""
+    p, cs, wk = work.p, work.cs, work.wk
     ys = wk[W_YBUF]
     for i in range(n):
         ys[i] = y[i] + RATE_STEP * f[i]
@@ -161,10 +162,11 @@ def event_rates(t, y, f, g_here, p, cs, n, u_tol, level_e, wk, istats, rates):
 
 
 @kernel
-def event_value_at(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
-    """g_k at time t on a step's dense output (coefficients F[row0:row0+7]); one RHS evaluation
-    for an event that reads the forces, none for one of the state alone."""
-    dense_eval(F, row0, y_old, t_old, h, t, n, wk[W_YBUF])
+def event_value_at(k, t, span, n, u_tol, level_e, work, istats):
+    """g_k at time t on the dense output of a step (span: layout.Span); one RHS evaluation, in the
+    span's contact state, for an event that reads the forces, none for one of the state alone."""
+    p, cs, wk = work.p, span.cs, work.wk
+    dense_eval(work.F, span.row0, span.y0, span.t0, span.h, t, n, wk[W_YBUF])
     if not reads_forces(k):
         return state_event_value(k, wk[W_YBUF], p, cs, u_tol, level_e)
     eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
@@ -180,8 +182,9 @@ def location_tol(tau):
 
 
 @kernel
-def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
-    """Illinois regula falsi for g_k on [ta, tb] with g(ta) > 0 >= g(tb). Returns (ta, tb) bracket.
+def locate(k, ta, ga, tb, gb, span, n, u_tol, level_e, work, istats):
+    """Illinois regula falsi for g_k on [ta, tb] with g(ta) > 0 >= g(tb), on the dense output of
+    span (layout.Span). Returns the (ta, tb) bracket.
 
     At most 200 iterations: Illinois converges superlinearly, and bisection steps are forced
     whenever the bracket fails to halve twice in a row, so 200 is never reached for a finite g.
@@ -196,7 +199,7 @@ def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, 
         if not (tm > ta and tm < tb) or side_kept >= 2:
             tm = 0.5 * (ta + tb)
             side_kept = 0
-        gm = event_value_at(k, tm, F, 0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats)
+        gm = event_value_at(k, tm, span, n, u_tol, level_e, work, istats)
         if math.isnan(gm):
             tb = tm
             gb = -1.0
@@ -217,18 +220,19 @@ def locate(k, ta, ga, tb, gb, F, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, 
 
 
 @kernel
-def _objective(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
-    """What brent_min minimises: -Phi for k < 0, else event k's value, on the dense output."""
+def _objective(k, t, span, n, u_tol, level_e, work, istats):
+    """What brent_min minimises: -Phi for k < 0, else event k's value, on span's dense output."""
     if k >= 0:
-        return event_value_at(k, t, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats)
-    dense_eval(F, row0, y_old, t_old, h, t, n, wk[W_YBUF])
-    eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+        return event_value_at(k, t, span, n, u_tol, level_e, work, istats)
+    wk = work.wk
+    dense_eval(work.F, span.row0, span.y0, span.t0, span.h, t, n, wk[W_YBUF])
+    eval_rhs(t, wk[W_YBUF], work.p, span.cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
     return -wk[W_AUXBUF, X_PHI]
 
 
 @kernel
-def brent_min(k, ta, tb, stop_at, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats):
-    """Time and value of the minimum of _objective(k) on [ta, tb] by Brent's parabolic/golden-section
+def brent_min(k, ta, tb, stop_at, span, n, u_tol, level_e, work, istats):
+    """Time and value of the minimum of _objective(k) on [ta, tb] (span's dense output) by Brent's parabolic/golden-section
     search; it returns at once at a value <= stop_at (a dip below an event surface is found).
 
     The location of a smooth minimum is determined only to ~sqrt(eps) relative to the bracket
@@ -238,7 +242,7 @@ def brent_min(k, ta, tb, stop_at, F, row0, y_old, t_old, h, n, p, cs, u_tol, lev
     a = ta
     b = tb
     x = w = v = a + cgold * (b - a)
-    fx = fw = fv = _objective(k, x, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats)
+    fx = fw = fv = _objective(k, x, span, n, u_tol, level_e, work, istats)
     d = 0.0
     e = 0.0
     for _ in range(100):
@@ -268,7 +272,7 @@ def brent_min(k, ta, tb, stop_at, F, row0, y_old, t_old, h, n, p, cs, u_tol, lev
             e = (a - x) if x >= xm else (b - x)
             d = cgold * e
         u = x + d if abs(d) >= tol1 else x + (tol1 if d >= 0 else -tol1)
-        fu = _objective(k, u, F, row0, y_old, t_old, h, n, p, cs, u_tol, level_e, wk, istats)
+        fu = _objective(k, u, span, n, u_tol, level_e, work, istats)
         if fu <= fx:
             if u >= x:
                 a = x
@@ -291,13 +295,13 @@ def brent_min(k, ta, tb, stop_at, F, row0, y_old, t_old, h, n, p, cs, u_tol, lev
 
 
 @kernel
-def phi_on_dense(tau, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
-    """Phi at tau on the dense output F[row0:row0 + 7] of the step from (t_old, y_old) over h."""
-    return -_objective(-1, tau, F, row0, y_old, t_old, h, n, p, cs, 0.0, math.nan, wk, istats)
+def phi_on_dense(tau, span, n, work, istats):
+    """Phi at tau on the dense output of span (layout.Span)."""
+    return -_objective(-1, tau, span, n, 0.0, math.nan, work, istats)
 
 
 @kernel
-def brent_max_phi(ta, tb, F, row0, y_old, t_old, h, n, p, cs, wk, istats):
-    """Time of the maximum of Phi on [ta, tb] and Phi there (brent_min of -Phi)."""
-    x, f = brent_min(-1, ta, tb, -math.inf, F, row0, y_old, t_old, h, n, p, cs, 0.0, math.nan, wk, istats)
+def brent_max_phi(ta, tb, span, n, work, istats):
+    """Time of the maximum of Phi on [ta, tb] (span's dense output) and Phi there (brent_min of -Phi)."""
+    x, f = brent_min(-1, ta, tb, -math.inf, span, n, 0.0, math.nan, work, istats)
     return x, -f

@@ -14,7 +14,7 @@ from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_ste
 from .jit import kernel
 from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_CS, T_NEXT_LEVEL, T_PREV_DENSE,
                      T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
-                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, W_YSEG, F_NFMAX, F_TEND)
+                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, W_YSEG, F_NFMAX, F_TEND, Span)
 from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
@@ -79,7 +79,7 @@ def record_levels(t, h, seg_end, e_seg, level_e, peaks_on, u_tol, n, work, rec):
             ta = t
             tb = t
         else:
-            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, gl, F, y, t, h, n, p, cs, u_tol, level_e[L], wk, istats)
+            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, gl, Span(0, y, t, h, cs), n, u_tol, level_e[L], work, istats)
         tl = 0.5 * (ta + tb)
         ybuf = wk[W_YBUF]
         dense_eval(F, 0, y, t, h, tl, n, ybuf)
@@ -170,20 +170,20 @@ def track_peaks(t, h, seg_end, phi_c, running, n, work, rec):
     two steps' dense outputs (this one's from work.y over [t, t + h]); if it stands out of its
     bracket it passes the hysteresis filter (frequency.peak_candidate); Phi at this segment end
     (phi_c) may confirm the candidate, which is then counted and resolves pending levels' f_hat."""
-    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
+    y, cs, wk, F, trk = work.y, work.cs, work.wk, work.F, work.trk
     level_out, peaks, istats, fstats, fq = rec.levels, rec.peaks, rec.istats, rec.fstats, rec.fq
     npk = int(trk[T_NPK])
     pa = trk[T_PHI_A]
     if peak_bracketed(phi_c, trk):
-        cprev = wk[W_CSPREV, :N_CS]
-        left, right = peak_sides(t, seg_end, F, y, h, n, p, cs, trk, wk, istats)
+        before = Span(N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], wk[W_CSPREV, :N_CS])
+        this = Span(0, y, t, h, cs)
+        left, right = peak_sides(t, seg_end, before, this, n, work, istats)
         tp1, pv1 = trk[T_TB], -math.inf
         tp2, pv2 = t, -math.inf
         if left:
-            tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV],
-                                     n, p, cprev, wk, istats)
+            tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], before, n, work, istats)
         if right:
-            tp2, pv2 = brent_max_phi(t, seg_end, F, 0, y, t, h, n, p, cs, wk, istats)
+            tp2, pv2 = brent_max_phi(t, seg_end, this, n, work, istats)
         ybuf = wk[W_YBUF]
         if pv1 >= pv2:
             tpk, pvk = tp1, pv1
@@ -209,21 +209,22 @@ def track_peaks(t, h, seg_end, phi_c, running, n, work, rec):
 
 
 @kernel
-def peak_sides(t, seg_end, F, y, h, n, p, cs, trk, wk, istats):
+def peak_sides(t, seg_end, before, this, n, work, istats):
     """Which of the two segments bracketing a maximum of Phi (the previous one, [T_TA, T_TB], and
     [t, seg_end], with T_TB = t) to search: (left, right). Phi at T_TB is known; read a gap past it
     on each side. Where it rises on one side and falls on the other, the maximum lies on the rising
     side (for a smooth Phi, one within half the gap of T_TB falls on both sides), and a search of
     the falling side would only creep to T_TB (Brent's golden steps, ~40 RHS calls) to lose the
-    comparison. Otherwise, or where a difference is within PEAK_SIDE_TOL, both are searched."""
+    comparison. Otherwise, or where a difference is within PEAK_SIDE_TOL, both are searched.
+    before, this: the two steps' dense outputs (layout.Span)."""
+    trk = work.trk
     gap = PEAK_SIDE_GAP * min(trk[T_TB] - trk[T_TA], seg_end - t)
     if not gap > 0.0:
         return True, True
     phi_b = trk[T_PHI_B]
     tol = PEAK_SIDE_TOL * abs(phi_b)
-    d_left = phi_on_dense(trk[T_TB] - gap, F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], n, p,
-                          wk[W_CSPREV, :N_CS], wk, istats) - phi_b
-    d_right = phi_on_dense(t + gap, F, 0, y, t, h, n, p, cs, wk, istats) - phi_b
+    d_left = phi_on_dense(trk[T_TB] - gap, before, n, work, istats) - phi_b
+    d_right = phi_on_dense(t + gap, this, n, work, istats) - phi_b
     if d_left > tol and d_right < -tol:
         return True, False
     if d_right > tol and d_left < -tol:
