@@ -38,7 +38,7 @@ import math
 from .contact import eval_rhs
 from .dop853 import dense_component, dense_eval
 from .jit import kernel
-from .layout import T_PENDING, W_AUXBUF, W_DYBUF, W_YBUF
+from .layout import T_PENDING, W_AUXBUF, W_DYBUF, W_YBUF, W_YSEG, Span
 from .model import X_PHI, Y_THETA
 
 SAMPLES_PER_CYCLE = 16          # S: lattice points per precession cycle (Nyquist: 8 Phi cycles per precession cycle)
@@ -151,20 +151,26 @@ def lattice_due(theta_end, fq):
 
 
 @kernel
-def _next_crossing(r, t_lo, t, y, h, seg_end, theta_end, F, fq):
-    """Time of the next new lattice point in direction r on [t_lo, seg_end], or inf."""
+def _next_crossing(r, t_lo, seg_end, theta_end, span, F, fq):
+    """Time of the next new lattice point in direction r on [t_lo, seg_end] of span's dense output
+    (layout.Span, coefficients in F), or inf."""
     target, sgn = _next_target(r, fq)
     if sgn * (theta_end - target) < 0.0:
         return math.inf
-    return theta_crossing(F, y, t, h, t_lo, seg_end, target, sgn)
+    return theta_crossing(F, span.y0, span.t0, span.h, t_lo, seg_end, target, sgn)
 
 
 @kernel
-def lattice_step(t, y, h, seg_end, theta_end, F, n, p, cs, fq, level_out, trk, wk, istats):
-    """The new lattice points on [t, seg_end] in time order: Phi there (dense output, this
-    segment's contact state), the rings, and the level windows they open, fill or complete."""
-    tu = _next_crossing(0, t, t, y, h, seg_end, theta_end, F, fq)
-    td = _next_crossing(1, t, t, y, h, seg_end, theta_end, F, fq)
+def lattice_step(t, h, seg_end, n, work, rec):
+    """The new lattice points on the segment [t, seg_end] of the step [t, t + h] from work.y (its
+    end state in wk[W_YSEG]) in time order: Phi there (dense output, this segment's contact
+    state), the rings, and the level windows they open, fill or complete."""
+    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
+    fq, level_out, istats = rec.fq, rec.levels, rec.istats
+    span = Span(0, y, t, h, cs)
+    theta_end = wk[W_YSEG, Y_THETA]
+    tu = _next_crossing(0, t, seg_end, theta_end, span, F, fq)
+    td = _next_crossing(1, t, seg_end, theta_end, span, F, fq)
     while tu < math.inf or td < math.inf:
         r = 0 if tu <= td else 1
         tc = tu if r == 0 else td
@@ -172,9 +178,9 @@ def lattice_step(t, y, h, seg_end, theta_end, F, n, p, cs, fq, level_out, trk, w
         eval_rhs(tc, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
         push_lattice(r, tc, wk[W_AUXBUF, X_PHI], fq, level_out, trk)
         if r == 0:
-            tu = _next_crossing(0, tc, t, y, h, seg_end, theta_end, F, fq)
+            tu = _next_crossing(0, tc, seg_end, theta_end, span, F, fq)
         else:
-            td = _next_crossing(1, tc, t, y, h, seg_end, theta_end, F, fq)
+            td = _next_crossing(1, tc, seg_end, theta_end, span, F, fq)
 
 
 @kernel

@@ -14,7 +14,7 @@ from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_ste
 from .jit import kernel
 from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_CS, T_NEXT_LEVEL, T_PREV_DENSE,
                      T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
-                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, W_YSEG, F_NFMAX, F_TEND, Span)
+                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND, Span)
 from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
@@ -155,13 +155,12 @@ def track_frequency(t, h, seg_end, phi_c, have_dense, running, n, work, rec):
     end state in wk[W_YSEG], Phi there phi_c): the precession lattice, the Phi maxima (the previous
     step's dense output where a maximum is bracketed), and the window of the last two segments kept
     for the next bracket."""
-    y, p, cs, wk, K, F, trk = work
-    istats, level_out, fq = rec.istats, rec.levels, rec.fq
-    lattice_step(t, y, h, seg_end, wk[W_YSEG, Y_THETA], F, n, p, cs, fq, level_out, trk, wk, istats)
+    y, p, wk, K, F, trk = work.y, work.p, work.wk, work.K, work.F, work.trk
+    lattice_step(t, h, seg_end, n, work, rec)
     if peak_bracketed(phi_c, trk):
-        previous_dense(y, n, p, K, F, trk, wk, istats)
+        previous_dense(y, n, p, K, F, trk, wk, rec.istats)
     track_peaks(t, h, seg_end, phi_c, running, n, work, rec)
-    shift_peak_window(t, y, h, seg_end, phi_c, K, F, have_dense, n, cs, trk, wk)
+    shift_peak_window(t, h, seg_end, phi_c, have_dense, n, work)
 
 
 @kernel
@@ -257,9 +256,11 @@ def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats
 
 
 @kernel
-def shift_peak_window(t, y, h, seg_end, phi_c, K, F, have_dense, n, cs, trk, wk):
-    """Keep this segment's Phi, contact state and dense output (or, where it was not built, the
-    stages it is built from: previous_dense) for the next bracket."""
+def shift_peak_window(t, h, seg_end, phi_c, have_dense, n, work):
+    """Keep this segment's Phi (phi_c at seg_end), contact state and dense output (or, where it was
+    not built, the stages it is built from: previous_dense) of the step [t, t + h] from work.y for
+    the next bracket."""
+    y, cs, wk, K, F, trk = work.y, work.cs, work.wk, work.K, work.F, work.trk
     trk[T_PHI_A] = trk[T_PHI_B]
     trk[T_TA] = trk[T_TB]
     trk[T_PHI_B] = phi_c
