@@ -110,7 +110,14 @@ DIP_INSIDE = DIP_CHECKED | set(UNSTICK)
 # ... and the slip speed against slip_tol and the slaving speed where a slide passes by u = 0 inside
 # a step: |u| has a V there, narrower than the step (harness seed 20261128 scene 39)
 DIP_INSIDE |= {"slipslow", "slave"}
-FORCE_EVENTS = {"cone", *UNSTICK}
+# ... and every other event function, as the kernel checks them all: the slaved slip's stop
+# u.s = 0, its exit to SLIDE and the fold of its direction, the normal force, the face (harness seed
+# 20261133 scene 127: a slaved slip that slowed to u.s = 0 at 2.3e-5 tau into a step of 3.9e-3 tau,
+# and sped up again along its direction before the step's end, was a slip with no stop here)
+DIP_INSIDE |= {"slipstop", "slipfast", "slave_lost", "contact", "face"}
+# the events that read the right-hand side (forces, the slaved direction): a dip that only the dense
+# output shows stands where the state integrated to its minimum confirms it (kernel: reads_forces)
+FORCE_EVENTS = {"cone", *UNSTICK, "slipstop", "slipfast", "slave_lost", "contact"}
 STEP_MIN_XATOL = 1e-12   # the minimum of a function over a step: its position to this fraction of the step   # the dip-checked events that read the contact forces
 
 
@@ -938,13 +945,14 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                                                       t_old, hstep)
                                 xs = [xm]
                         else:
-                            # the cone and un-stick margins have no exact slope: their Hermite minimum with end slopes
-                            # by differences on the dense output, and CONE_SAMPLES interior points
+                            # the others have no exact slope: their Hermite minimum with end slopes by differences
+                            # on the dense output, and for the cone and un-stick margins CONE_SAMPLES interior points
                             dt = 1e-6 * hstep
                             d0 = (gd(k, t_old + dt) - g_old[k]) / dt * hstep
                             d1 = (g_new[k] - gd(k, t_new - dt)) / dt * hstep
                             x = _hermite_min(g_old[k], d0, g_new[k], d1)
-                            xs = sorted([j / (CONE_SAMPLES + 1) for j in range(1, CONE_SAMPLES + 1)]
+                            inner = CONE_SAMPLES if k == "cone" or k in UNSTICK else 0
+                            xs = sorted([j / (inner + 1) for j in range(1, inner + 1)]
                                         + ([] if x is None else [x]))
                         # the first candidate at or below 0 brackets the dip
                         g_low = math.inf
