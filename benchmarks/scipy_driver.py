@@ -51,8 +51,9 @@ No rule depends on rtol, atol or the step size.
 
 The integration uses SciPy's `OdeSolver` classes (DOP853, RK45, LSODA, Radau, ...) step by step,
 as `solve_ivp` does, with the driver's own event scan (sign change at the step ends; inside a step,
-the minimum of a cubic Hermite interpolant for the sign and side functions, and for the cone margin
-that minimum, end slopes by differences on the dense output, plus 7 interior samples) and location
+for every event function, the minimum of a cubic Hermite interpolant: exact end slopes for the sign,
+spin and side functions, the minimum of |u| for the slip speeds, end slopes by differences on the
+dense output for the rest, plus 7 interior samples for the cone and un-stick margins) and location
 (Illinois regula falsi on the stepper's dense output to a bracket of a few ulp; the restart is at
 the bracket's post-event end). A new solver (default initial step) starts at every restart. The slaved direction's root is
 continued from the last accepted step end (never from a rejected stage).
