@@ -26,7 +26,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Record, Span, Work)
 from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
-from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes, slip_closest_approach
+from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes, slip_closest_approach, span_state
 from .tableau import N_STAGES
 from .tracking import (dense_wanted, halt_flat, record_levels, record_sample, record_samples, record_traj,
                        track_frequency)
@@ -300,7 +300,7 @@ def spin_holds(i, t_event, span, n, work, istats):
     changes nothing, and the step goes on instead of restarting there (the same trajectory, fewer
     restarts)."""
     wk = work.wk
-    dense_eval(work.F, span.row0, span.y0, span.t0, span.h, t_event, n, wk[W_YBUF])
+    span_state(t_event, span, n, work)
     return abs(needed_sigma(i, t_event, wk[W_YBUF], work.p, span.cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk,
                             istats)) < 1.0
 

@@ -162,11 +162,17 @@ def event_rates(t, y, f, g_here, rates, n, u_tol, level_e, work, istats):
 
 
 @kernel
+def span_state(t, span, n, work):
+    """The state at time t on the dense output of a step (span: layout.Span), into work.wk[W_YBUF]."""
+    dense_eval(work.F, span.row0, span.y0, span.t0, span.h, t, n, work.wk[W_YBUF])
+
+
+@kernel
 def event_value_at(k, t, span, n, u_tol, level_e, work, istats):
     """g_k at time t on the dense output of a step (span: layout.Span); one RHS evaluation, in the
     span's contact state, for an event that reads the forces, none for one of the state alone."""
     p, cs, wk = work.p, span.cs, work.wk
-    dense_eval(work.F, span.row0, span.y0, span.t0, span.h, t, n, wk[W_YBUF])
+    span_state(t, span, n, work)
     if not reads_forces(k):
         return state_event_value(k, wk[W_YBUF], p, cs, u_tol, level_e)
     eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
@@ -225,7 +231,7 @@ def _objective(k, t, span, n, u_tol, level_e, work, istats):
     if k >= 0:
         return event_value_at(k, t, span, n, u_tol, level_e, work, istats)
     wk = work.wk
-    dense_eval(work.F, span.row0, span.y0, span.t0, span.h, t, n, wk[W_YBUF])
+    span_state(t, span, n, work)
     eval_rhs(t, wk[W_YBUF], work.p, span.cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
     return -wk[W_AUXBUF, X_PHI]
 
