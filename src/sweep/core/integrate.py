@@ -24,7 +24,7 @@ from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SI
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
                      T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
-                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Record, Span, Work)
+                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Record, Segment, Span, Work)
 from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes, slip_closest_approach, span_state
 from .tableau import N_STAGES
@@ -619,48 +619,117 @@ def finish(outcome, t, h, n, peaks_on, work, rec):
 
 
 @kernel
+def next_try(t, h, outcome, settings, work, rec):
+    """The size of the next try from t (h: the step control's), or where the loop stops: after the
+    scene's end the Phi maxima's steps (step_after_end), the step budget, t_max, the smallest step
+    that still moves tau. Returns (h, outcome, whether the step ends at t_max, whether to stop)."""
+    running = outcome < 0
+    if not running:
+        h = step_after_end(t, h, work.trk)
+        if h < 0.0:
+            return h, outcome, False, True
+    if rec.istats[I_STEPS] + rec.istats[I_REJECTED] >= int(settings[S_MAXSTEPS]):
+        return h, oc.STEP_LIMIT if running else outcome, False, True
+    at_tmax = running and t + h >= settings[S_TMAX]
+    if at_tmax:
+        h = settings[S_TMAX] - t
+    # the model is autonomous (no stage reads tau), so a step only has to move tau: the floor is
+    # 2 eps tau; 16 eps tau stopped a slip spiralling into slip_tol at tau ~ 5100, which needs
+    # steps of ~1e-11 (tests/test_convergence.py)
+    if h <= 2.0 * EPS * max(abs(t), 1.0):
+        if running:
+            outcome = oc.T_MAX if at_tmax else oc.STEP_SIZE_UNDERFLOW
+        return h, outcome, at_tmax, True
+    return h, outcome, at_tmax, False
+
+
+@kernel
+def record_segment(seg, e_seg, outcome, lev, settings, level_e, sample_tau, work, rec):
+    """What the kept part of the step (seg: layout.Segment; its end state wk[W_YSEG], energy
+    e_seg) holds: the levels it crosses (HALTED at the last, with its end state), the samples, the
+    Phi maxima. Returns (the outcome, the energy of the next level to cross)."""
+    y, p, cs, wk, trk = work.y, work.p, work.cs, work.wk, work.trk
+    istats, fstats = rec.istats, rec.fstats
+    n = state_size(settings)
+    peaks_on = settings[S_PEAKS] > 0.0
+    event = seg.k >= 0
+    phi_c = segment_phi(seg.end, event, n, p, cs, wk, istats) if peaks_on else 0.0
+    have_dense = seg.dense
+    if not have_dense and dense_wanted(seg.running, seg.end, e_seg, wk[W_YSEG, Y_THETA], level_e, sample_tau, trk,
+                                       rec.fq, phi_c, peaks_on):
+        dense_coeffs(seg.t, y, seg.h, wk[W_YNEW], wk[W_FNEW], n, p, cs, work.K, work.F, wk, istats)
+        have_dense = True
+    if seg.running:
+        t_halt = record_levels(seg.t, seg.h, seg.end, e_seg, level_e, peaks_on, settings[S_UTOL], n, work, rec)
+        if t_halt >= 0.0:
+            outcome = oc.HALTED
+            dense_eval(work.F, 0, y, seg.t, seg.h, t_halt, n, wk[W_YBUF])
+            mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, rec.y_end, istats)
+        elif int(trk[T_NEXT_LEVEL]) < level_e.shape[0]:
+            lev = level_e[int(trk[T_NEXT_LEVEL])]
+    record_samples(seg.t, seg.h, seg.end, fstats[F_TEND] if outcome >= 0 else math.inf, sample_tau, n, work, rec)
+    if peaks_on:
+        track_frequency(seg.t, seg.h, seg.end, phi_c, have_dense, seg.running, n, work, rec)
+    return outcome, lev
+
+
+@kernel
+def end_segment(seg, outcome, lev, settings, level_e, work, rec):
+    """Restart at the end of the kept part (seg: layout.Segment): an event's discrete update
+    (restart_after_event: an outcome there ends the scene; a disk lying flat has halted), or the
+    step end's values carried on (at t_max the scene ends). Returns (the outcome, whether the loop
+    stops)."""
+    y, p, cs, wk, trk = work.y, work.p, work.cs, work.wk, work.trk
+    istats, fstats = rec.istats, rec.fstats
+    n = state_size(settings)
+    event = seg.k >= 0
+    advance(seg.t, seg.end, event, seg.running, outcome >= 0, y, n, cs, trk, wk, fstats)
+    t = seg.end
+    if rec.traj.shape[0] > 0 and outcome < 0:
+        record_traj(t, y, math.nan if event else wk[W_AUXNEW, X_PHI], cs, n, rec.traj, istats)
+    if not event:
+        carry_step_end(lev, int(trk[T_NEXT_LEVEL]) < level_e.shape[0], work)
+        if seg.at_tmax and outcome < 0:
+            outcome = oc.T_MAX
+            mark_end(t, y, n, p, cs, fstats, trk, rec.y_end, istats)
+        return outcome, False
+    code = restart_after_event(seg.k, t, y, p, cs, n, settings[S_UTOL], lev, wk, istats, fstats)
+    if code < 0:
+        return outcome, False
+    if seg.running and code == oc.FACE_CONTACT:
+        # the disk lies flat: it has halted (docs/model.md, 'Halt')
+        halt_flat(t, rec.levels, trk, level_e)
+        istats[I_FLAT] = 1
+        outcome = oc.HALTED
+        mark_end(t, y, n, p, cs, fstats, trk, rec.y_end, istats)
+    elif seg.running:
+        outcome = code
+        fstats[F_TEND] = t
+    return outcome, True
+
+
+@kernel
 def run(settings, level_e, sample_tau, work, rec):
     """Integrate one scene (the initial state in work.y, its parameters in work.p) into rec
     (layout.Work, layout.Record: the buffers' shapes): step, scan the accepted step for the
-    earliest event, record, restart at the event. settings (layout.S_*), level_e the levels'
-    energies (dimensionless), sample_tau the sample times (tau), ascending."""
-    y, p, cs, wk, K, F, trk = work
-    istats, fstats, level_out, traj, y_end, fq = rec.istats, rec.fstats, rec.levels, rec.traj, rec.y_end, rec.fq
-    rtol = settings[S_RTOL]
-    atol = settings[S_ATOL]
+    earliest event, record the kept part, restart at its end. settings (layout.S_*), level_e the
+    levels' energies (dimensionless), sample_tau the sample times (tau), ascending."""
+    p, cs, wk, trk = work.p, work.cs, work.wk, work.trk
+    istats = rec.istats
+    rtol, atol, t_max, u_tol = settings[S_RTOL], settings[S_ATOL], settings[S_TMAX], settings[S_UTOL]
     h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
-    t_max = settings[S_TMAX]
-    u_tol = settings[S_UTOL]
-    max_steps = int(settings[S_MAXSTEPS])
     extra_steps = int(settings[S_EXTRA])
-    peaks_on = settings[S_PEAKS] > 0.0
     n = state_size(settings)
-    nl = level_e.shape[0]
-    lev = level_e[0] if nl > 0 else math.nan
+    lev = level_e[0] if level_e.shape[0] > 0 else math.nan
     outcome, h = begin(settings, lev, sample_tau, work, rec)
     h = min(h, h_max)
-    e0 = max(abs(fstats[F_E0]), 1e-300)
+    e0 = max(abs(rec.fstats[F_E0]), 1e-300)
     t = 0.0
     after_reject = False
     while outcome < 0 or (trk[T_PENDING] > 0.0 and trk[T_AFTER_HALT] < extra_steps):
         running = outcome < 0
-        if not running:
-            h = step_after_end(t, h, trk)
-            if h < 0.0:
-                break
-        if istats[I_STEPS] + istats[I_REJECTED] >= max_steps:
-            if running:
-                outcome = oc.STEP_LIMIT
-            break
-        hit_tmax = running and t + h >= t_max
-        if hit_tmax:
-            h = t_max - t
-        # the model is autonomous (no stage reads tau), so a step only has to move tau: the floor is
-        # 2 eps tau; 16 eps tau stopped a slip spiralling into slip_tol at tau ~ 5100, which needs
-        # steps of ~1e-11 (tests/test_convergence.py)
-        if h <= 2.0 * EPS * max(abs(t), 1.0):
-            if running:
-                outcome = oc.T_MAX if hit_tmax else oc.STEP_SIZE_UNDERFLOW
+        h, outcome, at_tmax, stop = next_try(t, h, outcome, settings, work, rec)
+        if stop:
             break
         err = try_step(t, h, n, rtol, atol, e0, t_max, work, istats)
         if not err <= 1.0:
@@ -672,12 +741,10 @@ def run(settings, level_e, sample_tau, work, rec):
         if wk[W_AUXNEW, X_OK] != 1.0 and running:
             outcome = failure_outcome(wk[W_AUXNEW, X_OK])
             break
-
-        # --- the earliest event on the step: the kept part ends there --------------------------
+        # the earliest event on the step: the kept part ends there
         event_values(wk[W_YNEW], wk[W_AUXNEW], p, cs, u_tol, lev, wk[W_GNEW])
         first_k, seg_end, have_dense = first_event(t, h, n, u_tol, lev, work, istats)
-        event = first_k >= 0
-        if event and running and t < trk[T_DIP_END] < t + h:
+        if first_k >= 0 and running and t < trk[T_DIP_END] < t + h:
             # an event of the forces that only the dense output shows (both step ends on the safe
             # side): its value inside the step carries the interpolant's error, amplified where a
             # held moment's balance reads the slip direction; the dip stands only if the integrated
@@ -686,59 +753,22 @@ def run(settings, level_e, sample_tau, work, rec):
             h = trk[T_DIP_END] - t
             after_reject = True
             continue
-        if not event:
+        if first_k < 0:
             seg_end = t + h
-        e_seg, seg_err = segment_end(t, h, seg_end, event, running, n, e0, t_max, rtol, work)
+        e_seg, seg_err = segment_end(t, h, seg_end, first_k >= 0, running, n, e0, t_max, rtol, work)
         if seg_err > 1.0:
             retract_step(cs, istats)
             h *= step_factor(seg_err)
             after_reject = True
             continue
-        y_seg = wk[W_YSEG]
-
-        # --- levels, samples, Phi maxima on [t, seg_end] ------------------------------------------
-        phi_c = segment_phi(seg_end, event, n, p, cs, wk, istats) if peaks_on else 0.0
-        if not have_dense and dense_wanted(running, seg_end, e_seg, y_seg[Y_THETA], level_e, sample_tau, trk, fq,
-                                           phi_c, peaks_on):
-            dense_coeffs(t, y, h, wk[W_YNEW], wk[W_FNEW], n, p, cs, K, F, wk, istats)
-            have_dense = True
-        if running:
-            t_halt = record_levels(t, h, seg_end, e_seg, level_e, peaks_on, u_tol, n, work, rec)
-            if t_halt >= 0.0:
-                outcome = oc.HALTED
-                dense_eval(F, 0, y, t, h, t_halt, n, wk[W_YBUF])
-                mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, y_end, istats)
-            elif int(trk[T_NEXT_LEVEL]) < nl:
-                lev = level_e[int(trk[T_NEXT_LEVEL])]
-        record_samples(t, h, seg_end, fstats[F_TEND] if outcome >= 0 else math.inf, sample_tau, n, work, rec)
-        if peaks_on:
-            track_frequency(t, h, seg_end, phi_c, have_dense, running, n, work, rec)
-
-        # --- restart at the segment end -----------------------------------------------------------
-        advance(t, seg_end, event, running, outcome >= 0, y, n, cs, trk, wk, fstats)
+        seg = Segment(t, h, seg_end, first_k, have_dense, running, at_tmax)
+        outcome, lev = record_segment(seg, e_seg, outcome, lev, settings, level_e, sample_tau, work, rec)
+        outcome, stop = end_segment(seg, outcome, lev, settings, level_e, work, rec)
         t = seg_end
-        if traj.shape[0] > 0 and outcome < 0:
-            record_traj(t, y, math.nan if event else wk[W_AUXNEW, X_PHI], cs, n, traj, istats)
-        if event:
-            code = restart_after_event(first_k, t, y, p, cs, n, u_tol, lev, wk, istats, fstats)
-            if code >= 0:
-                if running and code == oc.FACE_CONTACT:
-                    # the disk lies flat: it has halted (docs/model.md, 'Halt')
-                    halt_flat(t, level_out, trk, level_e)
-                    istats[I_FLAT] = 1
-                    outcome = oc.HALTED
-                    mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)
-                elif running:
-                    outcome = code
-                    fstats[F_TEND] = t
-                break
-        else:
-            carry_step_end(lev, int(trk[T_NEXT_LEVEL]) < nl, work)
-            if hit_tmax and outcome < 0:
-                outcome = oc.T_MAX
-                mark_end(t, y, n, p, cs, fstats, trk, y_end, istats)
+        if stop:
+            break
         h = h_next
-    finish(outcome, t, h, n, peaks_on, work, rec)
+    finish(outcome, t, h, n, settings[S_PEAKS] > 0.0, work, rec)
 
 
 def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):

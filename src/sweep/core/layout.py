@@ -122,3 +122,8 @@ Record = namedtuple("Record", "istats fstats levels samples traj peaks y_end fq"
 # this step's, N_DENSE: the previous step's) hold the coefficients of the step from the state y0
 # (N_FULL) at tau t0 over h, which ran in the contact state cs (N_CS).
 Span = namedtuple("Span", "row0 y0 t0 h cs")
+# Segment: the kept part of an accepted step, [t, end] of the step [t, t + h] (end < t + h where
+# event k, >= 0, ends it; k = -1 where none does), whether the step's dense output is built
+# (dense), whether the scene was running when the step began (running: not yet ended, else the
+# step only resolves Phi maxima after the end), and whether the step ends at t_max (at_tmax).
+Segment = namedtuple("Segment", "t h end k dense running at_tmax")
