@@ -3,7 +3,8 @@
     jit.py       `@kernel`: how every kernel here is compiled (njit, cached, no reference counting)
     model.py     the Kessler-O'Reilly equations (dimensionless right-hand side, energy, steady motion)
     layout.py    named slots of the state, contact-state, work, settings and statistics arrays, and
-                 the run's buffers grouped (Work, Record: namedtuples of arrays)
+                 the run's buffers grouped (Work, Record: namedtuples of arrays), a step's dense
+                 output and its kept part (Span, Segment)
     contact.py   contact modes (roll, slide, slaved slip), event functions, discrete updates
     impulse.py   plastic contact impulse (side change)
     tableau.py   DOP853 coefficients
