@@ -733,3 +733,41 @@ def test_an_impulse_releases_a_stuck_component_only_beyond_spin_tol(setup):
         if released and move != 0.0:
             assert cs[L.CS_SIG] == math.copysign(1.0, move)
         assert cs[L.CS_STUCK + 1] == 0.0 and cs[L.CS_STUCK + 2] == 0.0
+
+
+def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end():
+    """integrate.next_try: the try's size and the loop's stops, each from its documented rule."""
+    from sweep import outcomes as oc
+    from sweep.core.integrate import EPS, next_try
+
+    settings = np.zeros(L.N_SETTINGS)
+    settings[L.S_TMAX] = 100.0
+    settings[L.S_MAXSTEPS] = 50
+    wk, istats = _work()
+    work = _group(np.zeros(M.N_PARAMS), np.zeros(L.N_CS), wk, np.zeros((2 * D.N_DENSE, M.N_FULL)))
+    rec = L.Record(istats, np.zeros(L.N_FSTATS), None, None, None, None, None, None)
+
+    assert next_try(10.0, 0.5, -1, settings, work, rec) == (0.5, -1, False, False)
+    # a try past t_max ends there exactly
+    assert next_try(99.75, 0.5, -1, settings, work, rec) == (0.25, -1, True, False)
+    # the smallest step that moves tau is 2 eps tau: under it the scene ends, at t_max as T_MAX
+    t_near = 100.0 - EPS * 100.0
+    h, outcome, at_tmax, stop = next_try(t_near, 0.5, -1, settings, work, rec)
+    assert (outcome, at_tmax, stop) == (oc.T_MAX, True, True) and h == 100.0 - t_near
+    # ... elsewhere as STEP_SIZE_UNDERFLOW (nothing in the model decides by the step size)
+    assert next_try(10.0, 1.5 * EPS * 10.0, -1, settings, work, rec)[1:] == (oc.STEP_SIZE_UNDERFLOW, False, True)
+    assert next_try(10.0, 2.5 * EPS * 10.0, -1, settings, work, rec)[1:] == (-1, False, False)
+    # the step budget counts accepted and rejected tries
+    istats[L.I_STEPS], istats[L.I_REJECTED] = 30, 20
+    assert next_try(10.0, 0.5, -1, settings, work, rec)[1:] == (oc.STEP_LIMIT, False, True)
+    assert next_try(10.0, 0.5, oc.HALTED, settings, work, rec)[1:] == (oc.HALTED, False, True)
+    istats[L.I_STEPS] = 0
+    work.trk[:] = 0.0
+    # after the end (HALTED at tau 40): the steps of the Phi maxima, no longer than the last one,
+    # and none past twice the end's tau; t_max no longer clips them
+    trk = work.trk
+    assert next_try(40.0, 0.5, oc.HALTED, settings, work, rec) == (0.5, oc.HALTED, False, False)
+    assert trk[L.T_H_AFTER] == 0.5 and trk[L.T_T_AFTER] == 80.0
+    assert next_try(60.0, 4.0, oc.HALTED, settings, work, rec) == (0.5, oc.HALTED, False, False)
+    assert next_try(99.9, 0.2, oc.HALTED, settings, work, rec) == (-1.0, oc.HALTED, False, True)
+    assert trk[L.T_AFTER_HALT] == 3.0
