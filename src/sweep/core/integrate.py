@@ -744,7 +744,8 @@ def run(settings, level_e, sample_tau, work, rec):
         # the earliest event on the step: the kept part ends there
         event_values(wk[W_YNEW], wk[W_AUXNEW], p, cs, u_tol, lev, wk[W_GNEW])
         first_k, seg_end, have_dense = first_event(t, h, n, u_tol, lev, work, istats)
-        if first_k >= 0 and running and t < trk[T_DIP_END] < t + h:
+        event = first_k >= 0
+        if event and running and t < trk[T_DIP_END] < t + h:
             # an event of the forces that only the dense output shows (both step ends on the safe
             # side): its value inside the step carries the interpolant's error, amplified where a
             # held moment's balance reads the slip direction; the dip stands only if the integrated
@@ -753,9 +754,9 @@ def run(settings, level_e, sample_tau, work, rec):
             h = trk[T_DIP_END] - t
             after_reject = True
             continue
-        if first_k < 0:
+        if not event:
             seg_end = t + h
-        e_seg, seg_err = segment_end(t, h, seg_end, first_k >= 0, running, n, e0, t_max, rtol, work)
+        e_seg, seg_err = segment_end(t, h, seg_end, event, running, n, e0, t_max, rtol, work)
         if seg_err > 1.0:
             retract_step(cs, istats)
             h *= step_factor(seg_err)
