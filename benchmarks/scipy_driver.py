@@ -343,13 +343,16 @@ class Disk:
 
     def onset_direction(self, t, y, c):
         """Slip onset at u = 0: a direction s with a_P parallel to s and a_P.s > 0 (the slip grows),
-        attracting (d cross/d nu < 0), nearest -F/|F|; the nearest growing root if none attracts."""
+        where the sliding law has a solution, attracting (d cross/d nu < 0), nearest -F/|F|; the
+        nearest growing root if none attracts; one without a solution (painleve) only if no root
+        has one. A sign change of cross with a solution on one side only is the pole at a Painleve
+        boundary, not a root."""
         _, aux = self.model(t, y, ROLL, c, 1.0, 0.0)
         guess = math.atan2(-aux[X_F2], -aux[X_F1])
         m = 128
         xs = [guess - math.pi + 2.0 * math.pi * j / m for j in range(m + 1)]
         cr = [self.cross_dot(x, 0.0, t, y, c)[0] for x in xs]
-        best = (math.inf, math.inf, guess)   # (not attracting, distance, root)
+        best = (math.inf, math.inf, math.inf, guess)   # (no solution, not attracting, distance, root)
         for j in range(m):
             if (cr[j] > 0.0) == (cr[j + 1] > 0.0):
                 continue
@@ -364,14 +367,15 @@ class Disk:
                 else:
                     hi = mid
             root = 0.5 * (lo + hi)
-            if self.cross_dot(root, 0.0, t, y, c)[1] <= 0.0:
+            none_lo, none_hi = self.no_solution(lo, 0.0, t, y, c), self.no_solution(hi, 0.0, t, y, c)
+            if none_lo != none_hi or self.cross_dot(root, 0.0, t, y, c)[1] <= 0.0:
                 continue
             repelling = 0 if self.dcross(root, 0.0, t, y, c) < 0.0 else 1
             d = abs(math.atan2(math.sin(root - guess), math.cos(root - guess)))
-            best = min(best, (repelling, d, root))
-        if best[0] == 1:
+            best = min(best, (int(none_lo), repelling, d, root))
+        if best[1] == 1:
             self.stats["onset_repelling"] += 1
-        return best[2]
+        return best[3]
 
     def no_solution(self, nu, u, t, y, c):
         """The sliding contact law at slip u s(nu) has no solution (Painleve: Phi's coefficient <= 0)."""

@@ -257,6 +257,34 @@ def test_a_slip_carried_into_the_painleve_singularity_ends_as_painleve_at_every_
     assert abs(peer["t_end"] * sc.chi - t12) < 1e-9 * t12
 
 
+def test_a_slip_onset_beside_a_painleve_pole_takes_the_root_at_every_rtol():
+    """Seed 20261136, scene 465 (an 11 cm disk, mu_d 1.15, a tumbling start): at tau 0.2194 the
+    friction cone is violated, and the cross product of the slip acceleration with the direction
+    changes sign at the root near -F/|F| and at two Painleve poles (Phi's coefficient through 0,
+    the contact law without a solution between them). At rtol 1e-9 the onset's bisection of a
+    pole's bracket evaluated the model on the pole itself, where the coefficient was exactly 0, and
+    the run raised ZeroDivisionError. The kernels now divide as numba-cuda does (inf, no
+    exception), and onset_direction tells a pole from a root by the model's flag on its two sides:
+    the disk slides from the root and leaves the table at the same time at every rtol, as the SciPy
+    peer does."""
+    from scipy_driver import run_scipy
+    from sweep.scene import load_scene
+
+    cfg = harness.harness_scene(20261136, 465)
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-9, 1e-10, 1e-12)}
+    assert all("exception" not in r for r in res.values()), res
+    assert {r["outcome"] for r in res.values()} == {"contact_lost"}
+    assert {tuple(r["events"]) for r in res.values()} == {(1, 0, 0)}
+    t12 = res[1e-12]["t_end"]
+    assert all(abs(r["t_end"] - t12) < 1e-9 * t12 for r in res.values())
+    c = copy.deepcopy(cfg)
+    c["solver"] = {"rtol": 1e-12, "atol": 1e-14}
+    sc = load_scene(c)
+    peer = run_scipy(sc, "DOP853", 1e-12, 1e-14)
+    assert peer["outcome"] == "contact_lost"
+    assert abs(peer["t_end"] * sc.chi - t12) < 1e-8 * t12
+
+
 def test_a_slide_near_flat_is_not_stopped_by_the_round_off_of_its_energy_balance():
     """Seed 20261125, scene 32 (an 8 mm shell, mu_d 0.0068, sliding at beta ~ 1e-6 before it lies
     flat): the gyroscopic terms of the right-hand side (tan(alpha) ~ 1e6) leave a round-off of

@@ -36,6 +36,7 @@ SCRIPT = textwrap.dedent("""
             if isinstance(obj, CPUDispatcher) and obj.py_func.__module__ == mod.__name__:
                 out[m.name + "." + name] = {
                     "nrt": obj.targetoptions.get("_nrt"),
+                    "error_model": obj.targetoptions.get("error_model"),
                     "inline": obj.targetoptions.get("inline", "never"),
                     "cached": type(obj._cache).__name__ != "NullCache",
                     "returns": [str(s.return_type) for s in obj.nopython_signatures],
@@ -54,6 +55,9 @@ def test_kernels_compile_without_refcounts_and_return_no_arrays(tmp_path):
     # the scan saw the kernels: the hot ones were typed in this process. Those numba inlines
     # (inline="always": model.rhs and its parts) are typed only as part of their callers, never on
     # their own: what they return is a value inside the caller's compiled function, under its options.
+    # numba-cuda's floating-point semantics on the CPU too: a division by zero gives inf or NaN,
+    # which the integrator rejects or reports, never a ZeroDivisionError that loses the scene
+    assert {k["error_model"] for k in kernels.values()} == {"numpy"}
     for name in ("contact.eval_rhs", "dop853.rk_step", "integrate.run", "ensemble.solve_index"):
         assert kernels[name]["returns"], name
     assert kernels["model.rhs"]["inline"] == "always" and not kernels["model.rhs"]["returns"]

@@ -470,6 +470,53 @@ def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
         assert abs(math.remainder(nu2 - nu, 2 * math.pi)) < 1e-12
 
 
+def test_onset_direction_takes_a_root_with_a_solution_and_never_a_painleve_pole(setup):
+    """Random rolling states with a high mu_d, where the sliding law has no solution on arcs of
+    slip directions (Phi's coefficient <= 0, model.tilt_balance): at the arcs' ends the cross
+    product changes sign through a pole, not a root. A fine scan classifies the sign changes; the
+    onset direction must be a root with a growing slip and a solution whenever one exists, and
+    never a pole (the bisection used to close on one in ~3 % of these states: harness seed
+    20261136 scene 465)."""
+    p0, _, cs0 = setup
+    n = M.N_CORE
+    wk, ist = _work()
+    dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
+    rng = np.random.default_rng(7)
+    grid = np.linspace(-math.pi, math.pi, 1441)
+    poles_seen = 0
+    for _ in range(200):
+        p = p0.copy()
+        p[M.P_MUD] = rng.uniform(0.6, 1.6)
+        p[M.P_MUS] = 1.05 * p[M.P_MUD]
+        p[M.P_H] = rng.uniform(0.0, 1.0)
+        p[M.P_A] = 0.25 + p[M.P_H] ** 2 / 3.0
+        y = np.zeros(M.N_FULL)
+        y[M.Y_ALPHA] = rng.uniform(-1.5, 1.5)
+        y[M.Y_W1:M.Y_W3 + 1] = rng.normal(0.0, 2.0, 3)
+        cs = cs0.copy()
+        cs[L.CS_SIDE] = 1.0 if y[M.Y_ALPHA] >= 0.0 else -1.0
+        cs[L.CS_SIG:L.CS_SIG + 3] = np.sign(rng.normal(size=3))
+        C._model(0.0, y, p, cs, n, dy, aux, 1.0, 0.0, ist)
+        if aux[M.X_OK] != 1.0 or aux[M.X_PHI] <= 0.0:
+            continue
+        F1, F2 = aux[M.X_F1], aux[M.X_F2]
+        guess = math.atan2(-F2, -F1)
+        cs[L.CS_MODE] = L.SLAVED
+        scan = np.array([C.slip_rates(x, 0.0, 0.0, y, p, cs, n, dy, aux, ys, ist) + (aux[M.X_OK],) for x in grid])
+        flips = np.nonzero((scan[:-1, 0] > 0.0) != (scan[1:, 0] > 0.0))[0]
+        consistent = any(scan[j, 2] > 0.0 and scan[j + 1, 2] > 0.0 and scan[j + 1, 1] > 0.0 for j in flips)
+        poles_seen += sum(1 for j in flips if scan[j, 2] != scan[j + 1, 2])
+        nu = C.onset_direction(0.0, y, p, cs, n, F1, F2, wk, ist)
+        if nu == guess:
+            assert not consistent
+            continue
+        cr, dr = C.slip_rates(nu, 0.0, 0.0, y, p, cs, n, dy, aux, ys, ist)
+        assert math.isfinite(cr) and abs(cr) <= 1e-9 * max(1.0, abs(dr)) and dr > 0.0   # a root, not a pole
+        if consistent:
+            assert aux[M.X_OK] == 1.0
+    assert poles_seen > 20   # the draw does reach the Painleve arcs
+
+
 def test_slaved_direction_near_a_fold_converges_at_the_round_off_floor():
     """500-scene harness scene 112 (seed 20261122) at rtol 1e-11, 36.17 s: a slide near flat hands
     over to the slaved direction of a weakly attracting root (d cross/d nu ~ -2e-3, a fold nearby).

@@ -1,6 +1,6 @@
 """The physics core: small numba kernels, plain arrays in and out, no allocation in the step loop.
 
-    jit.py       `@kernel`: how every kernel here is compiled (njit, cached, no reference counting)
+    jit.py       `@kernel`: how every kernel here is compiled (njit, cached, no reference counting, NumPy's error model)
     model.py     the Kessler-O'Reilly equations (dimensionless right-hand side, energy, steady motion)
     layout.py    named slots of the state, contact-state, work, settings and statistics arrays, and
                  the run's buffers grouped (Work, Record: namedtuples of arrays), a step's dense

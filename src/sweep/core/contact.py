@@ -207,40 +207,51 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
     The direction s must be one along which the slip then grows: slip acceleration parallel to s
     with a positive component along it. The paper's rule s = -F/|F| (section 6.2) is exact only for
     an isotropic contact inverse inertia; it is the initial guess. The cross product is scanned on 64
-    angles for sign changes with a growing slip, each root is refined by the secant method, and the
-    root nearest the guess is taken (the guess itself if no consistent root exists).
+    angles for sign changes, each is bisected, and of the roots with a growing slip the one nearest
+    the guess is taken among those where the sliding contact law has a solution (the model's flag
+    1), else among those where it has none (flag -1 on both sides: the scene ends as `painleve`
+    there), else the guess itself. A sign change whose final bracket has flag 1 on one side and -1
+    on the other is no root but a pole: across a Painleve boundary (Phi's coefficient through 0,
+    model.tilt_balance) the accelerations pass through infinity (harness seed 20261136 scene 465,
+    where the bisection landed on the pole itself).
     """
     dy = wk[W_DYTMP]
     aux = wk[W_AUXTMP]
     ys = wk[W_YSLIP]
     guess = math.atan2(-F2, -F1)
     best = guess
-    bestd = 1e300
+    bestd = 1e300    # the nearest root with a solution
+    best_none = guess
+    bestd_none = 1e300   # ... and without one
     m = 64
     xa = guess - math.pi
     ca, _ = slip_rates(xa, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+    oka = aux[X_OK]
     for j in range(1, m + 1):
         xb = guess - math.pi + 2.0 * math.pi * j / m
         cb, db = slip_rates(xb, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+        okb = aux[X_OK]
         if (ca > 0.0) != (cb > 0.0):
-            lo, hi, clo = xa, xb, ca
+            lo, hi, clo, oklo, okhi = xa, xb, ca, oka, okb
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
                 cm, dm = slip_rates(mid, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
                 if (cm > 0.0) == (clo > 0.0):
-                    lo, clo = mid, cm
+                    lo, clo, oklo = mid, cm, aux[X_OK]
                 else:
-                    hi = mid
+                    hi, okhi = mid, aux[X_OK]
                 if hi - lo < 1e-13:
                     break
             root = 0.5 * (lo + hi)
             cr, dr = slip_rates(root, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
             dist = abs(math.atan2(math.sin(root - guess), math.cos(root - guess)))
-            if dr > 0.0 and dist < bestd:
-                best = root
-                bestd = dist
-        xa, ca = xb, cb
-    return best
+            if dr > 0.0 and (oklo > 0.0) == (okhi > 0.0):
+                if oklo > 0.0 and dist < bestd:
+                    best, bestd = root, dist
+                elif oklo < 0.0 and dist < bestd_none:
+                    best_none, bestd_none = root, dist
+        xa, ca, oka = xb, cb, okb
+    return best if bestd < 1e300 else best_none
 
 
 @kernel
