@@ -231,6 +231,18 @@ def _counts(cfg, rtol, spin_tol):
     return (s["n_transitions"], s["n_stick"], s["n_impacts"]), s["levels"][-1]["t"]
 
 
+def _peer_end(cfg):
+    """The SciPy peer's outcome and end time (s) for a harness scene at rtol 1e-12."""
+    from scipy_driver import run_scipy
+    from sweep.scene import load_scene
+
+    c = copy.deepcopy(cfg)
+    c["solver"] = {"rtol": 1e-12, "atol": 1e-14}
+    sc = load_scene(c)
+    peer = run_scipy(sc, "DOP853", 1e-12, 1e-14)
+    return peer["outcome"], peer["t_end"] * sc.chi
+
+
 def test_a_slip_carried_into_the_painleve_singularity_ends_as_painleve_at_every_rtol():
     """Seed 20261125, scene 472 (a 4.6 mm disk, mu_d 1.53): at tau 7.84396 a decaying slip reaches
     the slaving speed, and the direction dynamics carry it not to a root of cross but to the
@@ -239,9 +251,6 @@ def test_a_slip_carried_into_the_painleve_singularity_ends_as_painleve_at_every_
     slaved step failed: step_size_underflow at every rtol. attracting_direction now tells a pole
     from a root by the state past it, and the scene ends as painleve there; the SciPy peer, with the
     rule written independently, ends at the same time."""
-    from scipy_driver import run_scipy
-    from sweep.scene import load_scene
-
     rng = np.random.default_rng(20261125)
     cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(473)][472])
     res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-9, 1e-10, 1e-12)}
@@ -249,12 +258,9 @@ def test_a_slip_carried_into_the_painleve_singularity_ends_as_painleve_at_every_
     assert len({tuple(r["events"]) for r in res.values()}) == 1
     t12 = res[1e-12]["t_end"]
     assert abs(res[1e-10]["t_end"] - t12) < 1e-9 * t12
-    c = copy.deepcopy(cfg)
-    c["solver"] = {"rtol": 1e-12, "atol": 1e-14}
-    sc = load_scene(c)
-    peer = run_scipy(sc, "DOP853", 1e-12, 1e-14)
-    assert peer["outcome"] == "painleve"
-    assert abs(peer["t_end"] * sc.chi - t12) < 1e-9 * t12
+    outcome, t_end = _peer_end(cfg)
+    assert outcome == "painleve"
+    assert abs(t_end - t12) < 1e-9 * t12
 
 
 def test_a_slip_onset_beside_a_painleve_pole_takes_the_root_at_every_rtol():
@@ -267,9 +273,6 @@ def test_a_slip_onset_beside_a_painleve_pole_takes_the_root_at_every_rtol():
     exception), and onset_direction tells a pole from a root by the model's flag on its two sides:
     the disk slides from the root and leaves the table at the same time at every rtol, as the SciPy
     peer does."""
-    from scipy_driver import run_scipy
-    from sweep.scene import load_scene
-
     cfg = harness.harness_scene(20261136, 465)
     res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-9, 1e-10, 1e-12)}
     assert all("exception" not in r for r in res.values()), res
@@ -277,12 +280,9 @@ def test_a_slip_onset_beside_a_painleve_pole_takes_the_root_at_every_rtol():
     assert {tuple(r["events"]) for r in res.values()} == {(1, 0, 0)}
     t12 = res[1e-12]["t_end"]
     assert all(abs(r["t_end"] - t12) < 1e-9 * t12 for r in res.values())
-    c = copy.deepcopy(cfg)
-    c["solver"] = {"rtol": 1e-12, "atol": 1e-14}
-    sc = load_scene(c)
-    peer = run_scipy(sc, "DOP853", 1e-12, 1e-14)
-    assert peer["outcome"] == "contact_lost"
-    assert abs(peer["t_end"] * sc.chi - t12) < 1e-8 * t12
+    outcome, t_end = _peer_end(cfg)
+    assert outcome == "contact_lost"
+    assert abs(t_end - t12) < 1e-8 * t12
 
 
 def test_a_slide_near_flat_is_not_stopped_by_the_round_off_of_its_energy_balance():
