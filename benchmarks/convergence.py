@@ -241,7 +241,7 @@ def analyse(recs: list[dict]) -> str:
     diff_robust = []
     complete = same_complete = 0
     diff_complete = []
-    calm = same_calm = 0
+    calm = same_calm = same_calm_ti = 0   # ti: transitions and impacts (the stick phases left out)
     diff_calm = []
     early = same_early = 0     # the calm class before stop 29: quantities up to tau 300 and the levels only
     diff_early = []
@@ -271,6 +271,7 @@ def analyse(recs: list[dict]) -> str:
                 if sens and all(x < WELL_CONDITIONED for x in sens.values()):
                     calm += 1
                     same_calm += ok
+                    same_calm_ti += len(seqs) == 4 and len({(q[0], q[2]) for q in seqs}) == 1
                     if not ok:
                         diff_calm.append(rec["index"])
                 early_sens = [x for k, x in sens.items() if k not in END_KEYS]
@@ -287,6 +288,7 @@ def analyse(recs: list[dict]) -> str:
                  + (f"; differ: scenes {diff_complete[:12]}" if diff_complete else ""))
     lines.append(f"  ... whose quantities all move < {WELL_CONDITIONED:g} under alpha0 + 1e-10: {same_calm}/{calm}"
                  + (f"; differ: scenes {diff_calm[:12]}" if diff_calm else ""))
+    lines.append(f"      (their transitions and impacts alone, the stick phases left out: {same_calm_ti}/{calm})")
     lines.append(f"      (the same without the end quantities {', '.join(END_KEYS)}, i.e. the class before "
                  f"stop 29: {same_early}/{early}" + (f"; differ: scenes {diff_early[:12]}" if diff_early else "") + ")")
     steps = np.array([r.get("n_steps", 0) for r in default])
