@@ -16,7 +16,6 @@ the curvature times the grid spacing squared of the dip's true minimum.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -40,13 +39,14 @@ def moment_axis_rate(alpha, omega, axis):
 
 def local_minima(values, ceiling):
     """Indices of the grid's local minima of `values` below `ceiling`."""
-    v = values
-    inner = (v[1:-1] <= v[:-2]) & (v[1:-1] < v[2:]) & (v[1:-1] < ceiling)
+    v = values[1:-1]
+    inner = (v <= values[:-2]) & (v < values[2:]) & (v < ceiling)
     return np.nonzero(inner)[0] + 1
 
 
 def main(argv=None) -> int:
     import sweep
+    from sweep.scene import load_scene
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("index", type=int)
@@ -67,13 +67,12 @@ def main(argv=None) -> int:
             cfg = cv.harness_scene(a.seed, a.index, rtol)
             if spin_tol is not None:
                 cfg["solver"]["spin_tol"] = spin_tol
-            shape_k2 = {"solid": 1.0, "shell": 2.0}[cfg["disk"]["shape"]]
-            chi = math.sqrt((shape_k2 + 4.0) / 4.0 * cfg["disk"]["radius"] / cfg["gravity"])
-            res = sweep.simulate(cfg, sample_times=tau * chi)
+            scene = load_scene(cfg)
+            res = sweep.simulate(scene, sample_times=tau * scene.chi)
             s = res.summary
             rate = np.abs(moment_axis_rate(np.asarray(res.samples["alpha"]), np.asarray(res.samples["omega"]), a.axis))
             idx = local_minima(rate, a.ceiling)
-            used = spin_tol if spin_tol is not None else sweep.scene.load_scene(cfg).config["solver"]["spin_tol"]
+            used = scene.config["solver"]["spin_tol"]
             print(f"rtol {rtol:g}, spin_tol {used:g} rad/s: {s['outcome']}, t_halt {s['t_halt']!r} s, "
                   f"transitions {s['n_transitions']}, stick phases {s['n_stick']}; |omega.a_{a.axis}| "
                   f"{rate.min():.3e}..{rate.max():.3e} rad/s, {len(idx)} minima below {a.ceiling:g}:")

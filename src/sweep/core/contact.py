@@ -229,13 +229,13 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
     oka = aux[X_OK]
     for j in range(1, m + 1):
         xb = guess - math.pi + 2.0 * math.pi * j / m
-        cb, db = slip_rates(xb, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+        cb, _ = slip_rates(xb, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
         okb = aux[X_OK]
         if (ca > 0.0) != (cb > 0.0):
             lo, hi, clo, oklo, okhi = xa, xb, ca, oka, okb
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
-                cm, dm = slip_rates(mid, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+                cm, _ = slip_rates(mid, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
                 if (cm > 0.0) == (clo > 0.0):
                     lo, clo, oklo = mid, cm, aux[X_OK]
                 else:
@@ -243,7 +243,7 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
                 if hi - lo < 1e-13:
                     break
             root = 0.5 * (lo + hi)
-            cr, dr = slip_rates(root, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+            _, dr = slip_rates(root, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
             dist = abs(math.atan2(math.sin(root - guess), math.cos(root - guess)))
             if dr > 0.0 and (oklo > 0.0) == (okhi > 0.0):
                 if oklo > 0.0 and dist < bestd:

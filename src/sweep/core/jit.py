@@ -6,8 +6,10 @@ same source with: a division by zero gives inf or NaN, which the integrator's ch
 rejected try (a non-finite stage) or a failure outcome, instead of a ZeroDivisionError that ends
 the whole run and loses the scene (harness seed 20261136 scene 465 at rtol 1e-9: a bisection closed
 on a Painleve pole, where Phi's coefficient was exactly 0). Results where nothing divides by zero
-are the same to the bit; the divisions no longer test their divisor. The kernels never allocate (every buffer comes from the caller) and never
-return arrays, so nothing in them needs a reference count; with the runtime on, every row view
+are the same to the bit; the divisions no longer test their divisor.
+
+The kernels never allocate (every buffer comes from the caller) and never return arrays, so nothing
+in them needs a reference count; with the runtime on, every row view
 (`wk[W_YTMP]`, `K[s]`, `cs[CS_SIG:CS_SIG + 3]`) cost a pair of out-of-line incref/decref calls,
 and those calls made a right-hand-side evaluation cost three times its arithmetic (docs/
 performance.md, 'Cost of the core'). An allocation added to a kernel now fails to compile instead of
