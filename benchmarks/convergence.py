@@ -243,6 +243,8 @@ def analyse(recs: list[dict]) -> str:
     diff_complete = []
     calm = same_calm = same_calm_ti = 0   # ti: transitions and impacts (the stick phases left out)
     diff_calm = []
+    # calm scenes whose counts at each rtol differ from rtol 1e-13's: how the count exceptions scale
+    calm_off = {rt: [] for rt in RTOLS if rt != REF_RTOL}
     early = same_early = 0     # the calm class before stop 29: quantities up to tau 300 and the levels only
     diff_early = []
     for rec in recs:
@@ -274,6 +276,9 @@ def analyse(recs: list[dict]) -> str:
                     same_calm_ti += len(seqs) == 4 and len({(q[0], q[2]) for q in seqs}) == 1
                     if not ok:
                         diff_calm.append(rec["index"])
+                    for r in rec["runs"]:
+                        if r["rtol"] in calm_off and tuple(r.get("events", ())) != tuple(ref.get("events", ())):
+                            calm_off[r["rtol"]].append(rec["index"])
                 early_sens = [x for k, x in sens.items() if k not in END_KEYS]
                 if early_sens and all(x < WELL_CONDITIONED for x in early_sens):
                     early += 1
@@ -289,6 +294,8 @@ def analyse(recs: list[dict]) -> str:
     lines.append(f"  ... whose quantities all move < {WELL_CONDITIONED:g} under alpha0 + 1e-10: {same_calm}/{calm}"
                  + (f"; differ: scenes {diff_calm[:12]}" if diff_calm else ""))
     lines.append(f"      (their transitions and impacts alone, the stick phases left out: {same_calm_ti}/{calm})")
+    lines.append("      (counts unlike rtol 1e-13's, by rtol: " + ", ".join(
+        f"{rt:g} {len(v)}/{calm}" + (f" {v[:6]}" if v else "") for rt, v in calm_off.items()) + ")")
     lines.append(f"      (the same without the end quantities {', '.join(END_KEYS)}, i.e. the class before "
                  f"stop 29: {same_early}/{early}" + (f"; differ: scenes {diff_early[:12]}" if diff_early else "") + ")")
     steps = np.array([r.get("n_steps", 0) for r in default])
