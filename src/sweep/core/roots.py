@@ -1,8 +1,8 @@
 """Roots and maxima on the dense output of one accepted step (numba kernels).
 
 Events are roots of g_k (g > 0 before the event). Roots are bracketed on the accepted step and
-refined with the Illinois variant of regula falsi on the 7th-order dense output until the bracket
-is no wider than 4 ulp of tau (location_tol); the restart point is the right end of the
+refined with Brent's method on the 7th-order dense output until the bracket is no wider than
+4 ulp of tau (location_tol); the restart point is the right end of the
 bracket, where the event has certainly happened, so a restart can never re-detect the crossing.
 The maxima of the normal force Phi are found by Brent's method on the same dense output.
 """
@@ -189,40 +189,64 @@ def location_tol(tau):
 
 @kernel
 def locate(k, ta, ga, tb, gb, span, n, u_tol, level_e, work, istats):
-    """Illinois regula falsi for g_k on [ta, tb] with g(ta) > 0 >= g(tb), on the dense output of
-    span (layout.Span). Returns the (ta, tb) bracket.
+    """Brent's method (inverse quadratic and secant steps inside a shrinking bracket, bisection
+    where they would be slow) for g_k on [ta, tb] with g(ta) > 0 >= g(tb), on the dense output of
+    span (layout.Span). Returns the (ta, tb) bracket, no wider than location_tol, g > 0 at ta.
 
-    At most 200 iterations: Illinois converges superlinearly, and bisection steps are forced
-    whenever the bracket fails to halve twice in a row, so 200 is never reached for a finite g.
+    b is the best point so far and c the bracket's other end (g of the other sign); a step is at
+    least half the tolerance, so a bracket that converges from one side closes. A NaN value (a
+    right-hand side that failed) counts as past the event. At most 200 evaluations: Brent's method
+    needs at most ~2 per bisection's worth of bracket, ~100 from a whole step to 4 ulp.
     """
-    side_kept = 0
+    a, fa, b, fb = ta, ga, tb, gb
+    c, fc = a, fa
+    d = b - a
+    e = d
     for _ in range(200):
-        tol = location_tol(max(abs(ta), abs(tb)))
-        if tb - ta <= tol:
+        if (fb > 0.0) == (fc > 0.0):
+            # b and the previous point a now bracket the root
+            c, fc = a, fa
+            d = b - a
+            e = d
+        if abs(fc) < abs(fb):
+            a, b, c = b, c, b
+            fa, fb, fc = fb, fc, fb
+        tol = location_tol(max(abs(b), abs(c)))
+        half = 0.5 * tol
+        xm = 0.5 * (c - b)
+        if abs(c - b) <= tol:
             break
-        width = tb - ta
-        tm = tb - gb * (tb - ta) / (gb - ga)
-        if not (tm > ta and tm < tb) or side_kept >= 2:
-            tm = 0.5 * (ta + tb)
-            side_kept = 0
-        gm = event_value_at(k, tm, span, n, u_tol, level_e, work, istats)
-        if math.isnan(gm):
-            tb = tm
-            gb = -1.0
-            continue
-        if gm > 0.0:
-            ta = tm
-            ga = gm
-            gb *= 0.5      # Illinois: halve the retained end's value
+        if abs(e) >= half and abs(fa) > abs(fb):
+            s = fb / fa
+            if a == c:
+                p = 2.0 * xm * s
+                q = 1.0 - s
+            else:
+                q = fa / fc
+                r = fb / fc
+                p = s * (2.0 * xm * q * (q - r) - (b - a) * (r - 1.0))
+                q = (q - 1.0) * (r - 1.0) * (s - 1.0)
+            if p > 0.0:
+                q = -q
+            else:
+                p = -p
+            if 2.0 * p < min(3.0 * xm * q - abs(half * q), abs(e * q)):
+                e = d
+                d = p / q
+            else:
+                d = xm
+                e = d
         else:
-            tb = tm
-            gb = gm
-            ga *= 0.5
-        if tb - ta > 0.5 * width:
-            side_kept += 1
-        else:
-            side_kept = 0
-    return ta, tb
+            d = xm
+            e = d
+        a, fa = b, fb
+        b = b + d if abs(d) > half else b + math.copysign(half, xm)
+        fb = event_value_at(k, b, span, n, u_tol, level_e, work, istats)
+        if math.isnan(fb):
+            fb = -1.0
+    if b < c:
+        return b, c
+    return c, b
 
 
 @kernel
