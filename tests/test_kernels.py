@@ -357,7 +357,7 @@ def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
     assert R.event_value_at(k, tb, span, n, 1e-9, math.nan, work, ist) <= 0.0
 
 
-def test_locate_closes_a_force_event_superlinearly_and_keeps_the_earliest_sign_change(setup):
+def test_locate_closes_a_force_event_bracket_superlinearly(setup):
     """The friction cone's margin mu_s Phi - |F| (a force event: one RHS per evaluation) falls
     through 0 inside a rolling step. Bisection from the whole step (0.3 tau) to location_tol
     (1e-15 tau here) needs 49 evaluations; Brent's method on this smooth function closes the
