@@ -447,3 +447,16 @@ def test_events_restart_at_their_roots_so_many_impacts_add_no_error_that_rtol_le
     assert kernel["events"] == peer["events"] == [0, 891, 1268], (kernel["events"], peer["events"])
     a_kernel, a_peer = kernel["q"]["alpha_tau_300"], peer["q"]["alpha_tau_300"]
     assert abs(a_kernel - a_peer) <= 1e-8 * abs(a_peer), (a_kernel, a_peer)
+
+
+def test_a_run_that_reaches_t_max_ends_exactly_there_and_keeps_the_sample_at_t_max():
+    """The last step of a run is cut to end at t_max (h = t_max - t), and t + h can round 1 ulp
+    short of t_max. Harness seed 20261138 scene 198 (a 9.6 mm shell rolling to t_max 300 s) did so
+    at rtol 1e-10: the run ended at 299.99999999999994 s and the sample asked for at 300 s was NaN,
+    while rtol 1e-13 had it. The step now ends at t_max itself, at every rtol."""
+    for rtol in (1e-10, 1e-13):
+        cfg = harness.harness_scene(20261138, 198, rtol)
+        r = sweep.simulate(cfg, sample_times=[100.0, cfg["stop"]["t_max"]])
+        assert r.summary["outcome"] == "t_max"
+        assert r.summary["t_end"] == cfg["stop"]["t_max"], (rtol, r.summary["t_end"])
+        assert np.all(np.isfinite(r.samples["alpha"])), (rtol, r.samples["alpha"])
