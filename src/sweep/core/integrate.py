@@ -757,7 +757,7 @@ def run(settings, level_e, sample_tau, work, rec):
         if not event:
             # a step cut to end at t_max ends there exactly: t + (t_max - t) can round 1 ulp short,
             # and a sample asked for at t_max would then be lost
-            seg_end = settings[S_TMAX] if at_tmax else t + h
+            seg_end = t_max if at_tmax else t + h
         e_seg, seg_err = segment_end(t, h, seg_end, event, running, n, e0, t_max, rtol, work)
         if seg_err > 1.0:
             retract_step(cs, istats)
