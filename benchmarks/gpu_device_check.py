@@ -201,7 +201,7 @@ def run(args) -> int:
     slowdown = info["gpu_seconds"] / cpu_walls[:8].max()
     res["warm_gpu_kernel_s"] = info["gpu_seconds"]
     res["gpu_thread_per_cpu_core_s_est"] = slowdown
-    fits = np.nonzero(slowdown * np.maximum.accumulate(cpu_walls) <= left(args) / 3)[0]
+    fits = np.nonzero(slowdown * np.maximum.accumulate(cpu_walls) <= left(args) * args.ref_share)[0]
     n_ref = min(len(ref), int(max(fits[-1] + 1 if fits.size else 8, 8)))
     ref, scs = ref[:n_ref], scs[:n_ref]
     cpu_walls = cpu_walls[:n_ref]
@@ -218,16 +218,40 @@ def run(args) -> int:
           f"{info['threads']} threads); agreement {cmp}", flush=True)
     save()
 
-    # the big batch: one block of threads on every multiprocessor (the reference run fills few of
-    # them), one scene per thread; its kernel lasts about as long as the reference's slowest scenes.
-    # (2026-11-26, H100: a full-residency batch, 33792 scenes on 528 blocks, took more than 400 s.)
-    sms = res["device"]["sms"]
-    rest = data["scenes"][n_ref:]
-    n_big = min(len(rest), sms * gpu.THREADS_PER_BLOCK)
-    res["big_plan"] = {"n": n_big, "left_s": left(args)}
-    if left(args) > 2.5 * info["gpu_seconds"] + 30 and n_big > 0:
-        res["big_run"] = big_run(gpu, Batch, load_scene, rest[:n_big])
+    if args.packed:
+        # the same scenes, launched as before stop 34's launch_shape: full blocks of THREADS_PER_BLOCK
+        # on as few multiprocessors as they fill (side by side with the spread launch above)
+        spread_s = info["gpu_seconds"]
+        if left(args) > 2.5 * spread_s + 30:
+            spread = gpu.launch_shape
+            tpb = gpu.THREADS_PER_BLOCK
+            gpu.launch_shape = lambda cuda, n, regs: (-(-n // tpb), tpb)
+            try:
+                got_p, info_p, _ = run_gpu(gpu, Batch, scs)
+            finally:
+                gpu.launch_shape = spread
+            same = sum(a is not None and b is not None and summaries_equal(a, b, rtol=0.0) == []
+                       for a, b in zip(got, got_p))
+            res["reference_run_packed"] = {"gpu_kernel_s": info_p["gpu_seconds"], "blocks": info_p["blocks"],
+                                           "threads_per_block": info_p["threads_per_block"],
+                                           "scenes_per_s": n_ref / info_p["gpu_seconds"],
+                                           "spread_over_packed_time": spread_s / info_p["gpu_seconds"],
+                                           "summaries_identical_to_spread": same}
+            print(f"packed launch: {res['reference_run_packed']}", flush=True)
+        else:
+            res["reference_run_packed"] = f"skipped: {left(args):.0f} s left"
         save()
+    else:
+        # the big batch: one block of threads on every multiprocessor (the reference run fills few of
+        # them), one scene per thread; its kernel lasts about as long as the reference's slowest scenes.
+        # (2026-11-26, H100: a full-residency batch, 33792 scenes on 528 blocks, took more than 400 s.)
+        sms = res["device"]["sms"]
+        rest = data["scenes"][n_ref:]
+        n_big = min(len(rest), sms * gpu.THREADS_PER_BLOCK)
+        res["big_plan"] = {"n": n_big, "left_s": left(args)}
+        if left(args) > 2.5 * info["gpu_seconds"] + 30 and n_big > 0:
+            res["big_run"] = big_run(gpu, Batch, load_scene, rest[:n_big])
+            save()
 
     if left(args) > args.cpu_min_s:
         import sweep
@@ -266,6 +290,11 @@ def main(argv=None) -> int:
     r.add_argument("--cpu-min-s", type=float, default=120.0, help="run the CPU comparison only with this much left")
     r.add_argument("--only-big", type=int, default=0, metavar="N",
                    help="only one GPU batch of N non-reference scenes (no warm-up, reference or CPU run)")
+    r.add_argument("--packed", action="store_true",
+                   help="instead of the big batch, rerun the reference scenes in full blocks of THREADS_PER_BLOCK "
+                        "(the launch before launch_shape spread small batches over every SM): the two side by side")
+    r.add_argument("--ref-share", type=float, default=1 / 3,
+                   help="share of the time left that the reference run may take (estimated from the warm-up)")
     r.add_argument("--out", default=os.environ.get("OUT", "gpucheck/out"))
     args = ap.parse_args(argv)
     return prepare(args) if args.cmd == "prepare" else run(args)
