@@ -168,3 +168,47 @@ def test_hysteresis_counts_one_maximum_per_swing():
     assert counted == [0.3, 0.6]              # 0.8 is still waiting for its fall
     step_end(1.8)
     assert counted == [0.3, 0.6, 0.8]
+
+
+def test_a_window_open_at_the_end_keeps_its_symmetric_part_unless_a_guard_cut_it():
+    """finish_levels: a level's window with 4 whole cycles before it and 20 lattice points after
+    (one whole cycle) when the steps end. Where the motion ended there, the value is the mean rate
+    over one cycle on each side; where a numerical guard stopped the steps (cut), no value."""
+    S = fr.SAMPLES_PER_CYCLE
+    mid = fr.HALF_CYCLES * S
+    rate = 2.0 * math.pi / 0.25              # theta turns once per 0.25 tau
+    for cut, want in ((False, rate), (True, math.nan)):
+        fq = np.zeros((fr.FQ_LEVEL0 + 1, fr.FQ_COLS))
+        row = fq[fr.FQ_LEVEL0]
+        row[fr.LW_STATE], row[fr.LW_DIR], row[fr.LW_MB], row[fr.LW_NF] = 2.0, 0.0, 4.0, 20.0
+        for i in range(fr.WIN_LEN):
+            row[fr.LW_HEAD + i] = 10.0 + (i - mid) * 0.25 / S              # lattice times
+            row[fr.LW_HEAD + fr.WIN_LEN + i] = 1.0 + 0.1 * math.cos(0.8 * 2 * math.pi * i / S)
+        level_out = np.full((1, 6), math.nan)
+        fr.finish_levels(fq, level_out, cut)
+        got = level_out[0, fr.LO_PRECESSION]
+        assert (math.isnan(got) and math.isnan(want)) or abs(got / want - 1) < 1e-12, (cut, got)
+        assert fq[fr.FQ_LEVEL0, fr.LW_STATE] == 3.0
+        assert cut or level_out[0, fr.LO_CYCLES] == 2.0
+
+
+def test_the_last_levels_frequencies_do_not_depend_on_a_step_count_after_the_halt():
+    """A default-grid scene (GPU check seed 0, scene 110) that reaches its last level, 1e-4 rad, while
+    slipping in ~1400 roll/slip transitions: its 4 precession cycles after that level take ~11 000
+    steps. A cap of 5000 steps after the halt left the level's precession NaN on the CPU and a
+    one-cycle value, 418 Hz, on an H200 whose round-off moved the steps. Now the steps go on until
+    the window is complete: a whole 8-cycle window on every rtol, one value to the window's
+    accuracy (the steady rolling relation at 1e-4 rad is far off here: the disk slips)."""
+    scene = {"disk": {"radius": 0.03755, "thickness": 0.0128, "mass": 0.4387, "shape": "solid"},
+             "contact": {"mu_s": 0.5, "mu_d": 0.3087134058437373, "k1": 3.755e-06, "k2": 3.004e-05,
+                         "k3": 0.00011728950778595781},
+             "initial": {"alpha": 1.3774699332888896, "omega": [0.0, 0.0, -22.765317166366714]},
+             "stop": {"levels": [0.1, 0.01, 0.001, 0.0001], "t_max": 120.0}}
+    got = []
+    for rtol in (1e-10, 1e-11):
+        s = sweep.simulate({**scene, "solver": {"rtol": rtol, "atol": rtol / 100}}).summary
+        assert s["outcome"] == "halted" and not s["lay_flat"]
+        last = s["levels"][3]
+        assert np.isfinite(last["precession_hz"]) and np.isfinite(last["ringing_hz"])
+        got.append(last["precession_hz"])
+    assert abs(got[0] / got[1] - 1) < 1e-8, got     # 2e-10 measured

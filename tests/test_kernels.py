@@ -830,13 +830,21 @@ def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end
     t_near = 100.0 - EPS * 100.0
     h, outcome, at_tmax, stop = next_try(t_near, 0.5, -1, settings, work, rec)
     assert (outcome, at_tmax, stop) == (oc.T_MAX, True, True) and h == 100.0 - t_near
-    # ... elsewhere as STEP_SIZE_UNDERFLOW (nothing in the model decides by the step size)
+    # (t_max is where the motion ends: the frequency windows still open keep their symmetric part)
+    assert work.trk[L.T_CUT] == 0.0
+    # ... elsewhere as STEP_SIZE_UNDERFLOW (nothing in the model decides by the step size), a
+    # numerical stop: the windows still open get no value
     assert next_try(10.0, 1.5 * EPS * 10.0, -1, settings, work, rec)[1:] == (oc.STEP_SIZE_UNDERFLOW, False, True)
+    assert work.trk[L.T_CUT] == 1.0
+    work.trk[:] = 0.0
     assert next_try(10.0, 2.5 * EPS * 10.0, -1, settings, work, rec)[1:] == (-1, False, False)
-    # the step budget counts accepted and rejected tries
+    # the step budget counts accepted and rejected tries; it stops the steps after the end too
     istats[L.I_STEPS], istats[L.I_REJECTED] = 30, 20
     assert next_try(10.0, 0.5, -1, settings, work, rec)[1:] == (oc.STEP_LIMIT, False, True)
+    assert work.trk[L.T_CUT] == 1.0
+    work.trk[:] = 0.0
     assert next_try(10.0, 0.5, oc.HALTED, settings, work, rec)[1:] == (oc.HALTED, False, True)
+    assert work.trk[L.T_CUT] == 1.0
     istats[L.I_STEPS] = 0
     work.trk[:] = 0.0
     # after the end (HALTED at tau 40): the steps of the Phi maxima, no longer than the last one,
@@ -846,4 +854,5 @@ def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end
     assert trk[L.T_H_AFTER] == 0.5 and trk[L.T_T_AFTER] == 80.0
     assert next_try(60.0, 4.0, oc.HALTED, settings, work, rec) == (0.5, oc.HALTED, False, False)
     assert next_try(99.9, 0.2, oc.HALTED, settings, work, rec) == (-1.0, oc.HALTED, False, True)
-    assert trk[L.T_AFTER_HALT] == 3.0
+    # twice the end's tau is where the motion after it ends, not a numerical stop
+    assert trk[L.T_CUT] == 0.0

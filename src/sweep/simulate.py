@@ -13,15 +13,10 @@ from .core.ensemble import D_APPROACH, D_HALT_FINITE, D_RAMP, D_RAMP_ERR, D_THAL
 from .core.integrate import integrate
 from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_FLAT, I_IMPACTS,
                           I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
-                          I_TRANS, N_SETTINGS, S_ATOL, S_EXTRA, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL,
+                          I_TRANS, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL,
                           S_TMAX, S_UTOL)
 from .errors import ConfigError
 from .scene import Scene, load_scene
-
-# After the smallest level, its frequencies need HALF_CYCLES (4) more precession cycles and the
-# next counted peak of Phi (~10-40 steps per cycle), so 5000 extra steps only bound a pathology.
-EXTRA_STEPS_FOR_PEAKS = 5000
-
 
 @dataclass
 class SimulationResult:
@@ -69,7 +64,6 @@ def _settings(scene: Scene) -> np.ndarray:
     s[S_MAXSTEPS] = st["max_steps"]
     s[S_KIN] = 1.0 if out["kinematics"] else 0.0
     s[S_PEAKS] = 1.0 if out["normal_force_frequency"] else 0.0
-    s[S_EXTRA] = EXTRA_STEPS_FOR_PEAKS
     return s
 
 

@@ -242,11 +242,13 @@ def window_values(L, m, fq, level_out):
 
 
 @kernel
-def finish_levels(fq, level_out):
-    """At the end of the scene: windows still open get the largest symmetric window they have."""
+def finish_levels(fq, level_out, cut):
+    """At the end of the scene: windows still open get the largest symmetric window they have where
+    the motion ended there (an event's outcome, t_max, twice the end's tau), no value where a
+    numerical guard stopped the steps (cut: step budget, step floor, a NaN state)."""
     for L in range(fq.shape[0] - FQ_LEVEL0):
         row = FQ_LEVEL0 + L
-        if fq[row, LW_STATE] == 2.0:
+        if fq[row, LW_STATE] == 2.0 and not cut:
             m = min(int(fq[row, LW_MB]), int(fq[row, LW_NF]) // SAMPLES_PER_CYCLE)
             if m >= 1:
                 window_values(L, m, fq, level_out)

@@ -21,8 +21,8 @@ from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, err
 from .jit import kernel
 from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
-                     N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_EXTRA, S_HMAX,
-                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_AFTER_HALT, T_DIMPACT_HALT,
+                     N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_HMAX,
+                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_CUT, T_DIMPACT_HALT,
                      T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Record, Segment, Span, Work)
 from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
@@ -485,7 +485,6 @@ def step_after_end(t, h, trk):
     the levels: not past the last step before the end, nor past twice the end's tau (a steady
     motion, e.g. rolling at a tilt held by a stuck moment, has no maxima, and its steps would grow
     tenfold each until t overflowed). Returns -1 where they stop."""
-    trk[T_AFTER_HALT] += 1.0
     if trk[T_H_AFTER] == 0.0:
         trk[T_H_AFTER] = h
         trk[T_T_AFTER] = 2.0 * t
@@ -606,7 +605,10 @@ def finish(outcome, t, h, n, peaks_on, work, rec):
         istats[I_STICK] = int(trk[T_END_STICK])
         istats[I_IMPACTS] = int(trk[T_END_IMPACTS])
     if peaks_on:
-        finish_levels(rec.fq, rec.levels)
+        # a window cut by a numerical stop has no value; one cut by the motion's end has its largest
+        # symmetric part
+        cut = trk[T_CUT] != 0.0 or outcome == oc.NUMERICAL_ERROR
+        finish_levels(rec.fq, rec.levels, cut)
     if ended:
         fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the end
     else:
@@ -629,6 +631,7 @@ def next_try(t, h, outcome, settings, work, rec):
         if h < 0.0:
             return h, outcome, False, True
     if rec.istats[I_STEPS] + rec.istats[I_REJECTED] >= int(settings[S_MAXSTEPS]):
+        work.trk[T_CUT] = 1.0
         return h, oc.STEP_LIMIT if running else outcome, False, True
     at_tmax = running and t + h >= settings[S_TMAX]
     if at_tmax:
@@ -639,6 +642,7 @@ def next_try(t, h, outcome, settings, work, rec):
     if h <= 2.0 * EPS * max(abs(t), 1.0):
         if running:
             outcome = oc.T_MAX if at_tmax else oc.STEP_SIZE_UNDERFLOW
+        work.trk[T_CUT] = 0.0 if outcome == oc.T_MAX else 1.0
         return h, outcome, at_tmax, True
     return h, outcome, at_tmax, False
 
@@ -718,7 +722,6 @@ def run(settings, level_e, sample_tau, work, rec):
     istats = rec.istats
     rtol, atol, t_max, u_tol = settings[S_RTOL], settings[S_ATOL], settings[S_TMAX], settings[S_UTOL]
     h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
-    extra_steps = int(settings[S_EXTRA])
     n = state_size(settings)
     lev = level_e[0] if level_e.shape[0] > 0 else math.nan
     outcome, h = begin(settings, lev, sample_tau, work, rec)
@@ -726,7 +729,9 @@ def run(settings, level_e, sample_tau, work, rec):
     e0 = max(abs(rec.fstats[F_E0]), 1e-300)
     t = 0.0
     after_reject = False
-    while outcome < 0 or (trk[T_PENDING] > 0.0 and trk[T_AFTER_HALT] < extra_steps):
+    # after the end, the steps go on while a level's frequencies wait for the motion after it: until
+    # they are complete, the motion ends (an event's outcome, twice the end's tau), or a guard stops
+    while outcome < 0 or trk[T_PENDING] > 0.0:
         running = outcome < 0
         h, outcome, at_tmax, stop = next_try(t, h, outcome, settings, work, rec)
         if stop:

@@ -65,8 +65,8 @@ N_WORK = 32
 N_WCOLS = 19     # columns of the work buffer: >= N_FULL, N_AUX and the number of events
 
 # --- settings vector ----------------------------------------------------------------------------
-S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS, S_EXTRA = 0, 1, 2, 3, 4, 5, 6, 7, 8
-N_SETTINGS = 9
+S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS = 0, 1, 2, 3, 4, 5, 6, 7
+N_SETTINGS = 8
 
 # --- integer statistics -------------------------------------------------------------------------
 I_OUTCOME, I_STEPS, I_REJECTED, I_RHS, I_EVENTS, I_TRANS, I_STICK, I_IMPACTS, I_LEVELS, I_TRAJ, I_PEAKS = range(11)
@@ -80,7 +80,9 @@ N_FSTATS = 8
 
 # --- tracking state of the level/peak/sample recorders (float64) ----------------------------------
 T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PHI_A, T_PHI_B, T_TA, T_TB, T_PREV_OK, T_TPREV, T_HPREV = range(9)
-T_PENDING, T_AFTER_HALT, T_NPK = 9, 10, 11
+T_PENDING, T_CUT, T_NPK = 9, 10, 11   # T_PENDING: level frequencies still waiting for the motion
+                  # after them; T_CUT: 1 where the steps after the end stopped on a numerical guard
+                  # (step budget, step floor): the windows still open then get no value
 T_DIMPACT_HALT = 12   # impact dissipation up to the end (steps after it only resolve Phi maxima)
 T_PEAK_RING = 13  # 1: the peak buffer is a ring of its last rows (batch path; only the summary is kept)
 T_PREV_DENSE = 14  # 1: F[7:14] holds the previous step's dense output; 0: K[K_PREV:] holds its stages
