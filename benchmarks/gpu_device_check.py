@@ -6,6 +6,8 @@ only the runs there.
     .venv/bin/python benchmarks/cuda_compile_offline.py --cc 9.0 --save-kernel gpucheck/kernel_sm90.pkl.xz
     # ... and the scenes with their one-core CPU summaries (the reference)
     .venv/bin/python benchmarks/gpu_device_check.py prepare --dir gpucheck --n 100000 --n-ref 1000
+    # two commits' CPU kernels on the same scenes (each `prepare` run from its own tree):
+    .venv/bin/python benchmarks/gpu_device_check.py compare OLD/scenes.pkl.xz NEW/scenes.pkl.xz
     # there (python3 with numba-cuda; no compilation, no schema package needed):
     python3 benchmarks/gpu_device_check.py run --dir gpucheck --budget-s 420 --out $OUT
 
@@ -56,6 +58,41 @@ def prepare(args) -> int:
     walls = np.array([s["wall_time"] for s in ref])
     print(f"{args.n} scenes (seed {args.seed}); reference: {args.n_ref} scenes on {args.workers} CPU thread(s) in "
           f"{dt:.1f} s; per scene median {np.median(walls):.3f} s, mean {walls.mean():.3f} s, max {walls.max():.2f} s")
+    return 0
+
+
+def compare(args) -> int:
+    """Two `prepare` records of the same scenes (e.g. two commits' CPU kernels): how many reference
+    summaries are identical (run statistics aside), which keys differ, the cost ratio, and per level
+    how many reached levels have no precession value."""
+    import collections
+    import math
+
+    from sweep.ensemble import summaries_equal
+
+    recs = []
+    for path in (args.a, args.b):
+        with lzma.open(path, "rb") as f:
+            recs.append(pickle.load(f))
+    ref_a, ref_b = recs[0]["reference"], recs[1]["reference"]
+    if recs[0]["seed"] != recs[1]["seed"] or len(ref_a) != len(ref_b):
+        raise SystemExit("compare: the two records hold different scenes (seed or n-ref differ)")
+    keys: collections.Counter = collections.Counter()
+    same = 0
+    for x, y in zip(ref_a, ref_b):
+        bad = summaries_equal(x, y, rtol=0.0, run_statistics=False)
+        same += not bad
+        keys.update({b.split(":")[0] for b in bad})
+    print(f"{len(ref_a)} scenes: {same} summaries identical (rtol 0, run statistics aside)")
+    print("keys that differ (scenes):", dict(keys.most_common(20)))
+    for stat in ("n_rhs", "n_steps"):
+        ta, tb = sum(r[stat] for r in ref_a), sum(r[stat] for r in ref_b)
+        print(f"{stat}: {ta} -> {tb} ({tb / ta:.4f})")
+    for lv in range(max(len(r["levels"]) for r in ref_a)):
+        def nan_count(ref):
+            return sum(1 for r in ref if lv < len(r["levels"]) and math.isfinite(r["levels"][lv]["t"])
+                       and math.isnan(r["levels"][lv]["precession_hz"]))
+        print(f"level {lv}: reached with precession NaN: {nan_count(ref_a)} -> {nan_count(ref_b)}")
     return 0
 
 
@@ -296,8 +333,11 @@ def main(argv=None) -> int:
     r.add_argument("--ref-share", type=float, default=1 / 3,
                    help="share of the time left that the reference run may take (estimated from the warm-up)")
     r.add_argument("--out", default=os.environ.get("OUT", "gpucheck/out"))
+    c = sub.add_parser("compare", help="two prepare records of the same scenes, summary by summary")
+    c.add_argument("a")
+    c.add_argument("b")
     args = ap.parse_args(argv)
-    return prepare(args) if args.cmd == "prepare" else run(args)
+    return {"prepare": prepare, "run": run, "compare": compare}[args.cmd](args)
 
 
 if __name__ == "__main__":
