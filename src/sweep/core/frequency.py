@@ -244,7 +244,7 @@ def window_values(L, m, fq, level_out):
 @kernel
 def finish_levels(fq, level_out, cut):
     """At the end of the scene: windows still open get the largest symmetric window they have where
-    the motion ended there (an event's outcome, t_max, twice the end's tau), no value where a
+    the motion ended there (t_max, an event's outcome, twice a halt's tau), no value where a
     numerical guard stopped the steps (cut: step budget, step floor, a NaN state)."""
     for L in range(fq.shape[0] - FQ_LEVEL0):
         row = FQ_LEVEL0 + L

@@ -729,9 +729,11 @@ def run(settings, level_e, sample_tau, work, rec):
     e0 = max(abs(rec.fstats[F_E0]), 1e-300)
     t = 0.0
     after_reject = False
-    # after the end, the steps go on while a level's frequencies wait for the motion after it: until
-    # they are complete, the motion ends (an event's outcome, twice the end's tau), or a guard stops
-    while outcome < 0 or trk[T_PENDING] > 0.0:
+    # after a halt (the last level: the disk still moves) the steps go on while a level's frequencies
+    # wait for the motion after it: until they are complete, the motion ends (an event's outcome,
+    # twice the end's tau), or a guard stops. Every other end (t_max, contact lost, ...) ends the
+    # motion the scene simulates: nothing is integrated past it.
+    while outcome < 0 or (outcome == oc.HALTED and trk[T_PENDING] > 0.0):
         running = outcome < 0
         h, outcome, at_tmax, stop = next_try(t, h, outcome, settings, work, rec)
         if stop:
