@@ -88,11 +88,13 @@ def compare(args) -> int:
     for stat in ("n_rhs", "n_steps"):
         ta, tb = sum(r[stat] for r in ref_a), sum(r[stat] for r in ref_b)
         print(f"{stat}: {ta} -> {tb} ({tb / ta:.4f})")
+    def reached_without_precession(ref, lv):
+        return sum(1 for r in ref if lv < len(r["levels"]) and math.isfinite(r["levels"][lv]["t"])
+                   and math.isnan(r["levels"][lv]["precession_hz"]))
+
     for lv in range(max(len(r["levels"]) for r in ref_a)):
-        def nan_count(ref):
-            return sum(1 for r in ref if lv < len(r["levels"]) and math.isfinite(r["levels"][lv]["t"])
-                       and math.isnan(r["levels"][lv]["precession_hz"]))
-        print(f"level {lv}: reached with precession NaN: {nan_count(ref_a)} -> {nan_count(ref_b)}")
+        print(f"level {lv}: reached with precession NaN: {reached_without_precession(ref_a, lv)} -> "
+              f"{reached_without_precession(ref_b, lv)}")
     return 0
 
 

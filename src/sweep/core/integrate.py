@@ -416,8 +416,8 @@ def tally_step(cs, istats, accepted, count):
 @kernel
 def mark_end(t_end, y_at_end, n, p, cs, fstats, trk, y_end, istats):
     """The scene ended (halted, or reached t_max) at t_end in state y_at_end: its end state,
-    energy, impact losses and event counts (trk[T_END_*]). Steps after the end only resolve Phi
-    maxima and change none of them."""
+    energy, impact losses and event counts (trk[T_END_*]). The steps after a halt only complete the
+    levels' frequency windows and change none of them."""
     fstats[F_TEND] = t_end
     for i in range(n):
         y_end[i] = y_at_end[i]
@@ -481,8 +481,8 @@ def begin(settings, lev, sample_tau, work, rec):
 
 @kernel
 def step_after_end(t, h, trk):
-    """The step size after the scene's end, where the steps only resolve the Phi maxima just after
-    the levels: not past the last step before the end, nor past twice the end's tau (a steady
+    """The step size after a halt, where the steps only complete the levels' frequency windows
+    (precession cycles and Phi maxima after the levels): not past the last step before the end, nor past twice the end's tau (a steady
     motion, e.g. rolling at a tilt held by a stuck moment, has no maxima, and its steps would grow
     tenfold each until t overflowed). Returns -1 where they stop."""
     if trk[T_H_AFTER] == 0.0:
@@ -642,7 +642,8 @@ def next_try(t, h, outcome, settings, work, rec):
     if h <= 2.0 * EPS * max(abs(t), 1.0):
         if running:
             outcome = oc.T_MAX if at_tmax else oc.STEP_SIZE_UNDERFLOW
-        work.trk[T_CUT] = 0.0 if outcome == oc.T_MAX else 1.0
+        if outcome != oc.T_MAX:
+            work.trk[T_CUT] = 1.0
         return h, outcome, at_tmax, True
     return h, outcome, at_tmax, False
 

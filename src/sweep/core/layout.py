@@ -81,9 +81,9 @@ N_FSTATS = 8
 # --- tracking state of the level/peak/sample recorders (float64) ----------------------------------
 T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PHI_A, T_PHI_B, T_TA, T_TB, T_PREV_OK, T_TPREV, T_HPREV = range(9)
 T_PENDING, T_CUT, T_NPK = 9, 10, 11   # T_PENDING: level frequencies still waiting for the motion
-                  # after them; T_CUT: 1 where the steps after the end stopped on a numerical guard
-                  # (step budget, step floor): the windows still open then get no value
-T_DIMPACT_HALT = 12   # impact dissipation up to the end (steps after it only resolve Phi maxima)
+                  # after them; T_CUT: 1 where a numerical guard stopped the steps (step budget, step
+                  # floor), running or after a halt: the windows still open then get no value
+T_DIMPACT_HALT = 12   # impact dissipation up to the end (the steps after a halt do not count)
 T_PEAK_RING = 13  # 1: the peak buffer is a ring of its last rows (batch path; only the summary is kept)
 T_PREV_DENSE = 14  # 1: F[7:14] holds the previous step's dense output; 0: K[K_PREV:] holds its stages
 T_RATES_OLD = 15  # 1: wk[W_RATEOLD] holds the event rates at the current step start (the last step end's)
@@ -91,7 +91,7 @@ T_RATES_NEW = 16  # 1: this step's scan computed wk[W_RATENEW] (the rates at its
 T_DIP_END = 17    # the first event found by an interior dip of an event of the forces: the time of the
                   # dense output's minimum there, where an integrated step confirms it; -1 else
 T_END_TRANS, T_END_STICK, T_END_IMPACTS = 18, 19, 20   # event counts at the scene's end (halt or
-                  # t_max; -1 before it): the steps after it only resolve Phi maxima
+                  # t_max; -1 before it): the steps after a halt do not count
 T_H_AFTER = 21    # the last step size before the end (the steps after it do not grow past it; 0 before)
 T_T_AFTER = 22    # ... nor run past this tau (twice the end's)
 N_TRACK = 23
@@ -127,5 +127,5 @@ Span = namedtuple("Span", "row0 y0 t0 h cs")
 # Segment: the kept part of an accepted step, [t, end] of the step [t, t + h] (end < t + h where
 # event k, >= 0, ends it; k = -1 where none does), whether the step's dense output is built
 # (dense), whether the scene was running when the step began (running: not yet ended, else the
-# step only resolves Phi maxima after the end), and whether the step ends at t_max (at_tmax).
+# step only completes frequency windows after a halt), and whether the step ends at t_max (at_tmax).
 Segment = namedtuple("Segment", "t h end k dense running at_tmax")
