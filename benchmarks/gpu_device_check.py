@@ -88,6 +88,7 @@ def compare(args) -> int:
     for stat in ("n_rhs", "n_steps"):
         ta, tb = sum(r[stat] for r in ref_a), sum(r[stat] for r in ref_b)
         print(f"{stat}: {ta} -> {tb} ({tb / ta:.4f})")
+
     def reached_without_precession(ref, lv):
         return sum(1 for r in ref if lv < len(r["levels"]) and math.isfinite(r["levels"][lv]["t"])
                    and math.isnan(r["levels"][lv]["precession_hz"]))

@@ -847,7 +847,7 @@ def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end
     assert work.trk[L.T_CUT] == 1.0
     istats[L.I_STEPS] = 0
     work.trk[:] = 0.0
-    # after the end (HALTED at tau 40): the steps of the Phi maxima, no longer than the last one,
+    # after a halt (at tau 40): the steps that complete the frequency windows, no longer than the last one,
     # and none past twice the end's tau; t_max no longer clips them
     trk = work.trk
     assert next_try(40.0, 0.5, oc.HALTED, settings, work, rec) == (0.5, oc.HALTED, False, False)
