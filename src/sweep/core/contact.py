@@ -65,6 +65,9 @@ SLAVE_EPS = 1e-7
 # A slaved slip returns to SLIDE only where it has grown to SLAVE_EXIT times the slaving speed: the
 # two modes' boundaries differ, so a slip near the slaving speed cannot switch at every step.
 SLAVE_EXIT = 4.0
+# cs[CS_SLAVE_OFF] while a slide that spirals out from u = 0 slides on below slip_tol (slow_slide):
+# the hand-over and EV_SLIP_SLOW are both off until the slip is fast again (EV_SLIP_FAST)
+SLOW_OFF = 2.0
 # Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
 DIR_TOL = 1e-14
 # ... or when cross is at its round-off floor: |cross| <= DIR_NOISE |slip acceleration|. Near a fold
@@ -361,6 +364,79 @@ def try_slave(t, y, p, cs, n, wk, istats):
     return -1
 
 
+# What a slide whose speed has fallen to slip_tol does next (slip_fate): it reaches u = 0 and ends,
+# it passes by u = 0 and leaves along a direction of growth, it spirals out from u = 0, or the
+# direction dynamics carry it into the Painleve singularity.
+FATE_ENDS, FATE_PASSES, FATE_SPIRALS_OUT, FATE_JAMMED = 0, 1, 2, 3
+# Points on the circle for the slip's change of ln|u| over one turn of a spiral (a periodic
+# integrand: the trapezoidal rule converges geometrically).
+SPIRAL_POINTS = 64
+
+
+@kernel
+def slip_fate(t, y, p, cs, n, wk, istats):
+    """Where a slide goes from a slow slip, decided by the slip's direction dynamics at the state
+    (docs/model.md, 'Where a slip ends'): (fate, nu), fate one of FATE_*, nu the direction in which a
+    passing slip leaves u = 0 (FATE_PASSES), else NaN.
+
+    Near u = 0 the slip acceleration a_P depends on the slip's direction s(nu) and hardly on its
+    size, so along the slide d nu/d ln|u| = cross(nu)/rad(nu) (cross, rad: a_P across and along s).
+    The direction therefore moves monotonically, in the sense of sign(cross), to the first root nu*
+    of cross (attracting_direction), whatever |u| does on the way, and the slip's fate is the sign
+    of rad(nu*): < 0, |u| falls to 0 in finite time along nu* (the slip ends: the model's rolling or
+    a new onset follows); > 0, |u| has a minimum on the way and grows along nu* (the slip passes by
+    u = 0 and never reaches it). Where cross has no root, the direction turns for ever and
+    ln|u| changes by the integral of rad/|cross| over each turn: < 0, the slip spirals into u = 0
+    in finite time (it ends); > 0, it spirals out. None of this reads slip_tol: the fate is the same
+    from every slower slip of the same slide, to the slip's own O(|u|) change of the state."""
+    dy = wk[W_DYTMP]
+    aux = wk[W_AUXTMP]
+    ys = wk[W_YSLIP]
+    u = math.hypot(y[Y_U1], y[Y_U2])
+    root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, p, cs, n, wk, istats)
+    if root == JAMMED:
+        return FATE_JAMMED, math.nan
+    if not math.isnan(root):
+        _, rad = slip_rates(root, u, t, y, p, cs, n, dy, aux, ys, istats)
+        if rad > 0.0:
+            return FATE_PASSES, root
+        return FATE_ENDS, math.nan
+    turn = 0.0
+    for j in range(SPIRAL_POINTS):
+        cross, rad = slip_rates(2.0 * math.pi * j / SPIRAL_POINTS, u, t, y, p, cs, n, dy, aux, ys, istats)
+        turn += rad / abs(cross)
+    if turn > 0.0:
+        return FATE_SPIRALS_OUT, math.nan
+    return FATE_ENDS, math.nan
+
+
+@kernel
+def slow_slide(t, y, p, cs, n, wk, istats):
+    """A slide whose speed has reached slip_tol (EV_SLIP_SLOW, or a discrete update that left it
+    there), by its fate (slip_fate): one that ends is ended by the plastic contact impulse (end_slip);
+    one that passes by u = 0 goes through it, its remaining slip removed by the same impulse, and
+    leaves as a slaved slip from u = 0 along its direction of growth (no transition: it never rolls);
+    one that spirals out slides on, and this event is off until the slip is fast again. The impulse
+    changes the velocity by O(slip_tol): the answer converges at first order as slip_tol -> 0, and no
+    decision moves with it. Returns the outcome that ends the scene (PAINLEVE), else -1."""
+    fate, nu = slip_fate(t, y, p, cs, n, wk, istats)
+    if fate == FATE_JAMMED:
+        return oc.PAINLEVE
+    if fate == FATE_ENDS:
+        end_slip(y, p, cs, wk, istats)
+    elif fate == FATE_PASSES:
+        side = int(cs[CS_SIDE])
+        y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
+        y[Y_U1] = 0.0
+        y[Y_U2] = 0.0
+        cs[CS_MODE] = SLAVED
+        cs[CS_NU] = nu
+        cs[CS_SLAVE_OFF] = 0.0
+    else:
+        cs[CS_SLAVE_OFF] = SLOW_OFF
+    return -1
+
+
 @kernel
 def confirm_slaved(t, y, p, cs, n, wk, istats):
     """SLAVED after a discrete update (integrate.run calls it after every event): the slaved
@@ -588,7 +664,8 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
     if mode == ROLL:
         g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
     elif mode == SLIDE:
-        g[EV_SLIP_SLOW] = state_event_value(EV_SLIP_SLOW, y, p, cs, u_tol, level_e)
+        if cs[CS_SLAVE_OFF] != SLOW_OFF:
+            g[EV_SLIP_SLOW] = state_event_value(EV_SLIP_SLOW, y, p, cs, u_tol, level_e)
         if cs[CS_SLAVE_OFF] == 0.0:
             g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(aux, p, u_tol)
         else:
@@ -657,7 +734,7 @@ def slip_event(k, t, y, p, cs, n, wk, istats):
         start_slip(t, y, p, cs, n, wk, istats)
         cs[CS_SLAVE_OFF] = 0.0
     elif k == EV_SLIP_SLOW:
-        end_slip(y, p, cs, wk, istats)
+        return slow_slide(t, y, p, cs, n, wk, istats)
     elif k == EV_SLIP_STOP:
         # the slip speed along the slaved direction is 0; what the integration left of the slip
         # (its error) is removed by the plastic impulse, so the energy books stay exact
@@ -702,20 +779,22 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
         code = slip_event(k, t, y, p, cs, n, wk, istats)
         if code >= 0:
             return code
-    settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own)
-    return -1
+    return settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own)
 
 
 @kernel
 def settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own):
-    """What every discrete update owes the state: a slip at or below slip_tol ends; the moment
+    """What every discrete update owes the state: a slide at or below slip_tol meets its fate
+    (slow_slide); the moment
     components that the update moved are released (release_moved: g_before, omega.a_i before it)
     and every sign made consistent (settle_signs, leaving component own); a rolling state left
-    outside the static cone starts to slip."""
-    if cs[CS_MODE] == SLIDE and math.hypot(y[Y_U1], y[Y_U2]) <= u_tol:
+    outside the static cone starts to slip. Returns the outcome that ends the scene, else -1."""
+    if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF and math.hypot(y[Y_U1], y[Y_U2]) <= u_tol:
         # the slip reached slip_tol within the located event's bracket (a stiff slip decays by
         # orders of magnitude in 1e-11 tau): its own event can no longer happen
-        end_slip(y, p, cs, wk, istats)
+        code = slow_slide(t, y, p, cs, n, wk, istats)
+        if code >= 0:
+            return code
     release_moved(y, p, cs, g_before)
     settle_signs(t, y, p, cs, n, wk, istats, own)
     # a rolling state must be admissible after every discrete update: a moment sign that flips or
@@ -725,6 +804,7 @@ def settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own):
         # the slip changes the moments the stuck components need
         # (a component the Filippov rule held is tested again: the slip changed its dynamics)
         settle_signs(t, y, p, cs, n, wk, istats, own if own >= 0 and cs[CS_STUCK + own] == 0.0 else -1)
+    return -1
 
 
 @kernel
