@@ -1,4 +1,4 @@
-"""Random-scene convergence harness (issue #8): does the integrator converge everywhere?
+"""Random-scene convergence harness: does the integrator converge everywhere, in rtol and in each threshold knob?
 
     python benchmarks/convergence.py [--quick] [--scenes N] [--seed S] [--jobs J] [--tag NAME] [--atol-ratio R]
     python benchmarks/convergence.py --seed S --only I J ... --tag NAME     # some scenes of a seed again
@@ -6,8 +6,9 @@
 Draws scenes over wide physical ranges (radius 3 mm..30 cm, thickness/radius 0.01..2, solid or
 shell, mu_s 0.05..1.6, mu_d/mu_s 0..1, each k_i/R 0 or 1e-6..5e-2, |alpha0| 0.03..1.5 rad with both
 signs, omega_hat ~ -e3 of 0.1..10, some with random omega1, omega2 and an initial slip), runs each
-at rtol 1e-9 ... 1e-13 (atol = rtol/100) and once more with alpha0 + 1e-10 rad at rtol 1e-13, and
-reports:
+at rtol 1e-9 ... 1e-13 (atol = rtol/100), once more with alpha0 + 1e-10 rad at rtol 1e-13, and at
+rtol 1e-10 with each threshold knob tightened alone (slip_tol 1e-11 and 1e-13 m/s, spin_tol 1e-9
+rad/s), and reports:
 
 * outcomes, exceptions, NaNs, step_size_underflow, step_limit (allowed only past 100 s simulated),
   the dissipation budget |E0 - E_end - sum(dissipated)| / E0 (target <= 1e-9);
@@ -19,6 +20,8 @@ reports:
   1e-13 at the default rtol 1e-10 (target >= 99.5 %), and whether errors shrink with rtol;
 * whether the event sequence (roll<->slip transitions, stick phases, impacts) is the same from
   rtol 1e-10 down;
+* for each threshold knob: the share of well-conditioned quantities within 1e-6 and 1e-3 of the default
+  run's, and the scenes whose event counts differ from the default run's;
 * cost at the default rtol: median, p90, p99, max of steps and wall time, total CPU time.
 
 Per-scene records go to benchmarks/out/convergence-<tag>.jsonl, the table to stdout and to
@@ -48,6 +51,13 @@ PERTURB = 1e-10
 ATOL_RATIO = 1e-2
 WELL_CONDITIONED = 1e-8
 AGREE = 1e-6
+# every value must agree with the default run's to this where a threshold knob is tightened
+AGREE_ALL = 1e-3
+# the solver's threshold knobs, each tightened alone at the default rtol and compared with the
+# default run (slip_tol 1e-9 m/s, spin_tol 1e-7 rad/s): the answers must not move (docs/model.md,
+# 'Where a slip ends'; 'Sticking at spin_tol')
+KNOB_RUNS = [("slip_tol 1e-11", {"slip_tol": 1e-11}), ("slip_tol 1e-13", {"slip_tol": 1e-13}),
+             ("spin_tol 1e-9", {"spin_tol": 1e-9})]
 DENSITY = 7800.0
 # outcomes whose t_end is a located event time (a quantity of the scene's end, like a level time)
 LOCATED_ENDS = ("contact_lost", "line_contact", "painleve")
@@ -124,11 +134,12 @@ def harness_scene(seed: int, index: int, rtol: float | None = None, t_max: float
     return cfg
 
 
-def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0, atol_ratio: float = ATOL_RATIO) -> dict:
+def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0, atol_ratio: float = ATOL_RATIO,
+             knobs: dict | None = None) -> dict:
     import sweep
 
     c = json.loads(json.dumps(cfg))
-    c["solver"] = {"rtol": rtol, "atol": rtol * atol_ratio}
+    c["solver"] = {"rtol": rtol, "atol": rtol * atol_ratio, **(knobs or {})}
     c["initial"]["alpha"] += d_alpha
     chi = math.sqrt((({"solid": 1.0, "shell": 2.0}[c["disk"]["shape"]]) + 4.0) / 4.0
                     * c["disk"]["radius"] / c["gravity"])
@@ -163,6 +174,7 @@ def run_scene(args) -> dict:
     cfg = _valid_levels(cfg)
     rec = {"index": idx, "scene": cfg, "runs": [_one_run(cfg, rt, 0.0, atol_ratio) for rt in RTOLS]}
     rec["perturbed"] = _one_run(cfg, REF_RTOL, PERTURB * math.copysign(1.0, cfg["initial"]["alpha"]), atol_ratio)
+    rec["knobs"] = {name: _one_run(cfg, DEFAULT_RTOL, 0.0, atol_ratio, knobs) for name, knobs in KNOB_RUNS}
     return rec
 
 
@@ -298,6 +310,7 @@ def analyse(recs: list[dict]) -> str:
         f"{rt:g} {len(v)}/{calm}" + (f" {v[:6]}" if v else "") for rt, v in calm_off.items()) + ")")
     lines.append(f"      (the same without the end quantities {', '.join(END_KEYS)}, i.e. the class before "
                  f"stop 29: {same_early}/{early}" + (f"; differ: scenes {diff_early[:12]}" if diff_early else "") + ")")
+    lines.extend(analyse_knobs(recs))
     steps = np.array([r.get("n_steps", 0) for r in default])
     cpu = np.array([r.get("cpu", 0.0) for r in default])
     pct = lambda a, q: float(np.percentile(a, q))  # noqa: E731
@@ -307,6 +320,59 @@ def analyse(recs: list[dict]) -> str:
                  f"p99 {1e3 * pct(cpu, 99):.1f} ms, max {1e3 * cpu.max():.1f} ms, total {cpu.sum():.1f} s, "
                  f"p99/median {pct(cpu, 99) / max(pct(cpu, 50), 1e-9):.1f}")
     return "\n".join(lines)
+
+
+def analyse_knobs(recs: list[dict]) -> list[str]:
+    """Each threshold knob tightened alone (KNOB_RUNS) against the default run: the share of
+    well-conditioned values (those a 1e-10 rad change of alpha0 moves by < WELL_CONDITIONED at rtol
+    1e-13) within AGREE and AGREE_ALL, the largest difference, and the scenes whose event counts
+    (transitions, stick phases, impacts) differ, among all scenes and among those whose counts
+    the perturbation leaves alone."""
+    lines = []
+    names = [name for name, _ in KNOB_RUNS if all(name in rec.get("knobs", {}) for rec in recs)]
+    if not names:
+        return ["threshold knobs: not run in this record"]
+    lines.append("threshold knobs at rtol 1e-10 against the default (slip_tol 1e-9 m/s, spin_tol 1e-7 rad/s):")
+    for name in names:
+        n_wc = n_ok = n_ok_all = 0
+        worst = []
+        same = robust = same_robust = 0
+        diff = []
+        for rec in recs:
+            ref = next(r for r in rec["runs"] if r["rtol"] == REF_RTOL)
+            base = next(r for r in rec["runs"] if r["rtol"] == DEFAULT_RTOL)
+            run = rec["knobs"][name]
+            pert = rec["perturbed"]
+            ok_counts = "events" in run and "events" in base and run["events"] == base["events"]
+            same += ok_counts
+            if not ok_counts:
+                diff.append(rec["index"])
+            if "events" in pert and "events" in ref and pert["events"] == ref["events"]:
+                robust += 1
+                same_robust += ok_counts
+            if "q" not in ref or "q" not in pert or "q" not in base:
+                continue
+            for k, vref in ref["q"].items():
+                if vref is None or not math.isfinite(vref) or not _rel(pert["q"].get(k), vref) < WELL_CONDITIONED:
+                    continue
+                vb = base["q"].get(k)
+                if vb is None or not math.isfinite(vb):
+                    continue
+                n_wc += 1
+                d = _rel(run.get("q", {}).get(k), vb)
+                n_ok += d <= AGREE
+                n_ok_all += d <= AGREE_ALL
+                if not d <= AGREE:
+                    worst.append((d, rec["index"], k))
+        worst.sort(key=lambda w: (-w[0] if math.isfinite(w[0]) else -math.inf))
+        lines.append(f"  {name}: well-conditioned within {AGREE:g} of the default {n_ok}/{n_wc} = "
+                     f"{100.0 * n_ok / max(n_wc, 1):.2f} %, within {AGREE_ALL:g} {n_ok_all}/{n_wc}, largest "
+                     f"{(worst[0][0] if worst else 0.0):.2e}; same event counts {same}/{len(recs)} scenes "
+                     f"({100.0 * same / max(len(recs), 1):.1f} %), among scenes whose counts alpha0 + 1e-10 "
+                     f"leaves alone {same_robust}/{robust}" + (f"; counts differ: scenes {diff[:10]}" if diff else ""))
+        if worst:
+            lines.append("    worst: " + "; ".join(f"scene {i} {k} {e:.2e}" for e, i, k in worst[:6]))
+    return lines
 
 
 def main(argv=None) -> int:
