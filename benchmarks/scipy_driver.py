@@ -19,7 +19,12 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   reaches 0, or no root is left near the last one: the stepper cannot continue and the fold is the
   last accepted point); after a fold the hand-over back to SLAVED is off until |u| grows past
   SLAVE_EXIT x u_s again;
-* SLIDE -> ROLL where |u| falls to slip_tol (plastic impulse, its loss booked to sliding); SLIDE ->
+* SLIDE at |u| = slip_tol: its fate from the slip's direction dynamics near u = 0 (the direction
+  flow d nu/ds = cross, d ln|u|/ds = rad integrated with the state frozen, Disk.slip_fate): a slip
+  that shrinks to u = 0 ends (plastic impulse, its loss booked to sliding; ROLL); one that passes by
+  u = 0 (it grows along the direction where the flow settles) goes through it: the impulse removes
+  the slip and a slaved slip leaves from u = 0 along that direction, no transition; one that
+  spirals out slides on with no slip end until |u| is past SLAVE_EXIT x u_s; SLIDE ->
   SLAVED where |u| falls to u_s, onto the root of cross that the direction dynamics
   d nu/d tau = cross/|u| carry the slip to (the cross slip removed plastically); none on the whole
   circle, or a slip that the impulse would leave pointing against the root (it is passing by
@@ -30,7 +35,7 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   slows to |omega.a_i| = spin_tol (from above) sticks there if the moment can hold it, and the
   rate left is stopped by the least (kinetic-energy) change of the velocity that keeps the contact
   and the stuck components at rest (loss booked to k_i), else it stays free;
-* after every discrete update (the driver's 'settle'): a slide at or below slip_tol ends; a
+* after every discrete update (the driver's 'settle'): a slide at or below slip_tol meets its fate; a
   component whose omega.a_i an impulse moved takes the sign of its new omega.a_i (a stuck one is
   released, a finite moment cannot hold it through an impulse, unless the move is within spin_tol;
   a free one left past its switching surface by no more than spin_tol is at rest and gets the stick
@@ -222,10 +227,11 @@ class Contact:
         self.stuck = [False, False, False]
         self.nu = 0.0
         self.slave_off = False
+        self.slow_off = False    # a slide spiralling out from u = 0: no slip end until fast again
 
     def copy(self):
         c = Contact(self.side)
-        c.mode, c.nu, c.slave_off = self.mode, self.nu, self.slave_off
+        c.mode, c.nu, c.slave_off, c.slow_off = self.mode, self.nu, self.slave_off, self.slow_off
         c.sig = list(self.sig)
         c.stuck = list(self.stuck)
         return c
@@ -426,6 +432,80 @@ class Disk:
         c.mode = ROLL
         self.stats["n_transitions"] += 1
 
+    def slip_fate(self, t, y, c):
+        """What a slide at |u| = slip_tol does next (docs/model.md, 'Where a slip ends'), found by
+        integrating the slip's direction dynamics near u = 0 with the rest of the state frozen:
+        in the time s with ds = d tau/|u|, d nu/ds = cross(nu) and d ln|u|/ds = rad(nu) (the slip
+        acceleration across and along s(nu) at the slip vector |u| s(nu)). Integrated (SciPy
+        DOP853) until nu settles (cross at its round-off) or has turned twice round the circle:
+        ("ends", nan) where ln|u| falls at the end (the direction settles where the slip shrinks,
+        or it spirals inwards), ("passes", nu) where it grows along the settled nu, ("spirals_out",
+        nan) where it grows while turning, ("jammed", nan) where the direction runs into the
+        Painleve singularity."""
+        u = math.hypot(y[Y_U1], y[Y_U2])
+        nu0 = math.atan2(y[Y_U2], y[Y_U1])
+        if self.no_solution(nu0, u, t, y, c):
+            return "jammed", math.nan
+        scale = 1.0
+        for j in range(16):
+            scale = max(scale, math.hypot(*self.cross_dot(2.0 * math.pi * j / 16, u, t, y, c)))
+        jammed = []
+
+        def flow(_s, z):
+            if self.no_solution(z[0], u, t, y, c):
+                jammed.append(z[0])
+                return [0.0, 0.0]
+            cr, rd = self.cross_dot(z[0], u, t, y, c)
+            return [cr, rd]
+
+        def settled(_s, z):
+            return abs(self.cross_dot(z[0], u, t, y, c)[0]) - 1e-10 * scale
+        settled.terminal = True
+
+        def turned(_s, z):
+            return abs(z[0] - nu0) - 4.0 * math.pi
+        turned.terminal = True
+        if abs(self.cross_dot(nu0, u, t, y, c)[0]) <= 1e-10 * scale:
+            sol_nu = nu0
+        else:
+            sol = _si.solve_ivp(flow, (0.0, 1e4 / scale), [nu0, 0.0], method="DOP853", rtol=1e-10,
+                                atol=1e-12, events=(settled, turned))
+            if jammed:
+                return "jammed", math.nan
+            sol_nu = sol.y[0, -1]
+            if sol.t_events[1].size:
+                # still turning after two turns: the change of ln|u| over one more full turn decides
+                def one_turn(_s, z):
+                    return abs(z[0] - sol_nu) - 2.0 * math.pi
+                one_turn.terminal = True
+                turn = _si.solve_ivp(flow, (0.0, 1e4 / scale), [sol_nu, 0.0], method="DOP853", rtol=1e-10,
+                                     atol=1e-12, events=(one_turn,))
+                return ("spirals_out", math.nan) if turn.y[1, -1] > 0.0 else ("ends", math.nan)
+        rad = self.cross_dot(sol_nu, u, t, y, c)[1]
+        return ("passes", sol_nu) if rad > 0.0 else ("ends", math.nan)
+
+    def slow_slide(self, t, y, c):
+        """A slide at |u| = slip_tol, by its fate: it ends (plastic impulse, rolling), passes by
+        u = 0 (the impulse removes the slip and a slaved slip leaves from u = 0 along its direction
+        of growth; no transition), or spirals out (it slides on, no slip end until fast again).
+        Returns outcomes.PAINLEVE where the direction is carried into the singularity, else -1."""
+        fate, nu = self.slip_fate(t, y, c)
+        if self.log is not None:
+            self.log.append((t, "slip_fate", fate, nu))
+        self.stats["fate_" + fate] = self.stats.get("fate_" + fate, 0) + 1
+        if fate == "jammed":
+            return outcomes.PAINLEVE
+        if fate == "ends":
+            self.to_roll(y, c)
+        elif fate == "passes":
+            y[Y_DSLIDE] += self.be.project_velocity(y, self.p, c.side, True, c.side, False, self.S)
+            y[Y_U1] = 0.0
+            y[Y_U2] = 0.0
+            c.mode, c.nu, c.slave_off = SLAVED, nu, False
+        else:
+            c.slow_off = True
+        return -1
+
     def start_slip(self, t, y, c):
         c.nu = self.onset_direction(t, y, c)
         c.mode = SLAVED
@@ -462,7 +542,7 @@ class Disk:
         """Contact state for a given slip vector (start, or after an impact while slipping)."""
         un = math.hypot(y[Y_U1], y[Y_U2])
         if un > self.u_tol:
-            c.mode, c.nu, c.slave_off = SLIDE, math.atan2(y[Y_U2], y[Y_U1]), False
+            c.mode, c.nu, c.slave_off, c.slow_off = SLIDE, math.atan2(y[Y_U2], y[Y_U1]), False, False
             _, aux = self.model(t, y, SLIDE, c, y[Y_U1] / un, y[Y_U2] / un)
             if un <= self.slave_speed(aux):
                 return self.try_slave(t, y, c)
@@ -471,7 +551,7 @@ class Disk:
         if math.isinf(root):
             return outcomes.PAINLEVE
         if math.isnan(root):
-            c.mode, c.nu, c.slave_off = SLIDE, math.atan2(y[Y_U2], y[Y_U1]), True
+            c.mode, c.nu, c.slave_off, c.slow_off = SLIDE, math.atan2(y[Y_U2], y[Y_U1]), True, False
         else:
             c.mode, c.nu = SLAVED, root
         return -1
@@ -553,8 +633,10 @@ class Disk:
     def settle(self, t, y, c, g_before, leaving=()):
         """After a discrete update: bring the contact state in line with the state (see the module
         docstring). `leaving`: components just released at an un-stick (on their surface, leaving)."""
-        if c.mode == SLIDE and math.hypot(y[Y_U1], y[Y_U2]) <= self.u_tol:
-            self.to_roll(y, c)
+        if c.mode == SLIDE and not c.slow_off and math.hypot(y[Y_U1], y[Y_U2]) <= self.u_tol:
+            code = self.slow_slide(t, y, c)
+            if code >= 0:
+                return code
         g = _axes(y)
         for i in range(3):
             if self.k[i] > 0.0 and g[i] != g_before[i]:
@@ -594,7 +676,8 @@ class Disk:
                 self.start_slip(t, y, c)
                 changed = True
             if not changed:
-                return
+                return -1
+        return -1
 
     def side_change(self, t, y, c):
         """alpha = 0: plastic impact of the other rim edge. Returns an outcome code or -1."""
@@ -733,7 +816,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                     stats["reslaved_after_update"] += 1
                     continue
                 # none on the circle: the slip spirals, its direction follows its own dynamics
-                c.mode, c.slave_off = SLIDE, True
+                c.mode, c.slave_off, c.slow_off = SLIDE, True, False
                 stats["fold_by_failure"] += 1
                 continue
             c.nu = nu
@@ -786,12 +869,13 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 active.append(UNSTICK[i] if seg.stuck[i] else SIGN[i])
                 if not seg.stuck[i] and w_tol > 0.0:
                     active.append(SPIN[i])
-        active.append({ROLL: "cone", SLIDE: "slipslow", SLAVED: "slipstop"}[seg.mode])
+        if not (seg.mode == SLIDE and seg.slow_off):
+            active.append({ROLL: "cone", SLIDE: "slipslow", SLAVED: "slipstop"}[seg.mode])
         if seg.mode == SLAVED:
             active += ["slipfast", "slave_lost"]
         if seg.mode == SLIDE and not seg.slave_off:
             active.append("slave")
-        if seg.mode == SLIDE and seg.slave_off:
+        if seg.mode == SLIDE and (seg.slave_off or seg.slow_off):
             active.append("slipfast")      # fast again: the hand-over is re-armed
         active += ["contact", "side", "face"]
         active.sort(key=ORDER.index)
@@ -866,7 +950,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                         t, y = solver.t, np.array(solver.y)
                         info_nu = info(t, y)[1]
                         c.nu = info_nu if not math.isnan(info_nu) else seed[0]
-                        c.mode, c.slave_off = SLIDE, True
+                        c.mode, c.slave_off, c.slow_off = SLIDE, True, False
                         stats["fold_by_failure"] += 1
                         stats["n_events"] += 1
                         ev = ("fold", t)
@@ -1076,16 +1160,20 @@ def _apply(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
         leaving_out.append(i)
     elif kind == "cone":
         disk.start_slip(t, y, c)
-    elif kind in ("slipslow", "slipstop"):
+    elif kind == "slipslow":
+        code = disk.slow_slide(t, y, c)
+        if code >= 0:
+            return code
+    elif kind == "slipstop":
         disk.to_roll(y, c)
     elif kind == "slipfast":
-        c.mode, c.slave_off = SLIDE, False
+        c.mode, c.slave_off, c.slow_off = SLIDE, False, False
     elif kind == "slave":
         code = disk.try_slave(t, y, c)
         if code >= 0:
             return code
     elif kind == "slave_lost":
-        c.mode, c.slave_off = SLIDE, True
+        c.mode, c.slave_off, c.slow_off = SLIDE, True, False
     elif kind == "contact":
         return outcomes.CONTACT_LOST
     elif kind == "face":
@@ -1095,5 +1183,4 @@ def _apply(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
         if code >= 0:
             return code
         g_before = (math.nan, math.nan, math.nan)   # every component was moved by the impact
-    disk.settle(t, y, c, g_before, tuple(leaving_out))
-    return -1
+    return disk.settle(t, y, c, g_before, tuple(leaving_out))

@@ -679,7 +679,7 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
     aux = np.zeros(M.N_AUX)
     C.eval_rhs(0.0, y, p, cs, n, f, aux, wk, ist)
     g = np.zeros(L.N_WCOLS)
-    C.event_values(y, aux, p, cs, 1e-9, math.nan, g)
+    C.event_values(0.0, y, aux, p, cs, 1e-9, math.nan, g)
     rates = np.zeros(L.N_WCOLS)
     R.event_rates(0.0, y, f, g, rates, n, 1e-9, math.nan, _group(p, cs, wk, np.zeros((14, M.N_FULL))), ist)
     for k in range(3):
@@ -692,7 +692,7 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
         ys[:n] += eps * f[:n]
         dy, ax, gg = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
         C.eval_rhs(eps, ys, p, cs, n, dy, ax, wk, ist)
-        C.event_values(ys, ax, p, cs, 1e-9, math.nan, gg)
+        C.event_values(0.0, ys, ax, p, cs, 1e-9, math.nan, gg)
         return gg
 
     g_plus, g_minus = g_at(1e-5), g_at(-1e-5)
@@ -733,12 +733,12 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
         dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
         C.eval_rhs(0.0, y, p, cs, M.N_CORE, dy, aux, wk, ist)
         g_true = np.zeros(L.N_WCOLS)
-        C.event_values(y, aux, p, cs, 1e-9, level, g_true)
+        C.event_values(0.0, y, aux, p, cs, 1e-9, level, g_true)
         for k in range(C.N_EVENTS):
             if C.reads_forces(k) or g_true[k] == math.inf:
                 continue
             checked.add(k)
-            assert C.state_event_value(k, y, p, cs, 1e-9, level) == g_true[k], k
+            assert C.state_event_value(k, 0.0, y, p, cs, 1e-9, level) == g_true[k], k
             # on a dense output whose every coefficient is 0, the value at any t is y itself
             rhs_before = ist[L.I_RHS]
             F = np.zeros((14, M.N_FULL))
@@ -774,7 +774,7 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
         dy, aux, g = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
         C.eval_rhs(0.0, y, p, cs, n, dy, aux, wk, ist)
         assert aux[M.X_OK] == 1.0
-        C.event_values(y, aux, p, cs, 1e-12, math.nan, g)
+        C.event_values(0.0, y, aux, p, cs, 1e-12, math.nan, g)
         values.append(g[C.EV_SLIP_STOP])
         # the stored direction would have given another value
         assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[C.EV_SLIP_STOP]) > 1e-3 * u

@@ -28,7 +28,7 @@ from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
-from .model import (N_PARAMS, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
+from .model import (N_PARAMS, P_G, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
                     Y_DSLIDE, Y_U1, Y_U2, Y_W1, energy_from_trig, moment_axes_rates, rhs)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
@@ -68,6 +68,9 @@ SLAVE_EXIT = 4.0
 # cs[CS_SLAVE_OFF] while a slide that spirals out from u = 0 slides on below slip_tol (slow_slide):
 # the hand-over and EV_SLIP_SLOW are both off until the slip is fast again (EV_SLIP_FAST)
 SLOW_OFF = 2.0
+# A passage by u = 0 is resolved in time where it takes at least this many ulps of tau (slip_floor).
+SLIP_RESOLUTION = 1024.0
+EPS = 2.220446049250313e-16
 # Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
 DIR_TOL = 1e-14
 # ... or when cross is at its round-off floor: |cross| <= DIR_NOISE |slip acceleration|. Near a fold
@@ -79,6 +82,16 @@ DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
 DIR_MAXIT = 30
 # attracting_direction's answer where the slip direction is carried into the Painleve singularity
 JAMMED = math.inf
+
+
+@kernel
+def slip_floor(t, p, u_tol):
+    """The slip speed (u_hat) at which a slide meets its fate (EV_SLIP_SLOW, slow_slide): slip_tol,
+    or where larger the round-off floor of a passage by u = 0 at tau = t: the speed that friction's
+    deceleration, ~mu_d G, takes off the slip in SLIP_RESOLUTION ulps of tau. A slide that passes u = 0
+    closer than that turns its direction within steps below the step-size floor (2 EPS tau); its
+    passage is taken in its limit instead (slow_slide), an O(floor) change of the velocity."""
+    return max(u_tol, SLIP_RESOLUTION * EPS * max(abs(t), 1.0) * p[P_MUD] * p[P_G])
 
 
 @kernel
@@ -629,7 +642,7 @@ def reads_forces(k):
 
 
 @kernel
-def state_event_value(k, y, p, cs, u_tol, level_e):
+def state_event_value(k, t, y, p, cs, u_tol, level_e):
     """g_k of an active event that does not read the forces (not reads_forces(k))."""
     if k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
         i = k if k <= EV_SIGN3 else k - EV_SPIN1
@@ -637,7 +650,7 @@ def state_event_value(k, y, p, cs, u_tol, level_e):
         g = cs[CS_SIG + i] * (r1 if i == 0 else (r2 if i == 1 else r3))
         return g if k <= EV_SIGN3 else g - p[P_WTOL]
     if k == EV_SLIP_SLOW:
-        return math.hypot(y[Y_U1], y[Y_U2]) - u_tol
+        return math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, p, u_tol)
     if k == EV_SIDE:
         return cs[CS_SIDE] * y[Y_ALPHA]
     if k == EV_FACE:
@@ -646,7 +659,7 @@ def state_event_value(k, y, p, cs, u_tol, level_e):
 
 
 @kernel
-def event_values(y, aux, p, cs, u_tol, level_e, g):
+def event_values(t, y, aux, p, cs, u_tol, level_e, g):
     """g[k] for every event k (inf where not active). `aux` must belong to `y`."""
     for k in range(N_EVENTS):
         g[k] = math.inf
@@ -665,7 +678,7 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
         g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
     elif mode == SLIDE:
         if cs[CS_SLAVE_OFF] != SLOW_OFF:
-            g[EV_SLIP_SLOW] = state_event_value(EV_SLIP_SLOW, y, p, cs, u_tol, level_e)
+            g[EV_SLIP_SLOW] = state_event_value(EV_SLIP_SLOW, t, y, p, cs, u_tol, level_e)
         if cs[CS_SLAVE_OFF] == 0.0:
             g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(aux, p, u_tol)
         else:
@@ -679,8 +692,8 @@ def event_values(y, aux, p, cs, u_tol, level_e, g):
         g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
         g[EV_SLAVE_LOST] = -aux[X_DCROSS]
     g[EV_CONTACT] = aux[X_PHI]
-    g[EV_SIDE] = state_event_value(EV_SIDE, y, p, cs, u_tol, level_e)
-    g[EV_FACE] = state_event_value(EV_FACE, y, p, cs, u_tol, level_e)
+    g[EV_SIDE] = state_event_value(EV_SIDE, t, y, p, cs, u_tol, level_e)
+    g[EV_FACE] = state_event_value(EV_FACE, t, y, p, cs, u_tol, level_e)
     if not math.isnan(level_e):
         g[EV_LEVEL] = mode_energy_at(y, aux, p, cs) - level_e   # state_event_value's, from aux
 
@@ -789,7 +802,7 @@ def settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own):
     components that the update moved are released (release_moved: g_before, omega.a_i before it)
     and every sign made consistent (settle_signs, leaving component own); a rolling state left
     outside the static cone starts to slip. Returns the outcome that ends the scene, else -1."""
-    if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF and math.hypot(y[Y_U1], y[Y_U2]) <= u_tol:
+    if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF and math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, p, u_tol):
         # the slip reached slip_tol within the located event's bracket (a stiff slip decays by
         # orders of magnitude in 1e-11 tau): its own event can no longer happen
         code = slow_slide(t, y, p, cs, n, wk, istats)

@@ -458,7 +458,7 @@ def begin(settings, lev, sample_tau, work, rec):
     start_code = start(y, p, cs, n, u_tol, wk, istats)
     eval_rhs(0.0, y, p, cs, n, f, aux, wk, istats)
     fstats[F_E0] = mode_energy(y, p, cs)
-    event_values(y, aux, p, cs, u_tol, lev, wk[W_GOLD])
+    event_values(0.0, y, aux, p, cs, u_tol, lev, wk[W_GOLD])
     outcome = -1
     if aux[X_PHI] <= 0.0:
         outcome = oc.CONTACT_LOST
@@ -573,7 +573,7 @@ def restart_after_event(k, t, y, p, cs, n, u_tol, lev, wk, istats, fstats):
         # the update (an impact) leaves the disk with no compressive normal force: it leaves the
         # table here (its own event, Phi falling through 0, cannot happen)
         return oc.CONTACT_LOST
-    event_values(y, aux, p, cs, u_tol, lev, wk[W_GOLD])
+    event_values(t, y, aux, p, cs, u_tol, lev, wk[W_GOLD])
     return -1
 
 
@@ -750,7 +750,7 @@ def run(settings, level_e, sample_tau, work, rec):
             outcome = failure_outcome(wk[W_AUXNEW, X_OK])
             break
         # the earliest event on the step: the kept part ends there
-        event_values(wk[W_YNEW], wk[W_AUXNEW], p, cs, u_tol, lev, wk[W_GNEW])
+        event_values(t + h, wk[W_YNEW], wk[W_AUXNEW], p, cs, u_tol, lev, wk[W_GNEW])
         first_k, seg_end, have_dense = first_event(t, h, n, u_tol, lev, work, istats)
         event = first_k >= 0
         if event and running and t < trk[T_DIP_END] < t + h:

@@ -152,7 +152,7 @@ def event_rates(t, y, f, g_here, rates, n, u_tol, level_e, work, istats):
     for i in range(n):
         ys[i] = y[i] + RATE_STEP * f[i]
     eval_rhs(t + RATE_STEP, ys, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
-    event_values(ys, wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
+    event_values(t + RATE_STEP, ys, wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
     for k in range(N_EVENTS):
         gk = wk[W_GBUF, k]
         if g_here[k] == math.inf or gk == math.inf:
@@ -174,9 +174,9 @@ def event_value_at(k, t, span, n, u_tol, level_e, work, istats):
     p, cs, wk = work.p, span.cs, work.wk
     span_state(t, span, n, work)
     if not reads_forces(k):
-        return state_event_value(k, wk[W_YBUF], p, cs, u_tol, level_e)
+        return state_event_value(k, t, wk[W_YBUF], p, cs, u_tol, level_e)
     eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
-    event_values(wk[W_YBUF], wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
+    event_values(t, wk[W_YBUF], wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
     return wk[W_GBUF, k]
 
 
