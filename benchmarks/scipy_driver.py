@@ -82,7 +82,7 @@ from sweep import outcomes
 from sweep.core import contact as _contact
 from sweep.core import impulse as _impulse
 from sweep.core import model
-from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, X_F1, X_F2, X_G1,
+from sweep.core.model import (N_AUX, N_CORE, P_A, P_G, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, X_F1, X_F2, X_G1,
                               X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DK1, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3)
 from sweep.scene import Scene, load_scene
 from sweep.simulate import initial_state, level_energies
@@ -341,6 +341,12 @@ class Disk:
 
     def energy(self, y, c):
         return self.be.energy(y, self.p, c.side, ROLL if c.mode == ROLL else SLIDE)
+
+    def slip_floor(self, t):
+        """The slip speed at which a slide meets its fate: slip_tol, or the speed that a deceleration
+        mu_d G takes off in 1024 ulps of tau where that is larger (a passage by u = 0 closer than
+        that cannot be stepped through in double precision; docs/model.md)."""
+        return max(self.u_tol, 1024.0 * np.finfo(float).eps * max(abs(t), 1.0) * self.p[P_MUD] * self.p[P_G])
 
     def slave_speed(self, aux):
         return max(self.u_tol, SLAVE_EPS * self.p[P_MUD] * aux[X_PHI])
@@ -633,7 +639,7 @@ class Disk:
     def settle(self, t, y, c, g_before, leaving=()):
         """After a discrete update: bring the contact state in line with the state (see the module
         docstring). `leaving`: components just released at an un-stick (on their surface, leaving)."""
-        if c.mode == SLIDE and not c.slow_off and math.hypot(y[Y_U1], y[Y_U2]) <= self.u_tol:
+        if c.mode == SLIDE and not c.slow_off and math.hypot(y[Y_U1], y[Y_U2]) <= self.slip_floor(t):
             code = self.slow_slide(t, y, c)
             if code >= 0:
                 return code
@@ -893,7 +899,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             if kind == "cone":
                 return p[P_MUS] * a[X_PHI] - math.hypot(a[X_F1], a[X_F2])
             if kind == "slipslow":
-                return math.hypot(yy[Y_U1], yy[Y_U2]) - u_tol
+                return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slip_floor(tt)
             if kind == "slave":
                 return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slave_speed(a)
             if kind == "slipstop":
