@@ -29,7 +29,7 @@ from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
 from .model import (N_PARAMS, P_G, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
-                    Y_DSLIDE, Y_U1, Y_U2, Y_W1, energy_from_trig, moment_axes_rates, rhs)
+                    Y_DSLIDE, Y_U1, Y_U2, Y_W1, energy_from_trig, moment_axes_rates, rhs, sign_rate)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
 EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against its moment's sign
@@ -68,6 +68,9 @@ SLAVE_EXIT = 4.0
 # cs[CS_SLAVE_OFF] while a slide that spirals out from u = 0 slides on below slip_tol (slow_slide):
 # the hand-over and EV_SLIP_SLOW are both off until the slip is fast again (EV_SLIP_FAST)
 SLOW_OFF = 2.0
+# tau: the central difference of d/dtau(omega.a_i) along the flow for its second derivative
+# (spin_reaches_rest); its error is O(SPIN_DIFF^2) of g'''', its round-off EPS |g'| / SPIN_DIFF.
+SPIN_DIFF = 1e-5
 # A passage by u = 0 is resolved in time where it takes at least this many ulps of tau (slip_floor).
 SLIP_RESOLUTION = 1024.0
 EPS = 2.220446049250313e-16
@@ -540,12 +543,44 @@ def stick_or_flip(i, t, y, p, cs, n, wk, istats):
 
 
 @kernel
+def spin_reaches_rest(i, t, y, p, cs, n, wk, istats):
+    """Free component i slowing through |omega.a_i| = spin_tol: does it go on to rest, omega.a_i = 0,
+    rather than turn back above it (docs/model.md, 'Sticking at spin_tol')? Read from the state: g =
+    sigma_i omega.a_i, its rate g' (exact, from the right-hand side) and g'' (a central difference of
+    g' along the flow, SPIN_DIFF); the local parabola g + g' s + g'' s^2/2 reaches 0 where g' < 0 and
+    g'^2 >= 2 g g'' (or g'' <= 0). Where it turns back, its minimum lies above 0 and the exact
+    Filippov rule would never stick it; where it reaches 0, it gets the stick test there and is
+    stuck at spin_tol instead, O(spin_tol) early. Uses wk[W_SCRATCH:W_SCRATCH + 3]."""
+    dy = wk[W_DYTMP]
+    ys = wk[W_SCRATCH]
+    dys = wk[W_SCRATCH + 1]
+    auxs = wk[W_SCRATCH + 2]
+    sig = cs[CS_SIG + i]
+    eval_rhs(t, y, p, cs, n, dy, wk[W_AUXTMP], wk, istats)
+    g = sig * moment_axes_rates(y)[i]
+    d1 = sig * sign_rate(i, y, dy)
+    if not d1 < 0.0:
+        return False
+    for j in range(n):
+        ys[j] = y[j] + SPIN_DIFF * dy[j]
+    eval_rhs(t + SPIN_DIFF, ys, p, cs, n, dys, auxs, wk, istats)
+    up = sign_rate(i, ys, dys)
+    for j in range(n):
+        ys[j] = y[j] - SPIN_DIFF * dy[j]
+    eval_rhs(t - SPIN_DIFF, ys, p, cs, n, dys, auxs, wk, istats)
+    d2 = sig * (up - sign_rate(i, ys, dys)) / (2.0 * SPIN_DIFF)
+    return d2 <= 0.0 or d1 * d1 >= 2.0 * g * d2
+
+
+@kernel
 def stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
-    """A free component has slowed to |omega.a_i| = spin_tol: if the moment can hold it (|sigma
-    needed| < 1, the stick test of stick_or_flip), it sticks, and the rate left is stopped by an
-    impulsive contact moment (impulse.stop_axis_rate, its energy booked to k_i). Else it stays free
-    with its sign (it will cross 0 or speed up again). Returns whether it stuck."""
-    if abs(needed_sigma(i, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)) < 1.0:
+    """A free component has slowed to |omega.a_i| = spin_tol: if it goes on to rest
+    (spin_reaches_rest) and the moment can hold it there (|sigma needed| < 1, the stick test of
+    stick_or_flip), it sticks, and the rate left is stopped by an impulsive contact moment
+    (impulse.stop_axis_rate, its energy booked to k_i). Else it stays free with its sign (it will
+    cross 0, where the Filippov rule decides, or speed up again). Returns whether it stuck."""
+    if spin_reaches_rest(i, t, y, p, cs, n, wk, istats) \
+            and abs(needed_sigma(i, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)) < 1.0:
         cs[CS_STUCK + i] = 1.0
         y[Y_DK1 + i] += stop_axis_rate(y, p, cs, i, wk[W_SCRATCH:W_SCRATCH + 7])
         istats[I_STICK] += 1

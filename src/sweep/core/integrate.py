@@ -14,7 +14,7 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
-from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SLAVE, EV_SLIP_SLOW, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved,
+from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SLAVE, EV_SLIP_SLOW, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved, spin_reaches_rest,
                       consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
@@ -295,14 +295,15 @@ def dip_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
 
 @kernel
 def spin_holds(i, t_event, span, n, work, istats):
-    """Would free component i stick at its spin event at t_event on span's dense output (|sigma
-    needed| < 1 there, the test contact.stick_at_spin_tol makes)? Where it would not, the event
+    """Would free component i stick at its spin event at t_event on span's dense output (it goes on
+    to rest and |sigma needed| < 1 there, the tests contact.stick_at_spin_tol makes)? Where it would not, the event
     changes nothing, and the step goes on instead of restarting there (the same trajectory, fewer
     restarts)."""
     wk = work.wk
     span_state(t_event, span, n, work)
-    return abs(needed_sigma(i, t_event, wk[W_YBUF], work.p, span.cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk,
-                            istats)) < 1.0
+    return spin_reaches_rest(i, t_event, wk[W_YBUF], work.p, span.cs, n, wk, istats) \
+        and abs(needed_sigma(i, t_event, wk[W_YBUF], work.p, span.cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk,
+                             istats)) < 1.0
 
 
 @kernel

@@ -85,6 +85,20 @@ def moment_axes_rates(y):
 
 
 @kernel
+def sign_rate(k, y, dy):
+    """d/dtau of omega.a_k (k = 0, 1, 2) from the state and its derivative."""
+    a = y[Y_ALPHA]
+    s = math.sin(a)
+    c = math.cos(a)
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
+    if k == 0:
+        return dy[Y_W1]
+    if k == 1:
+        return dy[Y_W2] * c - dy[Y_W3] * s - w1 * (w2 * s + w3 * c)
+    return dy[Y_W2] * s + dy[Y_W3] * c + w1 * (w2 * c - w3 * s)
+
+
+@kernel
 def height_above_flat(alpha, h):
     """height_from_trig at the inclination alpha."""
     return height_from_trig(math.sin(alpha), math.cos(alpha), h)

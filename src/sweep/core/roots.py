@@ -14,7 +14,7 @@ from .contact import N_EVENTS, eval_rhs, event_values, reads_forces, state_event
 from .dop853 import dense_eval
 from .jit import kernel
 from .layout import W_AUXBUF, W_DYBUF, W_GBUF, W_YBUF
-from .model import X_PHI, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
+from .model import X_PHI, Y_U1, Y_U2, sign_rate
 
 # Events are located to 4 ulp of tau, where the bracket cannot shrink further, with this floor near
 # tau = 0. The restart point is the bracket's right end, so each event restarts up to the tolerance
@@ -26,20 +26,6 @@ EVENT_TOL_TAU = 1e-15
 EPS = 2.220446049250313e-16
 # Step (tau) of the forward difference that gives the rate of an event function without a closed form.
 RATE_STEP = 1e-7
-
-
-@kernel
-def sign_rate(k, y, dy):
-    """d/dtau of omega.a_k (k = 0, 1, 2) from the state and its derivative."""
-    a = y[Y_ALPHA]
-    s = math.sin(a)
-    c = math.cos(a)
-    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
-    if k == 0:
-        return dy[Y_W1]
-    if k == 1:
-        return dy[Y_W2] * c - dy[Y_W3] * s - w1 * (w2 * s + w3 * c)
-    return dy[Y_W2] * s + dy[Y_W3] * c + w1 * (w2 * c - w3 * s)
 
 
 @kernel
