@@ -68,9 +68,9 @@ SLAVE_EXIT = 4.0
 # cs[CS_SLAVE_OFF] while a slide that spirals out from u = 0 slides on below slip_tol (slow_slide):
 # the hand-over and EV_SLIP_SLOW are both off until the slip is fast again (EV_SLIP_FAST)
 SLOW_OFF = 2.0
-# tau: the central difference of d/dtau(omega.a_i) along the flow for its second derivative
-# (spin_reaches_rest); its error is O(SPIN_DIFF^2) of g'''', its round-off EPS |g'| / SPIN_DIFF.
-SPIN_DIFF = 1e-5
+# tau: the differences of d/dtau(omega.a_i) along the motion for its second and third derivatives
+# (spin_reaches_rest): truncation O(SPIN_DIFF^2) and O(SPIN_DIFF), round-off EPS |g1| / SPIN_DIFF^2.
+SPIN_DIFF = 1e-3
 # A passage by u = 0 is resolved in time where it takes at least this many ulps of tau (slip_floor).
 SLIP_RESOLUTION = 1024.0
 EPS = 2.220446049250313e-16
@@ -545,31 +545,71 @@ def stick_or_flip(i, t, y, p, cs, n, wk, istats):
 @kernel
 def spin_reaches_rest(i, t, y, p, cs, n, wk, istats):
     """Free component i slowing through |omega.a_i| = spin_tol: does it go on to rest, omega.a_i = 0,
-    rather than turn back above it (docs/model.md, 'Sticking at spin_tol')? Read from the state: g =
-    sigma_i omega.a_i, its rate g' (exact, from the right-hand side) and g'' (a central difference of
-    g' along the flow, SPIN_DIFF); the local parabola g + g' s + g'' s^2/2 reaches 0 where g' < 0 and
-    g'^2 >= 2 g g'' (or g'' <= 0). Where it turns back, its minimum lies above 0 and the exact
-    Filippov rule would never stick it; where it reaches 0, it gets the stick test there and is
-    stuck at spin_tol instead, O(spin_tol) early. Uses wk[W_SCRATCH:W_SCRATCH + 3]."""
-    dy = wk[W_DYTMP]
-    ys = wk[W_SCRATCH]
-    dys = wk[W_SCRATCH + 1]
-    auxs = wk[W_SCRATCH + 2]
+    rather than turn back above it (docs/model.md, 'Sticking at spin_tol')? Read from the state:
+    g = sigma_i omega.a_i and its first three derivatives along the motion, g1 exact from the
+    right-hand side, g2 and g3 by differences of g1 at the trajectory points tau +- SPIN_DIFF
+    (second-order Taylor steps of the state); the cubic g + g1 s + g2 s^2/2 + g3 s^3/6 reaches 0
+    before its first minimum, or not. Where the motion turns back, its minimum lies above 0 and the
+    exact Filippov rule never sticks it; where it reaches 0, it gets the stick test there and is
+    stuck at spin_tol instead, O(spin_tol) early. Uses wk[W_SCRATCH:W_SCRATCH + 6]."""
+    f0 = wk[W_SCRATCH]
+    fp = wk[W_SCRATCH + 1]
+    fm = wk[W_SCRATCH + 2]
+    ys = wk[W_SCRATCH + 3]
+    dys = wk[W_SCRATCH + 4]
+    auxs = wk[W_SCRATCH + 5]
     sig = cs[CS_SIG + i]
-    eval_rhs(t, y, p, cs, n, dy, wk[W_AUXTMP], wk, istats)
+    d = SPIN_DIFF
+    eval_rhs(t, y, p, cs, n, f0, auxs, wk, istats)
     g = sig * moment_axes_rates(y)[i]
-    d1 = sig * sign_rate(i, y, dy)
-    if not d1 < 0.0:
+    g1 = sig * sign_rate(i, y, f0)
+    if not g1 < 0.0:
         return False
     for j in range(n):
-        ys[j] = y[j] + SPIN_DIFF * dy[j]
-    eval_rhs(t + SPIN_DIFF, ys, p, cs, n, dys, auxs, wk, istats)
-    up = sign_rate(i, ys, dys)
+        ys[j] = y[j] + d * f0[j]
+    eval_rhs(t + d, ys, p, cs, n, fp, auxs, wk, istats)
     for j in range(n):
-        ys[j] = y[j] - SPIN_DIFF * dy[j]
-    eval_rhs(t - SPIN_DIFF, ys, p, cs, n, dys, auxs, wk, istats)
-    d2 = sig * (up - sign_rate(i, ys, dys)) / (2.0 * SPIN_DIFF)
-    return d2 <= 0.0 or d1 * d1 >= 2.0 * g * d2
+        ys[j] = y[j] - d * f0[j]
+    eval_rhs(t - d, ys, p, cs, n, fm, auxs, wk, istats)
+    # the motion at tau +- d to O(d^3): y +- d f + d^2/2 f', f' by the central difference
+    for j in range(n):
+        ys[j] = y[j] + d * f0[j] + 0.25 * d * (fp[j] - fm[j])
+    eval_rhs(t + d, ys, p, cs, n, dys, auxs, wk, istats)
+    up = sig * sign_rate(i, ys, dys)
+    for j in range(n):
+        ys[j] = y[j] - d * f0[j] + 0.25 * d * (fp[j] - fm[j])
+    eval_rhs(t - d, ys, p, cs, n, dys, auxs, wk, istats)
+    down = sig * sign_rate(i, ys, dys)
+    g2 = (up - down) / (2.0 * d)
+    g3 = (up - 2.0 * g1 + down) / (d * d)
+    return cubic_reaches_zero(g, g1, g2, g3)
+
+
+@kernel
+def cubic_reaches_zero(g, g1, g2, g3):
+    """Does c(s) = g + g1 s + g2 s^2/2 + g3 s^3/6, with g > 0 and g1 < 0, reach 0 at some s > 0 before
+    its first local minimum there? (The minimum is the first root of c'(s) = g1 + g2 s + g3 s^2/2
+    where c'' > 0; without one, c falls for ever.)"""
+    a = 0.5 * g3
+    if a == 0.0:
+        if not g2 > 0.0:
+            return True
+        s = -g1 / g2
+    else:
+        disc = g2 * g2 - 4.0 * a * g1
+        if disc < 0.0:
+            return True            # c' < 0 for every s (a < 0 here): c falls through 0
+        r = math.sqrt(disc)
+        # the roots of a s^2 + g2 s + g1, written without cancellation
+        q = -0.5 * (g2 + (r if g2 >= 0.0 else -r))
+        s = math.inf
+        if q != 0.0:
+            for x in (q / a, g1 / q):
+                if 0.0 < x < s and g2 + 2.0 * a * x > 0.0:
+                    s = x
+        if s == math.inf:
+            return True
+    return g + s * (g1 + s * (0.5 * g2 + s * g3 / 6.0)) <= 0.0
 
 
 @kernel
