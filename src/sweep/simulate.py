@@ -115,7 +115,7 @@ def summary_from(sc: Scene, istats: np.ndarray, fstats: np.ndarray, lev: np.ndar
         # the disk that reached the table face-down halted there, located as an event
         fits = np.empty(N_DERIVED)
         summary_fits(level_t, prec_hz, np.asarray(levels, dtype=float), len(levels), lay_flat,
-                     float(fstats[F_TEND]), chi, fits)
+                     np.asarray(fstats, dtype=float), chi, fits)
     t_end = float(fstats[F_TEND]) * chi
     dis = y_end[model.Y_DSLIDE:model.Y_DK3 + 1] * escale
     return {

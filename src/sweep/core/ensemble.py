@@ -28,9 +28,10 @@ from collections import namedtuple
 import numpy as np
 
 from .frequency import FQ_COLS, FQ_LEVEL0
+from .halt import halt_from_three
 from .integrate import run
 from .jit import kernel
-from .layout import (F_TEND, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
+from .layout import (F_APPROACH, F_TEND, F_THALT, F_THALT_ERR, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
                      N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS, Record, Work)
 from .model import N_FULL, N_PARAMS
 from .roots import location_tol
@@ -62,41 +63,7 @@ N_SCRATCH = 2
 TWO_PI = 2.0 * math.pi
 
 
-# --- halt time and exponents (diagnostics.py explains the method) -------------------------------
-@kernel
-def _halt_residual(x, t1, t2, t3, rho):
-    return math.log((x - t1) / (x - t2)) / math.log((x - t2) / (x - t3)) - rho
-
-
-@kernel
-def halt_from_three(t1, t2, t3, b1, b2, b3):
-    """(t_halt, p) from three level times t1 < t2 < t3 and inclinations b1 > b2 > b3, or NaNs."""
-    d1 = t2 - t1
-    d2 = t3 - t2
-    if not (d1 > 0.0 and d2 > 0.0):
-        return math.nan, math.nan
-    rho = math.log(b1 / b2) / math.log(b2 / b3)
-    if d1 / d2 <= rho:       # the root x runs off to infinity: no finite halt
-        return math.nan, math.nan
-    lo = t3 + 1e-12 * max(1.0, abs(t3))
-    hi = t3 + d2
-    while _halt_residual(hi, t1, t2, t3, rho) < 0.0:
-        hi = t3 + 2.0 * (hi - t3)
-        if hi - t3 > 1e12 * d2:
-            return math.nan, math.nan
-    # the residual increases from -rho at x = t3+ to d1/d2 - rho > 0 at infinity: bisection to round-off
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if mid <= lo or mid >= hi:
-            break
-        if _halt_residual(mid, t1, t2, t3, rho) < 0.0:
-            lo = mid
-        else:
-            hi = mid
-    x = 0.5 * (lo + hi)
-    return x, math.log(b2 / b3) / math.log((x - t2) / (x - t3))
-
-
+# --- halt time and exponents (diagnostics.py explains the method; halt_from_three: core/halt.py) ----
 @kernel
 def halt_fit(level_t, levels, nl, out):
     """out[D_THALT, D_THALT_ERR, D_HALT_FINITE, D_APPROACH] from the last reached levels
@@ -166,16 +133,23 @@ def ramp_fit(level_t, precession, nl, t_halt):
 
 
 @kernel
-def summary_fits(level_t, prec_hz, levels, nl, lay_flat, t_end_tau, chi, out):
+def summary_fits(level_t, prec_hz, levels, nl, lay_flat, fstats, chi, out):
     """The summary's fitted numbers into out (D_*). level_t (s), prec_hz (Hz), levels (rad): the
-    first nl entries. A disk that lay flat halted at the located event t_end_tau."""
+    first nl entries; fstats: the run's (layout.F_*). A disk that lay flat halted at the located
+    event fstats[F_TEND]; where the configured levels give no finite halt, the integrator's fit on
+    the levels below them (fstats[F_THALT], tracking.deep_levels) is taken."""
     if lay_flat:
-        out[D_THALT] = t_end_tau * chi
-        out[D_THALT_ERR] = location_tol(t_end_tau) * chi
+        out[D_THALT] = fstats[F_TEND] * chi
+        out[D_THALT_ERR] = location_tol(fstats[F_TEND]) * chi
         out[D_HALT_FINITE] = 1.0
         out[D_APPROACH] = math.nan
     else:
         halt_fit(level_t, levels, nl, out)
+        if math.isnan(out[D_THALT]) and not math.isnan(fstats[F_THALT]):
+            out[D_THALT] = fstats[F_THALT] * chi
+            out[D_THALT_ERR] = fstats[F_THALT_ERR] * chi
+            out[D_HALT_FINITE] = 1.0
+            out[D_APPROACH] = fstats[F_APPROACH]
     out[D_RAMP], out[D_RAMP_ERR] = ramp_fit(level_t, prec_hz, nl, out[D_THALT])
 
 
@@ -230,7 +204,7 @@ def solve_scene(inp, chi, work, rec, fits):
         scratch[R_LEVEL_T, L] = lev[L, 0] * chi
         scratch[R_PREC_HZ, L] = abs(lev[L, 2]) / chi / TWO_PI
     summary_fits(scratch[R_LEVEL_T], scratch[R_PREC_HZ], inp.levels, nl, rec.istats[I_FLAT] != 0,
-                 rec.fstats[F_TEND], chi, fits.derived)
+                 rec.fstats, chi, fits.derived)
 
 
 # --- a worker over the batch ---------------------------------------------------------------------

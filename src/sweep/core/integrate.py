@@ -19,16 +19,16 @@ from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SLAVE, EV_SLI
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
-from .layout import (I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
+from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_E, I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_CUT, T_DIMPACT_HALT,
                      T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Record, Segment, Span, Work)
 from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
-from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, sign_slopes, slip_closest_approach, span_state
+from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, location_tol, sign_slopes, slip_closest_approach, span_state
 from .tableau import N_STAGES
-from .tracking import (dense_wanted, halt_flat, record_levels, record_sample, record_samples, record_traj,
+from .tracking import (deep_levels, deep_pending, start_deep_levels, dense_wanted, halt_flat, record_levels, record_sample, record_samples, record_traj,
                        track_frequency)
 
 EPS = 2.220446049250313e-16
@@ -452,6 +452,10 @@ def begin(settings, lev, sample_tau, work, rec):
     aux = wk[W_AUX]
     p[P_UFREEZE] = u_tol
     fstats[F_TIMPACT] = -math.inf
+    fstats[F_THALT] = math.nan
+    fstats[F_THALT_ERR] = math.nan
+    fstats[F_APPROACH] = math.nan
+    trk[T_DEEP_E] = math.nan
     trk[T_END_TRANS] = -1.0
     trk[T_END_STICK] = -1.0
     trk[T_END_IMPACTS] = -1.0
@@ -671,8 +675,11 @@ def record_segment(seg, e_seg, outcome, lev, settings, level_e, sample_tau, work
             outcome = oc.HALTED
             dense_eval(work.F, 0, y, seg.t, seg.h, t_halt, n, wk[W_YBUF])
             mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, rec.y_end, istats)
+            start_deep_levels(level_e, rec.levels, p, trk, fstats)
         elif int(trk[T_NEXT_LEVEL]) < level_e.shape[0]:
             lev = level_e[int(trk[T_NEXT_LEVEL])]
+    elif deep_pending(trk):
+        deep_levels(seg.t, seg.h, seg.end, e_seg, settings[S_UTOL], n, work, rec)
     record_samples(seg.t, seg.h, seg.end, fstats[F_TEND] if outcome >= 0 else math.inf, sample_tau, n, work, rec)
     if peaks_on:
         track_frequency(seg.t, seg.h, seg.end, phi_c, have_dense, seg.running, n, work, rec)
@@ -711,6 +718,11 @@ def end_segment(seg, outcome, lev, settings, level_e, work, rec):
     elif seg.running:
         outcome = code
         fstats[F_TEND] = t
+    elif code == oc.FACE_CONTACT and deep_pending(trk):
+        # the halt fit waited for a deeper level, and the disk lies flat first: it halted here
+        fstats[F_THALT] = t
+        fstats[F_THALT_ERR] = location_tol(t)
+        trk[T_DEEP_E] = math.nan
     return outcome, True
 
 
@@ -732,10 +744,10 @@ def run(settings, level_e, sample_tau, work, rec):
     t = 0.0
     after_reject = False
     # after a halt (the last level: the disk still moves) the steps go on while a level's frequencies
-    # wait for the motion after it: until they are complete, the motion ends (an event's outcome,
-    # twice the end's tau), or a guard stops. Every other end (t_max, contact lost, ...) ends the
+    # wait for the motion after it, or the halt fit for a deeper level: until they are complete, the
+    # motion ends (an event's outcome, twice the end's tau), or a guard stops. Every other end (t_max, contact lost, ...) ends the
     # motion the scene simulates: nothing is integrated past it.
-    while outcome < 0 or (outcome == oc.HALTED and trk[T_PENDING] > 0.0):
+    while outcome < 0 or (outcome == oc.HALTED and (trk[T_PENDING] > 0.0 or deep_pending(trk))):
         running = outcome < 0
         h, outcome, at_tmax, stop = next_try(t, h, outcome, settings, work, rec)
         if stop:

@@ -76,7 +76,10 @@ N_ISTATS = 15
 
 # --- float statistics ---------------------------------------------------------------------------
 F_TEND, F_SLIDETIME, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_NFMAX, F_TIMPACT = range(8)
-N_FSTATS = 8
+# the halt time (tau), its error and the approach exponent from the levels below the last one, where
+# the configured levels give no finite halt (tracking.deep_levels); NaN where not needed or not found
+F_THALT, F_THALT_ERR, F_APPROACH = 8, 9, 10
+N_FSTATS = 11
 
 # --- tracking state of the level/peak/sample recorders (float64) ----------------------------------
 T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PHI_A, T_PHI_B, T_TA, T_TB, T_PREV_OK, T_TPREV, T_HPREV = range(9)
@@ -94,7 +97,11 @@ T_END_TRANS, T_END_STICK, T_END_IMPACTS = 18, 19, 20   # event counts at the sce
                   # t_max; -1 before it): the steps after a halt do not count
 T_H_AFTER = 21    # the last step size before the end (the steps after it do not grow past it; 0 before)
 T_T_AFTER = 22    # ... nor run past this tau (twice the end's)
-N_TRACK = 23
+T_DEEP_E = 23     # the energy of the next level below the last one that the halt fit waits for (NaN: none)
+T_DEEP_B = 24     # ... its inclination (rad)
+T_FIT_T = 25      # 3 slots: the tau of the last three levels crossed, oldest first (the halt fit's input)
+T_FIT_B = 28      # 3 slots: ... their inclinations (rad)
+N_TRACK = 31
 
 # --- RK stage buffer ----------------------------------------------------------------------------
 K_PREV = N_STAGES_EXTENDED      # first row of the previous step's stages

@@ -11,11 +11,12 @@ import math
 from .contact import EV_LEVEL, eval_rhs, mode_energy
 from .dop853 import N_DENSE, dense_coeffs, dense_eval
 from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_step, open_level, peak_candidate, peak_confirmed
+from .halt import halt_from_three
 from .jit import kernel
-from .layout import (CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_CS, T_NEXT_LEVEL, T_PREV_DENSE,
+from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_B, T_DEEP_E, T_FIT_B, T_FIT_T, CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_CS, T_NEXT_LEVEL, T_PREV_DENSE,
                      T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
                      T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND, Span)
-from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA
+from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA, steady_rolling_energy
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
 
@@ -31,10 +32,13 @@ PEAK_SIDE_TOL = 1e-12
 @kernel
 def dense_wanted(running, seg_end, e_seg, theta_seg, level_e, sample_tau, trk, fq, phi_c, peaks_on):
     """Whether a recorder reads this segment's dense output (the tests they make): a level crossed
-    (while running), a sample due, a new point of the precession lattice, a bracketed Phi maximum.
-    e_seg, theta_seg: the energy (mode_energy) and theta at the segment end."""
+    (while running, or one the halt fit waits for after the halt), a sample due, a new point of the
+    precession lattice, a bracketed Phi maximum. e_seg, theta_seg: the energy (mode_energy) and
+    theta at the segment end."""
     L = int(trk[T_NEXT_LEVEL])
     if running and L < level_e.shape[0] and e_seg - level_e[L] <= 0.0:
+        return True
+    if not running and deep_pending(trk) and e_seg - trk[T_DEEP_E] <= 0.0:
         return True
     j = int(trk[T_NEXT_SAMPLE])
     if j < sample_tau.shape[0] and sample_tau[j] <= seg_end:
@@ -282,3 +286,107 @@ def shift_peak_window(t, h, seg_end, phi_c, have_dense, n, work):
     trk[T_TPREV] = t
     trk[T_HPREV] = h
     trk[T_PREV_OK] = 1.0
+
+
+# Each level the halt fit waits for after the last one lies this factor below the one before (decades,
+# as the default levels).
+DEEP_FACTOR = 10.0
+
+
+@kernel
+def level_inclination(e, p):
+    """The inclination beta (rad) of the steady rolling motion of energy e (E_ss^-1, model.
+    steady_rolling_energy, which increases from 0 at beta = 0 up to the largest valid level),
+    by bisection to round-off."""
+    lo = 0.0
+    hi = 1e-3
+    while steady_rolling_energy(hi, p) < e and hi < 0.5 * math.pi:
+        hi = min(2.0 * hi, 0.5 * math.pi)
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        if steady_rolling_energy(mid, p) < e:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+@kernel
+def push_fit_level(trk, tau, beta):
+    """A level crossed at tau with inclination beta joins the last three (trk[T_FIT_*])."""
+    for j in range(2):
+        trk[T_FIT_T + j] = trk[T_FIT_T + j + 1]
+        trk[T_FIT_B + j] = trk[T_FIT_B + j + 1]
+    trk[T_FIT_T + 2] = tau
+    trk[T_FIT_B + 2] = beta
+
+
+@kernel
+def fit_last_three(trk):
+    """(t_halt, p) of the halt fit (halt.halt_from_three) on the last three levels crossed, NaNs
+    where there are fewer or the fit has no finite root."""
+    if math.isnan(trk[T_FIT_T]):
+        return math.nan, math.nan
+    return halt_from_three(trk[T_FIT_T], trk[T_FIT_T + 1], trk[T_FIT_T + 2],
+                           trk[T_FIT_B], trk[T_FIT_B + 1], trk[T_FIT_B + 2])
+
+
+@kernel
+def deep_pending(trk):
+    """Is a level below the last one still awaited for the halt fit?"""
+    return not math.isnan(trk[T_DEEP_E])
+
+
+@kernel
+def next_deep_level(trk, p):
+    """The halt fit waits for the level DEEP_FACTOR below the last one crossed."""
+    trk[T_DEEP_B] = trk[T_FIT_B + 2] / DEEP_FACTOR
+    trk[T_DEEP_E] = steady_rolling_energy(trk[T_DEEP_B], p)
+
+
+@kernel
+def start_deep_levels(level_e, levels, p, trk, fstats):
+    """At the halt (the last configured level crossed, levels[:, 0] their tau): the halt fit on the
+    last three levels; where it has no finite root (the level times do not yet show the final
+    approach, or there are fewer than three levels), the steps after the halt go on to the levels
+    below, a decade each (deep_levels), until the fit on the last three has one or the disk lies
+    flat (docs/model.md, 'Halt time')."""
+    nl = level_e.shape[0]
+    for j in range(3):
+        trk[T_FIT_T + j] = math.nan
+        trk[T_FIT_B + j] = math.nan
+    for L in range(max(nl - 3, 0), nl):
+        push_fit_level(trk, levels[L, 0], level_inclination(level_e[L], p))
+    th, _ = fit_last_three(trk)
+    if math.isnan(th):
+        next_deep_level(trk, p)
+
+
+@kernel
+def deep_levels(t, h, seg_end, e_seg, u_tol, n, work, rec):
+    """After the halt, the levels below the last one that the halt fit waits for, crossed on [t,
+    seg_end] of the step [t, t + h] from work.y (dense output built; e_seg: the energy at
+    seg_end), located as the configured levels are; where the fit on the last three has a finite
+    root, the halt time, its error (the remainder t_halt - t_last) and the approach exponent go to
+    rec.fstats (F_THALT, F_THALT_ERR, F_APPROACH), and the search ends."""
+    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
+    while deep_pending(trk) and e_seg - trk[T_DEEP_E] <= 0.0:
+        le = trk[T_DEEP_E]
+        gl0 = mode_energy(y, p, cs) - le
+        if gl0 <= 0.0:
+            tl = t
+        else:
+            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, e_seg - le, Span(0, y, t, h, cs), n, u_tol, le, work,
+                            rec.istats)
+            tl = 0.5 * (ta + tb)
+        push_fit_level(trk, tl, trk[T_DEEP_B])
+        th, pw = fit_last_three(trk)
+        if math.isnan(th):
+            next_deep_level(trk, p)
+        else:
+            rec.fstats[F_THALT] = th
+            rec.fstats[F_THALT_ERR] = th - tl
+            rec.fstats[F_APPROACH] = pw
+            trk[T_DEEP_E] = math.nan
