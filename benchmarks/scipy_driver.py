@@ -82,7 +82,7 @@ from sweep import outcomes
 from sweep.core import contact as _contact
 from sweep.core import impulse as _impulse
 from sweep.core import model
-from sweep.core.model import (N_AUX, N_CORE, P_A, P_G, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, X_F1, X_F2, X_G1,
+from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, X_F1, X_F2, X_G1,
                               X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DK1, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3)
 from sweep.scene import Scene, load_scene
 from sweep.simulate import initial_state, level_energies
@@ -342,11 +342,18 @@ class Disk:
     def energy(self, y, c):
         return self.be.energy(y, self.p, c.side, ROLL if c.mode == ROLL else SLIDE)
 
-    def slip_floor(self, t):
-        """The slip speed at which a slide meets its fate: slip_tol, or the speed that a deceleration
-        mu_d G takes off in 1024 ulps of tau where that is larger (a passage by u = 0 closer than
-        that cannot be stepped through in double precision; docs/model.md)."""
-        return max(self.u_tol, 1024.0 * np.finfo(float).eps * max(abs(t), 1.0) * self.p[P_MUD] * self.p[P_G])
+    def slip_floor(self, t, phi):
+        """The slip speed at which a slide meets its fate: slip_tol, or the speed that the friction's
+        deceleration bound mu_d Phi (1 + 1/A) takes off in 256 ulps of tau where that is larger (an
+        approach to u = 0 closer than that cannot be stepped through in double precision;
+        docs/model.md, 'Where a slip ends')."""
+        decel = self.p[P_MUD] * max(phi, 0.0) * (1.0 + 1.0 / self.p[P_A])
+        return max(self.u_tol, 256.0 * np.finfo(float).eps * max(abs(t), 1.0) * decel)
+
+    @staticmethod
+    def _slip_dir(y, c):
+        un = math.hypot(y[Y_U1], y[Y_U2])
+        return (y[Y_U1] / un, y[Y_U2] / un) if un > 0.0 else (math.cos(c.nu), math.sin(c.nu))
 
     def slave_speed(self, aux):
         return max(self.u_tol, SLAVE_EPS * self.p[P_MUD] * aux[X_PHI])
@@ -639,7 +646,8 @@ class Disk:
     def settle(self, t, y, c, g_before, leaving=()):
         """After a discrete update: bring the contact state in line with the state (see the module
         docstring). `leaving`: components just released at an un-stick (on their surface, leaving)."""
-        if c.mode == SLIDE and not c.slow_off and math.hypot(y[Y_U1], y[Y_U2]) <= self.slip_floor(t):
+        if c.mode == SLIDE and not c.slow_off and \
+                math.hypot(y[Y_U1], y[Y_U2]) <= self.slip_floor(t, self.model(t, y, SLIDE, c, *self._slip_dir(y, c))[1][X_PHI]):
             code = self.slow_slide(t, y, c)
             if code >= 0:
                 return code
@@ -899,7 +907,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             if kind == "cone":
                 return p[P_MUS] * a[X_PHI] - math.hypot(a[X_F1], a[X_F2])
             if kind == "slipslow":
-                return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slip_floor(tt)
+                return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slip_floor(tt, a[X_PHI])
             if kind == "slave":
                 return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slave_speed(a)
             if kind == "slipstop":

@@ -747,7 +747,7 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
             assert ist[L.I_RHS] == rhs_before
     expected = {C.EV_SIDE, C.EV_FACE, C.EV_LEVEL} | (
         {C.EV_SIGN1, C.EV_SIGN2, C.EV_SIGN3, C.EV_SPIN1, C.EV_SPIN2, C.EV_SPIN3} if mode == L.ROLL
-        else {C.EV_SLIP_SLOW} if mode == L.SLIDE else set())
+        else set())
     assert expected <= checked
 
 

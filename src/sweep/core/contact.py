@@ -28,7 +28,7 @@ from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
-from .model import (N_PARAMS, P_G, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
+from .model import (N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
                     Y_DSLIDE, Y_U1, Y_U2, Y_W1, energy_from_trig, moment_axes_rates, rhs, sign_rate)
 
 # event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
@@ -72,7 +72,7 @@ SLOW_OFF = 2.0
 # (spin_reaches_rest): truncation O(SPIN_DIFF^2) and O(SPIN_DIFF), round-off EPS |g1| / SPIN_DIFF^2.
 SPIN_DIFF = 1e-3
 # A passage by u = 0 is resolved in time where it takes at least this many ulps of tau (slip_floor).
-SLIP_RESOLUTION = 1024.0
+SLIP_RESOLUTION = 256.0
 EPS = 2.220446049250313e-16
 # Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
 DIR_TOL = 1e-14
@@ -88,13 +88,15 @@ JAMMED = math.inf
 
 
 @kernel
-def slip_floor(t, p, u_tol):
+def slip_floor(t, aux, p, u_tol):
     """The slip speed (u_hat) at which a slide meets its fate (EV_SLIP_SLOW, slow_slide): slip_tol,
-    or where larger the round-off floor of a passage by u = 0 at tau = t: the speed that friction's
-    deceleration, ~mu_d G, takes off the slip in SLIP_RESOLUTION ulps of tau. A slide that passes u = 0
-    closer than that turns its direction within steps below the step-size floor (2 EPS tau); its
-    passage is taken in its limit instead (slow_slide), an O(floor) change of the velocity."""
-    return max(u_tol, SLIP_RESOLUTION * EPS * max(abs(t), 1.0) * p[P_MUD] * p[P_G])
+    or where larger the round-off floor of a slip's approach to u = 0 at tau = t: the speed that the
+    friction's deceleration, at most ~mu_d Phi (1 + 1/A) (aux: the right-hand side's at the state),
+    takes off the slip in SLIP_RESOLUTION ulps of tau. A slide that passes or spirals closer to
+    u = 0 than that turns its direction within steps below the step-size floor (2 EPS tau); its
+    fate is taken there instead (slow_slide), an O(floor) change of the velocity."""
+    decel = p[P_MUD] * max(aux[X_PHI], 0.0) * (1.0 + 1.0 / p[P_A])
+    return max(u_tol, SLIP_RESOLUTION * EPS * max(abs(t), 1.0) * decel)
 
 
 @kernel
@@ -709,11 +711,12 @@ def consistent_signs(t, y, p, cs, n, wk, istats):
 @kernel
 def reads_forces(k):
     """Does event k's function read the right-hand side's aux (the contact forces, or the slaved
-    direction at the state: the slip's end, EV_SLIP_STOP)? The others (moment signs and spin_tol,
-    slip speed, side, face, level) are functions of the state alone: on a step's dense output
+    direction at the state: the slip's end, EV_SLIP_STOP; the normal force in the slip's round-off
+    floor, EV_SLIP_SLOW)? The others (moment signs and spin_tol, side, face, level) are functions
+    of the state alone: on a step's dense output
     they cost no right-hand-side evaluation (state_event_value)."""
     return (EV_UNSTICK1 <= k <= EV_UNSTICK3 or k == EV_CONE or k == EV_SLIP_STOP or k == EV_SLIP_FAST
-            or k == EV_SLAVE or k == EV_CONTACT or k == EV_SLAVE_LOST)
+            or k == EV_SLAVE or k == EV_CONTACT or k == EV_SLAVE_LOST or k == EV_SLIP_SLOW)
 
 
 @kernel
@@ -724,8 +727,6 @@ def state_event_value(k, t, y, p, cs, u_tol, level_e):
         r1, r2, r3 = moment_axes_rates(y)
         g = cs[CS_SIG + i] * (r1 if i == 0 else (r2 if i == 1 else r3))
         return g if k <= EV_SIGN3 else g - p[P_WTOL]
-    if k == EV_SLIP_SLOW:
-        return math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, p, u_tol)
     if k == EV_SIDE:
         return cs[CS_SIDE] * y[Y_ALPHA]
     if k == EV_FACE:
@@ -753,7 +754,7 @@ def event_values(t, y, aux, p, cs, u_tol, level_e, g):
         g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
     elif mode == SLIDE:
         if cs[CS_SLAVE_OFF] != SLOW_OFF:
-            g[EV_SLIP_SLOW] = state_event_value(EV_SLIP_SLOW, t, y, p, cs, u_tol, level_e)
+            g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p, u_tol)
         if cs[CS_SLAVE_OFF] == 0.0:
             g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(aux, p, u_tol)
         else:
@@ -877,12 +878,14 @@ def settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own):
     components that the update moved are released (release_moved: g_before, omega.a_i before it)
     and every sign made consistent (settle_signs, leaving component own); a rolling state left
     outside the static cone starts to slip. Returns the outcome that ends the scene, else -1."""
-    if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF and math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, p, u_tol):
-        # the slip reached slip_tol within the located event's bracket (a stiff slip decays by
-        # orders of magnitude in 1e-11 tau): its own event can no longer happen
-        code = slow_slide(t, y, p, cs, n, wk, istats)
-        if code >= 0:
-            return code
+    if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF:
+        eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+        if math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, wk[W_AUXTMP], p, u_tol):
+            # the slip reached its floor within the located event's bracket (a stiff slip decays
+            # by orders of magnitude in 1e-11 tau): its own event can no longer happen
+            code = slow_slide(t, y, p, cs, n, wk, istats)
+            if code >= 0:
+                return code
     release_moved(y, p, cs, g_before)
     settle_signs(t, y, p, cs, n, wk, istats, own)
     # a rolling state must be admissible after every discrete update: a moment sign that flips or
