@@ -4,6 +4,7 @@
     .venv/bin/python benchmarks/compile_time.py              # cold + warm, tiny scene (~2-4 min on 2 cores)
     .venv/bin/python benchmarks/compile_time.py --top 25     # more dispatchers in the table
     .venv/bin/python benchmarks/compile_time.py --json out.json
+    .venv/bin/python benchmarks/compile_time.py --opt 2 1   # also cold compiles at NUMBA_OPT 2, 1 (~2 min each)
 
 Each measurement runs in a fresh Python process (the numba cache is per process and per disk folder):
 
@@ -17,6 +18,9 @@ Each measurement runs in a fresh Python process (the numba cache is per process 
 * **warm**: the same in a new process over the cache the cold run filled: the cost of loading the
   compiled kernels, which every process that runs scenes pays once (each Snakemake job of a sweep is
   one such process).
+
+Each process then times the paper's case (to the 1e-3 level, thread CPU, minimum of 3 runs), so that
+`--opt` levels (NUMBA_OPT for the whole compilation) show compile time against the code's speed.
 
 During each phase a listener on numba's event API (`numba.core.event`) records every
 "numba:compile" (one dispatcher's compilation for one signature), "numba:run_pass" (one compiler
@@ -123,6 +127,7 @@ out["import_cpu_s"] = time.process_time()
 out["python_start_to_import_s"] = time.perf_counter() - T0
 
 SCENE = {"stop": {"t_max": 0.01}}
+PAPER = sys.argv[1]
 
 def phase(name, fn):
     rec.reset()
@@ -144,18 +149,33 @@ def batch():
 phase("simulate", lambda: sweep.simulate(SCENE))
 phase("simulate_batch", batch)
 phase("second_simulate", lambda: sweep.simulate(SCENE))
+# what the compiled code then costs: the paper's case to the 1e-3 level, minimum thread CPU of 3 runs
+import yaml, copy
+cfg = yaml.safe_load(open(PAPER))
+cfg.setdefault("stop", {})["levels"] = [1e-1, 1e-2, 1e-3]
+best = 1e9
+for _ in range(3):
+    c = time.thread_time()
+    sweep.simulate(copy.deepcopy(cfg))
+    best = min(best, time.thread_time() - c)
+out["paper_case_cpu_s"] = best
 from sweep.core import jit
 out["cache_dir"] = str(jit.cache_dir())
+import numba
+out["numba_opt"] = numba.config.OPT
 print("RESULT " + json.dumps(out), flush=True)
 '''
 
 
-def run_child(cache_dir: str) -> dict:
+def run_child(cache_dir: str, opt: int | None = None) -> dict:
     import resource
     env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, PYTHONPATH=str(ROOT / "src"))
+    if opt is not None:
+        env["NUMBA_OPT"] = str(opt)
     r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, cwd=ROOT)
+    p = subprocess.run([sys.executable, "-c", CHILD, str(ROOT / "config" / "scenes" / "kessler2002.yaml")], env=env,
+                       capture_output=True, text=True, cwd=ROOT)
     total = time.perf_counter() - t0
     r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
@@ -194,6 +214,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--top", type=int, default=15, help="dispatchers listed (by exclusive compile time)")
     ap.add_argument("--json", default=str(HERE / "out" / "compile_time.json"))
+    ap.add_argument("--opt", type=int, nargs="*", default=[],
+                    help="also cold-compile with these NUMBA_OPT levels (0-3; default 3) in fresh processes and "
+                         "report compile CPU against the paper case's CPU time")
     a = ap.parse_args(argv)
     print(f"# compile_time: {os.cpu_count()} CPUs, python {sys.version.split()[0]}; {load()}\n", flush=True)
     tmp = tempfile.mkdtemp(prefix="sweep-compile-time-")
@@ -237,7 +260,23 @@ def main(argv=None) -> int:
         print("|---|---|---|")
         for k, v in sorted(passes.items(), key=lambda kv: -kv[1])[:10]:
             print(f"| {k} | {v:.2f} | {100 * v / ptot:.1f} % |")
-    res = {"cold": cold, "warm": warm, "cache_files": files, "cache_bytes": size, "load_end": load()}
+    opts = {}
+    for level in a.opt:
+        tmp2 = tempfile.mkdtemp(prefix=f"sweep-compile-opt{level}-")
+        try:
+            opts[level] = run_child(tmp2, level)
+        finally:
+            import shutil
+            shutil.rmtree(tmp2, ignore_errors=True)
+        print(f"NUMBA_OPT={level} cold run done ({load()})", flush=True)
+    print("\nLLVM optimisation level: cold compile of the first simulate against the paper case's cost "
+          "(to the 1e-3 level, min thread CPU of 3 runs):\n")
+    print("| NUMBA_OPT | first simulate CPU (s) | of it LLVM (s) | first simulate_batch CPU (s) | paper case CPU (ms) |")
+    print("|---|---|---|---|---|")
+    for level, r in [(cold["numba_opt"], cold)] + list(opts.items()):
+        print(f"| {level} | {r['simulate']['cpu_s']:.1f} | {r['simulate']['llvm_s']:.1f} | "
+              f"{r['simulate_batch']['cpu_s']:.1f} | {1e3 * r['paper_case_cpu_s']:.1f} |")
+    res = {"cold": cold, "warm": warm, "opt": opts, "cache_files": files, "cache_bytes": size, "load_end": load()}
     Path(a.json).parent.mkdir(parents=True, exist_ok=True)
     Path(a.json).write_text(json.dumps(res, indent=1))
     print(f"\n({load()}); written: {a.json}")
