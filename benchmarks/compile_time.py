@@ -19,6 +19,12 @@ Each measurement runs in a fresh Python process (the numba cache is per process 
   compiled kernels, which every process that runs scenes pays once (each Snakemake job of a sweep is
   one such process).
 
+Before the runs it prints the core's call graph from the source (`static_call_graph`): the number
+of @kernel functions, the inline="always" ones and their call sites, the separate kernels with a
+single call site, how deep the separate libraries nest below the entry points, and the kernels
+linked into the most other libraries (numba links a callee's LLVM module into each caller's library
+and optimises and compiles the whole linked module again there).
+
 Each process then times the paper's case (to the 1e-3 level, thread CPU, minimum of 3 runs), so that
 `--opt` levels (NUMBA_OPT for the whole compilation) show compile time against the code's speed.
 
@@ -167,6 +173,67 @@ print("RESULT " + json.dumps(out), flush=True)
 '''
 
 
+def static_call_graph(core: Path = ROOT / "src" / "sweep" / "core") -> dict:
+    """The core's @kernel functions and their call sites, from the source (ast): how many there are,
+    how many are inline="always" (numba inlines them into each caller's IR: typed and lowered once
+    per call site), how many separate ones have a single call site, the depth of the nesting of
+    separate libraries below each entry point, and the kernels whose code is linked into the most
+    other libraries (numba links a callee's LLVM module into every caller's library and optimises
+    and compiles the linked module again there, at every level)."""
+    import ast
+    import collections
+    import functools
+
+    kernels, bodies = {}, {}
+    for f in sorted(core.glob("*.py")):
+        for node in ast.parse(f.read_text()).body:
+            if not isinstance(node, ast.FunctionDef):
+                continue
+            inline = None
+            for d in node.decorator_list:
+                if isinstance(d, ast.Name) and d.id == "kernel":
+                    inline = False
+                elif isinstance(d, ast.Call) and getattr(d.func, "id", None) == "kernel":
+                    inline = any(k.arg == "inline" and getattr(k.value, "value", None) == "always" for k in d.keywords)
+            if inline is not None:
+                kernels[node.name] = inline
+                bodies[node.name] = node
+    calls = collections.defaultdict(list)
+    for name, node in bodies.items():
+        for sub in ast.walk(node):
+            if isinstance(sub, ast.Call):
+                fn = sub.func
+                callee = fn.id if isinstance(fn, ast.Name) else (fn.attr if isinstance(fn, ast.Attribute) else None)
+                if callee in kernels and callee != name:
+                    calls[callee].append(name)
+    graph = collections.defaultdict(set)
+    for callee, callers in calls.items():
+        for c in callers:
+            graph[c].add(callee)
+
+    @functools.lru_cache(None)
+    def depth(n):
+        subs = [depth(c) for c in graph[n]]
+        return (max(subs) if subs else 0) + (0 if kernels[n] else 1)
+
+    @functools.lru_cache(None)
+    def ancestors(n):
+        out = set()
+        for c in calls[n]:
+            out.add(c)
+            out |= ancestors(c)
+        return frozenset(out)
+
+    linked = sorted(((sum(1 for a in ancestors(k) if not kernels[a]), k) for k in kernels if not kernels[k]),
+                    reverse=True)
+    entries = [k for k in kernels if not calls[k]]
+    return {"kernels": len(kernels), "inline_always": sum(kernels.values()),
+            "inline_call_sites": {k: len(calls[k]) for k in kernels if kernels[k]},
+            "single_call_site": sum(1 for k in kernels if not kernels[k] and len(calls[k]) == 1),
+            "entries": entries, "depth": {k: depth(k) for k in ("run", "solve_index") if k in kernels},
+            "most_linked": linked[:8]}
+
+
 def run_child(cache_dir: str, opt: int | None = None) -> dict:
     import resource
     env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, PYTHONPATH=str(ROOT / "src"))
@@ -219,6 +286,12 @@ def main(argv=None) -> int:
                          "report compile CPU against the paper case's CPU time")
     a = ap.parse_args(argv)
     print(f"# compile_time: {os.cpu_count()} CPUs, python {sys.version.split()[0]}; {load()}\n", flush=True)
+    st = static_call_graph()
+    print(f"the core's call graph (source): {st['kernels']} @kernel functions, {st['inline_always']} of them "
+          f"inline=\"always\" (call sites: {st['inline_call_sites']}); {st['single_call_site']} separate kernels "
+          f"with a single call site; entry points / called from Python only: {', '.join(st['entries'])}; "
+          f"nesting of separate libraries below the entry points: {st['depth']}; the kernels linked into the "
+          f"most other libraries (count, name): {st['most_linked']}\n", flush=True)
     tmp = tempfile.mkdtemp(prefix="sweep-compile-time-")
     try:
         cold = run_child(tmp)
@@ -276,7 +349,7 @@ def main(argv=None) -> int:
     for level, r in [(cold["numba_opt"], cold)] + list(opts.items()):
         print(f"| {level} | {r['simulate']['cpu_s']:.1f} | {r['simulate']['llvm_s']:.1f} | "
               f"{r['simulate_batch']['cpu_s']:.1f} | {1e3 * r['paper_case_cpu_s']:.1f} |")
-    res = {"cold": cold, "warm": warm, "opt": opts, "cache_files": files, "cache_bytes": size, "load_end": load()}
+    res = {"static": st, "cold": cold, "warm": warm, "opt": opts, "cache_files": files, "cache_bytes": size, "load_end": load()}
     Path(a.json).parent.mkdir(parents=True, exist_ok=True)
     Path(a.json).write_text(json.dumps(res, indent=1))
     print(f"\n({load()}); written: {a.json}")
