@@ -681,13 +681,48 @@ def part_wp(ctx: dict, res: dict) -> None:
     say(f"\nwhere a project step's time goes: the right-hand side alone (contact.eval_rhs, ROLL, a jitted loop) {rc['core']:.0f} ns with "
         f"N_CORE, {rc['full']:.0f} ns with N_FULL (the kinematics, as in these runs) per call:\n")
     say("\n".join(alines))
+    kin = kinematics_cost(rounds)
+    if kin:
+        say("\nthe passive kinematics that simulate integrates for a sample (lean, run_kernel directly, thread CPU, "
+            f"min of {rounds}): " + "; ".join(
+                f"rtol {k['rtol']:.0e}: on {1e3 * k['on']:.2f} ms, off {1e3 * k['off']:.2f} ms ({k['on'] / k['off']:.2f}x; "
+                f"{k['steps']} steps both, state difference {k['diff']:.0e})" for k in kin))
     hy_us = {t: 1e6 * info[("heyoka", t)]["cpu"] / info[("heyoka", t)]["steps"] for t in tols}
     say("heyoka CPU per step (us): " + ", ".join(f"tol {t:.0e}: {v:.2f}" for t, v in hy_us.items()))
     res["wp"] = {"points": [{"side": k[0], "key": list(k[1]) if isinstance(k[1], tuple) else k[1], **v}
                             for k, v in info.items()],
-                 "matched": matched, "rhs_ns": rc, "anatomy": anat, "table": table, "matched_table": mtable,
+                 "matched": matched, "rhs_ns": rc, "anatomy": anat, "kinematics": kin, "table": table, "matched_table": mtable,
                  "anatomy_table": "\n".join(alines), "rounds": rounds, "load_after": load()}
     say(f"\n({load()})")
+
+
+def kinematics_cost(rounds: int, rtols=(1e-8, 1e-10, 1e-12)) -> list[dict]:
+    """Kernel CPU time of the lean rolling scene with the passive kinematics on (as simulate runs it
+    for samples) and off, through sweep.simulate.run_kernel (skipped where it no longer exists)."""
+    import importlib
+
+    from sweep.core.layout import I_STEPS
+    sim = importlib.import_module("sweep.simulate")
+    if not hasattr(sim, "run_kernel"):
+        return []
+    out = []
+    for rt in rtols:
+        got = {}
+        for on in (True, False):
+            sc = project_scene(CONFIGS["lean"], rt, T_S, kinematics=on)
+            tau = np.array([T_S / sc.chi])
+            r = sim.run_kernel(sc, tau)
+            best = math.inf
+            for _ in range(rounds):
+                c = time.thread_time()
+                r = sim.run_kernel(sc, tau)
+                best = min(best, time.thread_time() - c)
+            got[on] = (best, int(r.istats[I_STEPS]), np.array(r.samples[0, :4]))
+        if got[True][1] != got[False][1]:
+            raise RuntimeError("the kinematics changed the steps")
+        out.append({"rtol": rt, "on": got[True][0], "off": got[False][0], "steps": got[True][1],
+                    "diff": float(np.max(np.abs(got[True][2] - got[False][2])))})
+    return out
 
 
 def batch_scenes(n: int, seed: int) -> list[dict]:
