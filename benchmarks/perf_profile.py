@@ -2,6 +2,7 @@
 """Profile of the jitted core by function, with Linux `perf` (where the CPU time of a scene goes).
 
     .venv/bin/python benchmarks/perf_profile.py [--seed 20261122] [--index 27 36 9 13 22] [--top 30]
+    .venv/bin/python benchmarks/perf_profile.py --rolling 1e-10 [--repeat 40]   # issue #42's rolling scene
 
 numba's machine code has no symbols that perf can read, so this compiles the core afresh (into a
 temporary NUMBA_CACHE_DIR: code loaded from the cache keeps no LLVM module to name it), writes
@@ -9,6 +10,10 @@ temporary NUMBA_CACHE_DIR: code loaded from the cache keeps no LLVM module to na
 code), and records the given harness scenes (benchmarks/convergence.py, rtol 1e-10, as the harness
 runs them) with `perf record` attached to this process after a warm-up scene. It prints the
 functions by their share of the samples (libm's sin/cos and hypot appear under their own names).
+With --rolling RTOL it records instead the pure-rolling scene of benchmarks/peer_heyoka.py (the paper's
+disk, mu 5, k1 = k3 = 0, to T = 57.84 s; its 'lean' configuration: one level, no normal-force
+frequency; a sample at T, so the kinematics are integrated), --repeat times: where a rolling step's
+time goes (the right-hand side, contact.eval_rhs with model.rhs inlined, against the machinery).
 Needs `perf` and permission to record this process (perf_event_paranoid <= 2 for one's own
 processes). Compiling takes a few minutes.
 """
@@ -74,6 +79,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=20261122)
     ap.add_argument("--index", type=int, nargs="+", default=[27, 36, 9, 13, 22])
     ap.add_argument("--top", type=int, default=30)
+    ap.add_argument("--rolling", type=float, default=None, metavar="RTOL",
+                    help="profile the peer_heyoka rolling scene at this rtol instead of harness scenes")
+    ap.add_argument("--repeat", type=int, default=40, help="runs of the rolling scene (--rolling)")
     a = ap.parse_args(argv)
     if os.environ.get("_PERF_PROFILE_CHILD") != "1":
         tmp = tempfile.mkdtemp(prefix="perf-profile-")
@@ -85,11 +93,24 @@ def main(argv=None) -> int:
     import numpy as np
     import convergence as cv
 
-    rng = np.random.default_rng(a.seed)
-    scenes = [cv._valid_levels(cv.draw_scene(rng)) for _ in range(max(a.index) + 1)]
+    if a.rolling is not None:
+        import sweep
+        W3 = -14.456878347621343
+        T = 57.84
+        rolling = {"contact": {"mu_s": 5.0, "mu_d": 5.0, "k1": 0.0, "k2": 3.004e-5, "k3": 0.0},
+                   "initial": {"alpha": 1.0, "omega": [0.0, 0.0, W3]},
+                   "stop": {"levels": [1e-4], "t_max": T}, "solver": {"rtol": a.rolling, "atol": a.rolling * 1e-2},
+                   "outputs": {"normal_force_frequency": False}}
 
-    def run(i):
-        return cv._one_run(scenes[i], cv.DEFAULT_RTOL)   # as the harness runs it at the default rtol
+        def run(i):
+            return sweep.simulate(rolling, sample_times=[T])
+        a.index = list(range(a.repeat))
+    else:
+        rng = np.random.default_rng(a.seed)
+        scenes = [cv._valid_levels(cv.draw_scene(rng)) for _ in range(max(a.index) + 1)]
+
+        def run(i):
+            return cv._one_run(scenes[i], cv.DEFAULT_RTOL)   # as the harness runs it at the default rtol
 
     run(a.index[0])      # compiles everything
     n_fn = write_perf_map()
@@ -105,7 +126,9 @@ def main(argv=None) -> int:
     rec.wait()
     rep = subprocess.run(["perf", "report", "-i", str(data), "--no-children", "--sort", "symbol", "--stdio"],
                          capture_output=True, text=True).stdout
-    print(f"seed {a.seed}, scenes {a.index}: {cpu:.1f} s CPU recorded; {n_fn} jitted functions mapped\n")
+    what = (f"rolling scene at rtol {a.rolling:g}, {a.repeat} runs" if a.rolling is not None
+            else f"seed {a.seed}, scenes {a.index}")
+    print(f"{what}: {cpu:.1f} s CPU recorded; {n_fn} jitted functions mapped\n")
     print("| share | function |")
     print("|---|---|")
     shown = 0
