@@ -848,7 +848,7 @@ def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end
     istats[L.I_STEPS] = 0
     work.trk[:] = 0.0
     # after a halt (at tau 40): the steps that complete the frequency windows, no longer than the last one,
-    # and none past twice the end's tau; t_max no longer clips them
+    # and none past twice the end's tau, nor past t_max
     trk = work.trk
     assert next_try(40.0, 0.5, oc.HALTED, settings, work, rec) == (0.5, oc.HALTED, False, False)
     assert trk[L.T_H_AFTER] == 0.5 and trk[L.T_T_AFTER] == 80.0
@@ -856,3 +856,8 @@ def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end
     assert next_try(99.9, 0.2, oc.HALTED, settings, work, rec) == (-1.0, oc.HALTED, False, True)
     # twice the end's tau is where the motion after it ends, not a numerical stop
     assert trk[L.T_CUT] == 0.0
+    # ... while the halt fit waits for a level below the last one, they go on past it, up to t_max
+    trk[L.T_DEEP_E] = 1e-3
+    assert next_try(90.0, 0.2, oc.HALTED, settings, work, rec) == (0.2, oc.HALTED, False, False)
+    assert next_try(99.9, 0.2, oc.HALTED, settings, work, rec)[0] == pytest.approx(0.1)
+    assert next_try(100.0, 0.2, oc.HALTED, settings, work, rec) == (-1.0, oc.HALTED, False, True)

@@ -81,9 +81,11 @@ def _level_times(rtol, levels, **mods):
 
 def test_loose_tolerance_slip_end_does_not_hover():
     # explicit steps at the stability limit of the slip direction used to hover at |u| ~ 3 slip_tol
-    # (2e6 steps at rtol 1e-6); the slaved direction below SLAVE_EPS mu_d Phi ends such slips
+    # (2e6 steps at rtol 1e-6); the slaved direction below SLAVE_EPS mu_d Phi ends such slips (three
+    # levels whose times give a finite halt: the steps end at the last)
     for rtol in (1e-6, 3e-7, 1e-7):
-        t, s = _level_times(rtol, [0.3, 0.1], stop__max_steps=100_000)
+        t, s = _level_times(rtol, [0.3, 0.1, 0.03], stop__max_steps=100_000)
+        assert math.isfinite(s["t_halt"])
         assert s["outcome"] == "halted", (rtol, s["outcome"])
         assert s["n_steps"] + s["n_rejected"] < 5000, (rtol, s["n_steps"])
 

@@ -455,7 +455,7 @@ def begin(settings, lev, sample_tau, work, rec):
     fstats[F_THALT] = math.nan
     fstats[F_THALT_ERR] = math.nan
     fstats[F_APPROACH] = math.nan
-    trk[T_DEEP_E] = math.nan
+    trk[T_DEEP_E] = 0.0
     trk[T_END_TRANS] = -1.0
     trk[T_END_STICK] = -1.0
     trk[T_END_IMPACTS] = -1.0
@@ -485,17 +485,18 @@ def begin(settings, lev, sample_tau, work, rec):
 
 
 @kernel
-def step_after_end(t, h, trk):
+def step_after_end(t, h, t_max, trk):
     """The step size after a halt, where the steps only complete the levels' frequency windows
-    (precession cycles and Phi maxima after the levels): not past the last step before the end, nor past twice the end's tau (a steady
-    motion, e.g. rolling at a tilt held by a stuck moment, has no maxima, and its steps would grow
-    tenfold each until t overflowed). Returns -1 where they stop."""
+    (precession cycles and Phi maxima after the levels) or reach the levels the halt fit waits for:
+    not past the last step before the end, nor past twice the end's tau while only windows wait (a
+    steady motion, e.g. rolling at a tilt held by a stuck moment, has no maxima, and its steps would
+    grow tenfold each until t overflowed), nor past t_max. Returns -1 where they stop."""
     if trk[T_H_AFTER] == 0.0:
         trk[T_H_AFTER] = h
         trk[T_T_AFTER] = 2.0 * t
-    if t >= trk[T_T_AFTER]:
+    if t_max - t <= 2.0 * EPS * max(abs(t), 1.0) or (t >= trk[T_T_AFTER] and not deep_pending(trk)):
         return -1.0
-    return min(h, trk[T_H_AFTER])
+    return min(h, trk[T_H_AFTER], t_max - t)
 
 
 @kernel
@@ -632,7 +633,7 @@ def next_try(t, h, outcome, settings, work, rec):
     that still moves tau. Returns (h, outcome, whether the step ends at t_max, whether to stop)."""
     running = outcome < 0
     if not running:
-        h = step_after_end(t, h, work.trk)
+        h = step_after_end(t, h, settings[S_TMAX], work.trk)
         if h < 0.0:
             return h, outcome, False, True
     if rec.istats[I_STEPS] + rec.istats[I_REJECTED] >= int(settings[S_MAXSTEPS]):
@@ -722,7 +723,7 @@ def end_segment(seg, outcome, lev, settings, level_e, work, rec):
         # the halt fit waited for a deeper level, and the disk lies flat first: it halted here
         fstats[F_THALT] = t
         fstats[F_THALT_ERR] = location_tol(t)
-        trk[T_DEEP_E] = math.nan
+        trk[T_DEEP_E] = 0.0
     return outcome, True
 
 

@@ -97,7 +97,7 @@ T_END_TRANS, T_END_STICK, T_END_IMPACTS = 18, 19, 20   # event counts at the sce
                   # t_max; -1 before it): the steps after a halt do not count
 T_H_AFTER = 21    # the last step size before the end (the steps after it do not grow past it; 0 before)
 T_T_AFTER = 22    # ... nor run past this tau (twice the end's)
-T_DEEP_E = 23     # the energy of the next level below the last one that the halt fit waits for (NaN: none)
+T_DEEP_E = 23     # the energy (> 0) of the next level below the last one that the halt fit waits for (0: none)
 T_DEEP_B = 24     # ... its inclination (rad)
 T_FIT_T = 25      # 3 slots: the tau of the last three levels crossed, oldest first (the halt fit's input)
 T_FIT_B = 28      # 3 slots: ... their inclinations (rad)

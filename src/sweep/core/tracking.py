@@ -335,8 +335,8 @@ def fit_last_three(trk):
 
 @kernel
 def deep_pending(trk):
-    """Is a level below the last one still awaited for the halt fit?"""
-    return not math.isnan(trk[T_DEEP_E])
+    """Is a level below the last one still awaited for the halt fit (its energy, > 0, in trk)?"""
+    return trk[T_DEEP_E] > 0.0
 
 
 @kernel
@@ -389,4 +389,4 @@ def deep_levels(t, h, seg_end, e_seg, u_tol, n, work, rec):
             rec.fstats[F_THALT] = th
             rec.fstats[F_THALT_ERR] = th - tl
             rec.fstats[F_APPROACH] = pw
-            trk[T_DEEP_E] = math.nan
+            trk[T_DEEP_E] = 0.0
