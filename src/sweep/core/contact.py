@@ -12,12 +12,13 @@ Modes (docs/model.md, 'Modes, signs and sticking'):
           |u| falls to u_s onto the attracting quasi-static direction, if there is one (try_slave);
           it hands over to SLIDE where u grows past SLAVE_EXIT u_s or the direction folds away, and
           ends in ROLL where u.s returns to 0 (located events; the velocity is continuous).
-A SLIDE whose slip spirals into u = 0 (no quasi-static direction to settle on) ends where |u| falls to
-slip_tol, by a plastic contact impulse that removes the remaining slip (O(slip_tol), first-order
-convergence in slip_tol).
+A SLIDE not handed over (a slip spiralling into u = 0, or passing by it) meets its fate where |u|
+falls to slip_tol (slip_fate, slow_slide; docs/model.md, 'Where a slip ends'): it ends where its
+direction dynamics carry it to u = 0, else it passes through u = 0 or spirals out; the plastic
+impulse there changes the velocity by O(slip_tol), and no decision depends on slip_tol.
 Moment components (eq. 3.3, Filippov): a free component sticks where omega.a_i reaches 0, or where
-it slows to spin_tol (p[P_WTOL]), if the moment can hold it (|sigma needed| < 1); a stuck one is
-released where |sigma needed| reaches 1.
+it slows to spin_tol (p[P_WTOL]) and its motion goes on to rest (spin_reaches_rest), if the moment
+can hold it (|sigma needed| < 1); a stuck one is released where |sigma needed| reaches 1.
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ from .model import (N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_
 EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against its moment's sign
 EV_UNSTICK1, EV_UNSTICK2, EV_UNSTICK3 = 3, 4, 5  # a stuck component needs more than k_i |N|
 EV_CONE = 6        # ROLL: the friction needed leaves the static cone, mu_s Phi - |F| = 0
-EV_SLIP_SLOW = 7   # SLIDE: |u| falls to slip_tol -> ROLL (plastic impulse)
+EV_SLIP_SLOW = 7   # SLIDE: |u| falls to slip_tol (slip_floor) -> its fate (slow_slide)
 EV_SLIP_STOP = 8   # SLAVED: u.s reaches 0 -> ROLL
 EV_SLIP_FAST = 9   # SLAVED: |u| grows to SLAVE_EXIT x the slaving speed -> SLIDE (and SLIDE re-arms the hand-over)
 EV_SLAVE = 10      # SLIDE: |u| falls to the slaving speed -> SLAVED if the direction has relaxed

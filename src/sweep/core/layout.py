@@ -7,7 +7,8 @@ Contact state `cs` (float64, N_CS): the discrete state of the hybrid system.
     CS_SIG     3 slots: sign of omega.a_i used in the moment M_f (eq. 3.3)
     CS_STUCK   3 slots: 1 where omega.a_i is held at 0 by the dry-friction moment (Filippov)
     CS_NU      slip direction angle on (a1, a2) (rad): the slaved friction direction
-    CS_SLAVE_OFF  1 while a slip that found no quasi-static direction stays in SLIDE
+    CS_SLAVE_OFF  1 while a slip that found no quasi-static direction stays in SLIDE; 2 (contact.SLOW_OFF)
+                  while a slide spiralling out from u = 0 slides on below slip_tol
 Work buffer `wk` (float64, N_WORK x N_FULL): rows used as vectors; `K` (N_KROWS x N_FULL) holds the
 RK stages of this step (rows 0..15) and of the previous step (rows K_PREV.., kept while its dense
 output was not built), `F` (14 x N_FULL) the dense-output coefficients of this step (rows 0..6) and
