@@ -32,7 +32,8 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
 * moment signs sigma_i = sign(omega.a_i) with Filippov sticking: at omega.a_i = 0 a component
   sticks if the moment needed to hold it is within k_i Phi (|sigma needed| < 1), else it passes;
   a stuck component leaves where |sigma needed| reaches 1, with that sign; a free component that
-  slows to |omega.a_i| = spin_tol (from above) sticks there if the moment can hold it, and the
+  slows to |omega.a_i| = spin_tol (from above) sticks there if its motion, integrated ahead, reaches
+  omega.a_i = 0 before it turns back (Disk.reaches_rest) and the moment can hold it, and the
   rate left is stopped by the least (kinetic-energy) change of the velocity that keeps the contact
   and the stuck components at rest (loss booked to k_i), else it stays free;
 * after every discrete update (the driver's 'settle'): a slide at or below slip_tol meets its fate; a
@@ -123,7 +124,7 @@ DIP_INSIDE |= {"slipslow", "slave"}
 DIP_INSIDE |= {"slipstop", "slipfast", "slave_lost", "contact", "face"}
 # the events that read the right-hand side (forces, the slaved direction): a dip that only the dense
 # output shows stands where the state integrated to its minimum confirms it (kernel: reads_forces)
-FORCE_EVENTS = {"cone", *UNSTICK, "slipstop", "slipfast", "slave_lost", "contact"}
+FORCE_EVENTS = {"cone", *UNSTICK, "slipslow", "slipstop", "slipfast", "slave_lost", "contact"}
 STEP_MIN_XATOL = 1e-12   # the minimum of a function over a step: its position to this fraction of the step   # the dip-checked events that read the contact forces
 
 
@@ -599,11 +600,46 @@ class Disk:
             c.stuck[i] = False
             c.sig[i] = 1.0 if need > 0.0 else -1.0
 
+    def reaches_rest(self, i, t, y, c):
+        """Does free component i, slowing through |omega.a_i| = spin_tol, go on to rest (omega.a_i = 0)
+        rather than turn back above it? Its motion in the contact state c is integrated ahead (SciPy
+        DOP853, rtol 1e-12) to whichever comes first: g = sigma_i omega.a_i reaching 0, or g' reaching
+        0 (a minimum above 0); not past 8 g/|g'|, by which a motion that keeps falling has reached 0."""
+        sig = c.sig[i]
+        seed = [c.nu]
+
+        def f(tt, yy):
+            dy, _, nu = self.rhs(tt, yy, c, seed[0])
+            if c.mode == SLAVED and math.isfinite(nu):
+                seed[0] = nu
+            return dy
+
+        def g(tt, yy):
+            return sig * _axes(yy)[i]
+
+        def slope(tt, yy):
+            return sig * _axes_rate(i, yy, f(tt, yy))
+        g.terminal = True
+        g.direction = -1
+        slope.terminal = True
+        slope.direction = 1
+        y0 = np.array(y[:self.n], dtype=float)
+        g0, d0 = g(t, y0), slope(t, y0)
+        if not d0 < 0.0:
+            return False
+        sol = _si.solve_ivp(f, (t, t + 8.0 * g0 / -d0), y0, method="DOP853", rtol=1e-12,
+                            atol=1e-15, events=(g, slope))
+        if sol.t_events[0].size and (not sol.t_events[1].size or sol.t_events[0][0] <= sol.t_events[1][0]):
+            return True
+        return False
+
     def spin_stop(self, i, t, y, c):
         """|omega.a_i| has slowed to spin_tol: it sticks if the moment can hold it, and the rate left
         is stopped by the least change of the velocity in the kinetic-energy metric that keeps the
         contact (rolling, or sliding with the slip free) and the stuck components at rest
         (Lagrange multipliers on all of (w1, w2, w3, u1, u2)); the loss is booked to k_i."""
+        if not self.reaches_rest(i, t, y, c):
+            return False
         need = self.needed_sigma(i, t, y, c)
         if abs(need) >= 1.0:
             return False
