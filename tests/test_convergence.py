@@ -269,7 +269,7 @@ def test_a_slip_onset_beside_a_painleve_pole_takes_the_root_at_every_rtol():
     changes sign at the root near -F/|F| and at two Painleve poles (Phi's coefficient through 0,
     the contact law without a solution between them). At rtol 1e-9 the onset's bisection of a
     pole's bracket evaluated the model on the pole itself, where the coefficient was exactly 0, and
-    the run raised ZeroDivisionError. The kernels now divide as numba-cuda does (inf, no
+    the run raised ZeroDivisionError. The kernels now divide as NumPy does (inf, no
     exception), and onset_direction tells a pole from a root by the model's flag on its two sides:
     the disk slides from the root and leaves the table at the same time at every rtol, as the SciPy
     peer does."""
