@@ -395,19 +395,6 @@ def test_spin_tolerance_convergence():
     assert d[2] < 1e-8 * t[0.0]
 
 
-def test_the_measured_step_control_patches_apply_to_this_tree():
-    """docs/performance.md reproduces its step-control measurements by applying the patches in
-    benchmarks/patches/ to this tree; a patch the core has outgrown would make those commands false."""
-    import subprocess
-
-    root = Path(__file__).resolve().parents[1]
-    patches = sorted((root / "benchmarks" / "patches").glob("*.diff"))
-    assert len(patches) >= 4
-    for patch in patches:
-        r = subprocess.run(["git", "apply", "--check", str(patch)], cwd=root, capture_output=True, text=True)
-        assert r.returncode == 0, f"{patch.name}: {r.stderr}"
-
-
 def test_the_peer_comparison_counts_totals_only_in_calm_scenes():
     """benchmarks/scipy_agreement.py: an event count or outcome is a total over the whole run, so it
     is compared only where every value of the run (t_halt included) moves < 1e-8 under the
