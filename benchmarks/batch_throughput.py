@@ -109,6 +109,9 @@ def main(argv=None) -> int:
         ideal = sum(s["wall_time"] for s in ref) / max(free)
         print(f"idle-machine estimate for {workers} threads (one-thread scene times, dynamic hand-out): "
               f"{ideal:.2f}x one thread")
+    wall = np.array([s["wall_time"] for s in ref])
+    print(f"one-thread scene times (s){' (all-cores run: --skip-1core)' if args.skip_1core else ''}: "
+          f"median {np.median(wall):.3f}, mean {wall.mean():.3f}, max {wall.max():.3f}")
     steps = np.array([s["n_steps"] + s["n_rejected"] for s in ref], dtype=float)
     q = np.percentile(steps, [0, 50, 90, 100])
     print(f"\nsteps per scene (accepted + rejected): min {q[0]:.0f}, median {q[1]:.0f}, p90 {q[2]:.0f}, "

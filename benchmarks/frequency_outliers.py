@@ -77,8 +77,7 @@ def harness_scenes(n: int, seed: int) -> list[dict]:
 def grid_scenes() -> list[dict]:
     from sweep import grid
 
-    settings = grid.normalize(yaml.safe_load((ROOT / "config" / "config.yaml").read_text()),
-                              grid.load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml"))
+    settings = grid.normalize(yaml.safe_load((ROOT / "config" / "config.yaml").read_text()), grid.load_schema())
     g = settings["grid"]
     return [grid.scene(settings, p) for p in itertools.product(*(g[a] for a in grid.AXES))]
 

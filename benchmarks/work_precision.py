@@ -1,7 +1,8 @@
 """Work-precision benchmark: sweep's hybrid integrator vs SciPy solve_ivp on the same model (issue #3).
 
     python benchmarks/work_precision.py            # full run (~15-30 min on 2 shared cores)
-    python benchmarks/work_precision.py --quick    # paper's case only, few tolerances (~2 min)
+    python benchmarks/work_precision.py --quick    # paper's case only, few tolerances (~11 min)
+    python benchmarks/work_precision.py --quick --rtols 1e-6 1e-8 1e-10 --no-compile-probe
     python3 run.py bench [--quick]                 # the same, in the project venv
 
 For each benchmark scene (the paper's case, a slip-heavy case, a near-upright case, a shell):
@@ -247,12 +248,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="paper's case only, rtol 1e-4..1e-10 in steps of 100x")
     ap.add_argument("--scenes", nargs="*", default=None, help="subset of: " + ", ".join(SCENES))
+    ap.add_argument("--rtols", nargs="+", type=float, default=None,
+                    help="relative tolerances of every solver (default: 1e-4..1e-10 in steps of 100x with "
+                         "--quick, else 1e-4..1e-12)")
     ap.add_argument("--no-compile-probe", action="store_true")
     args = ap.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     quick = args.quick
     scenes = args.scenes or (["paper"] if quick else list(SCENES))
-    rtols = [1e-4, 1e-6, 1e-8, 1e-10] if quick else [10.0 ** -k for k in range(4, 13)]
+    rtols = args.rtols or ([1e-4, 1e-6, 1e-8, 1e-10] if quick else [10.0 ** -k for k in range(4, 13)])
     methods = ["RK45", "DOP853", "LSODA", "Radau"]
     dts_tau = [0.2, 0.1, 0.05, 0.025] if quick else [0.4, 0.2, 0.1, 0.05, 0.025, 0.0125]
     report = dict(platform=platform.platform(), python=sys.version.split()[0], quick=quick,
