@@ -21,8 +21,9 @@ For each benchmark scene (the paper's case, a slip-heavy case, a near-upright ca
   work_precision.json (all points), work_precision.png (log-log plots).
 
 A SciPy combination is skipped when its predicted time (the previous, looser tolerance's time times
-the observed growth) exceeds BUDGET_S = 60 s, and any single SciPy run is abandoned after 60 s; the
-report lists what was skipped.
+the observed growth) exceeds BUDGET_S = 60 s, and any single SciPy run is abandoned after 60 s; after
+an abandoned run the tighter tolerances are skipped too, unless no tolerance has finished yet (a peer
+can stall at a loose tolerance only). The report lists what was skipped.
 """
 from __future__ import annotations
 
@@ -315,12 +316,19 @@ def main(argv=None) -> int:
                     first = None
                 pt = run_peer(scene_cfg(name), method, rt, backend=be, first=first)
                 add("SciPy " + label, f"{rt:.0e}", pt)
-                prev.append(pt["time"])
                 if pt["outcome"] == "step_limit":
-                    msg = f"{name}: SciPy {label} rtol {rt:.0e} abandoned after {BUDGET_S:.0f} s; tighter skipped"
+                    if prev:   # a tighter tolerance than one that finished: the cost grows from here
+                        msg = f"{name}: SciPy {label} rtol {rt:.0e} abandoned after {BUDGET_S:.0f} s; tighter skipped"
+                        report["skipped"].append(msg)
+                        log("  " + msg)
+                        break
+                    # no tolerance has finished yet: a loose one can stall where a tighter one does
+                    # not (the peers chatter at the contact rules at rtol 1e-4), so go on
+                    msg = f"{name}: SciPy {label} rtol {rt:.0e} abandoned after {BUDGET_S:.0f} s; trying the next"
                     report["skipped"].append(msg)
                     log("  " + msg)
-                    break
+                    continue
+                prev.append(pt["time"])
         report["scenes"][name] = entry
         _write(report)
 
