@@ -1,7 +1,8 @@
 """Work-precision benchmark: sweep's hybrid integrator vs SciPy solve_ivp on the same model (issue #3).
 
     python benchmarks/work_precision.py            # full run (~15-30 min on 2 shared cores)
-    python benchmarks/work_precision.py --quick    # paper's case only, few tolerances (~2 min)
+    python benchmarks/work_precision.py --quick    # paper's case only, few tolerances (~11 min)
+    python benchmarks/work_precision.py --quick --rtols 1e-6 1e-8 1e-10 --no-compile-probe
     python3 run.py bench [--quick]                 # the same, in the project venv
 
 For each benchmark scene (the paper's case, a slip-heavy case, a near-upright case, a shell):
@@ -20,8 +21,9 @@ For each benchmark scene (the paper's case, a slip-heavy case, a near-upright ca
   work_precision.json (all points), work_precision.png (log-log plots).
 
 A SciPy combination is skipped when its predicted time (the previous, looser tolerance's time times
-the observed growth) exceeds BUDGET_S = 60 s, and any single SciPy run is abandoned after 60 s; the
-report lists what was skipped.
+the observed growth) exceeds BUDGET_S = 60 s, and any single SciPy run is abandoned after 60 s; after
+an abandoned run the tighter tolerances are skipped too, unless no tolerance has finished yet (a peer
+can stall at a loose tolerance only). The report lists what was skipped.
 """
 from __future__ import annotations
 
@@ -247,12 +249,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="paper's case only, rtol 1e-4..1e-10 in steps of 100x")
     ap.add_argument("--scenes", nargs="*", default=None, help="subset of: " + ", ".join(SCENES))
+    ap.add_argument("--rtols", nargs="+", type=float, default=None,
+                    help="relative tolerances of every solver (default: 1e-4..1e-10 in steps of 100x with "
+                         "--quick, else 1e-4..1e-12)")
     ap.add_argument("--no-compile-probe", action="store_true")
     args = ap.parse_args(argv)
     OUT.mkdir(exist_ok=True)
     quick = args.quick
     scenes = args.scenes or (["paper"] if quick else list(SCENES))
-    rtols = [1e-4, 1e-6, 1e-8, 1e-10] if quick else [10.0 ** -k for k in range(4, 13)]
+    rtols = args.rtols or ([1e-4, 1e-6, 1e-8, 1e-10] if quick else [10.0 ** -k for k in range(4, 13)])
     methods = ["RK45", "DOP853", "LSODA", "Radau"]
     dts_tau = [0.2, 0.1, 0.05, 0.025] if quick else [0.4, 0.2, 0.1, 0.05, 0.025, 0.0125]
     report = dict(platform=platform.platform(), python=sys.version.split()[0], quick=quick,
@@ -311,12 +316,19 @@ def main(argv=None) -> int:
                     first = None
                 pt = run_peer(scene_cfg(name), method, rt, backend=be, first=first)
                 add("SciPy " + label, f"{rt:.0e}", pt)
-                prev.append(pt["time"])
                 if pt["outcome"] == "step_limit":
-                    msg = f"{name}: SciPy {label} rtol {rt:.0e} abandoned after {BUDGET_S:.0f} s; tighter skipped"
+                    if prev:   # a tighter tolerance than one that finished: the cost grows from here
+                        msg = f"{name}: SciPy {label} rtol {rt:.0e} abandoned after {BUDGET_S:.0f} s; tighter skipped"
+                        report["skipped"].append(msg)
+                        log("  " + msg)
+                        break
+                    # no tolerance has finished yet: a loose one can stall where a tighter one does
+                    # not (the peers chatter at the contact rules at rtol 1e-4), so go on
+                    msg = f"{name}: SciPy {label} rtol {rt:.0e} abandoned after {BUDGET_S:.0f} s; trying the next"
                     report["skipped"].append(msg)
                     log("  " + msg)
-                    break
+                    continue
+                prev.append(pt["time"])
         report["scenes"][name] = entry
         _write(report)
 

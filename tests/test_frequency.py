@@ -193,10 +193,11 @@ def test_a_window_open_at_the_end_keeps_its_symmetric_part_unless_a_guard_cut_it
 
 
 def test_the_last_levels_frequencies_do_not_depend_on_a_step_count_after_the_halt():
-    """A default-grid scene (GPU check seed 0, scene 110) that reaches its last level, 1e-4 rad, while
-    slipping in ~1400 roll/slip transitions: its 4 precession cycles after that level take ~11 000
-    steps. A cap of 5000 steps after the halt left the level's precession NaN on the CPU and a
-    one-cycle value, 418 Hz, on an H200 whose round-off moved the steps. Now the steps go on until
+    """A scene of the default grid's ranges (benchmarks/batch_throughput.py's scenes, seed 0, scene
+    110) that reaches its last level, 1e-4 rad, while slipping in ~1400 roll/slip transitions: its 4
+    precession cycles after that level take ~11 000 steps. A cap of 5000 steps after the halt left
+    the level's precession NaN on the CPU and a one-cycle value, 418 Hz, on a GPU whose round-off
+    moved the steps. Now the steps go on until
     the window is complete: a whole 8-cycle window on every rtol, one value to the window's
     accuracy (the steady rolling relation at 1e-4 rad is far off here: the disk slips)."""
     scene = {"disk": {"radius": 0.03755, "thickness": 0.0128, "mass": 0.4387, "shape": "solid"},

@@ -178,7 +178,7 @@ def test_numba_cache_is_keyed_by_every_kernel_source(tmp_path):
     model = pkg / "core" / "model.py"
     model.write_text(model.read_text() + "\n# edited\n")
     assert jit.sources_digest(paths, pkg) != jit.DIGEST
-    assert {p.name for p in jit.KERNEL_SOURCES} >= {"model.py", "contact.py", "integrate.py", "outcomes.py", "gpu.py"}
+    assert {p.name for p in jit.KERNEL_SOURCES} >= {"model.py", "contact.py", "integrate.py", "outcomes.py"}
     assert jit.DIGEST[:16] in jit.cache_dir().name
     # the kernels are located there, with the digest as their stamp
     from sweep.core import integrate

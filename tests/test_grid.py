@@ -34,7 +34,7 @@ def norm(cfg: dict) -> dict:
 
 # ------------------------------------------------------------------------------- validation
 
-@pytest.mark.parametrize("name", ["config.yaml", "tiny.yaml"])
+@pytest.mark.parametrize("name", ["config.yaml", "tiny.yaml", "million.yaml"])
 def test_shipped_configs_are_valid(name):
     settings = grid.normalize(load(name), SCHEMA)
     cfg = load(name)
@@ -107,6 +107,21 @@ def test_core_checks_reach_the_config_key():
     cfg["levels"] = [too_high, 0.1]
     msg = _bad(lambda c: c.update(levels=cfg["levels"]))
     assert "`levels`" in msg and "physics-core" in msg
+
+
+@pytest.mark.parametrize("section, field", [({"device": "cuda", "chunk_size": 100000}, "execution.device"),
+                                            ({"device": "cpu"}, "execution.device"),
+                                            ({"chunk_size": 10}, "execution")])
+def test_the_removed_execution_section_is_refused_in_one_line_naming_the_field(section, field):
+    """The GPU path and its `execution` section were removed: a config that still has one gets one
+    line naming the field and saying why and what to do, not an 'unknown key' or a traceback."""
+    msg = _bad(lambda c: c.__setitem__("execution", section))
+    lines = msg.splitlines()[1:]
+    assert len(lines) == 1, msg
+    assert lines[0].strip().startswith(f"config key `{field}`:"), msg
+    assert "GPU path was removed" in msg and "delete the `execution` section" in msg, msg
+    if "device" in section:
+        assert repr(section["device"]) in msg
 
 
 def test_all_problems_reported_together():

@@ -55,8 +55,8 @@ def test_kernels_compile_without_refcounts_and_return_no_arrays(tmp_path):
     # the scan saw the kernels: the hot ones were typed in this process. Those numba inlines
     # (inline="always": model.rhs and its parts) are typed only as part of their callers, never on
     # their own: what they return is a value inside the caller's compiled function, under its options.
-    # numba-cuda's floating-point semantics on the CPU too: a division by zero gives inf or NaN,
-    # which the integrator rejects or reports, never a ZeroDivisionError that loses the scene
+    # NumPy's floating-point semantics: a division by zero gives inf or NaN, which the integrator
+    # rejects or reports, never a ZeroDivisionError that loses the scene
     assert {k["error_model"] for k in kernels.values()} == {"numpy"}
     for name in ("contact.eval_rhs", "dop853.rk_step", "integrate.run", "ensemble.solve_index"):
         assert kernels[name]["returns"], name

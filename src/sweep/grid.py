@@ -48,7 +48,7 @@ AXIS_LONG_NAMES = {
 
 # Bump when the chunk file layout or the meaning of its variables changes: every chunk's
 # identity includes it, so old chunk files are then recomputed instead of being gathered.
-CHUNK_FORMAT = 2     # 2: error bars of the counts and slip_fraction (stop 29)
+CHUNK_FORMAT = 2     # 2: error bars of the counts and slip_fraction (CHANGELOG.md, 2026-11-26)
 
 # Length of the hex chunk id: 16 hex digits = 64 bits, so a collision among even 10^6 chunks
 # has probability ~ n^2 / 2^65 < 3e-8.
@@ -158,11 +158,29 @@ def fill_defaults(config: Mapping, schema: dict) -> dict:
     return fill(config, schema)
 
 
+# `execution` (where chunks ran: cpu, or cuda on a GPU) went with the GPU path: a config that still
+# has it is refused with the reason, not as an unknown key.
+EXECUTION_REMOVED = ("the GPU path was removed on 2026-11-27 (it ran slower than the CPU: CHANGELOG.md); "
+                     "delete the `execution` section: chunks run on CPU cores, on a cluster with "
+                     "--profile workflow/profiles/slurm")
+
+
+def removed_key_errors(config: Mapping) -> list[str]:
+    """A one-line message naming the field where the config still has the `execution` section."""
+    if "execution" not in config:
+        return []
+    section = config["execution"]
+    if isinstance(section, Mapping) and "device" in section:
+        return [f"config key `execution.device`: {section['device']!r} is no longer accepted: {EXECUTION_REMOVED}"]
+    return [f"config key `execution`: no longer accepted: {EXECUTION_REMOVED}"]
+
+
 def schema_errors(config: Mapping, schema: dict) -> list[str]:
     """Readable messages for every JSON-schema violation and every non-finite number."""
     import jsonschema
 
-    messages: list[str] = []
+    messages: list[str] = removed_key_errors(config)
+    config = {k: v for k, v in config.items() if k != "execution"}
     for path, value in _walk(config, []):
         if isinstance(value, float) and not math.isfinite(value):
             # an axis item has no description of its own: its axis states the allowed range
@@ -352,8 +370,6 @@ def normalize(config: Mapping, schema: dict | None = None, check_scenes: bool = 
         "chunk_size": int(cfg["chunk_size"]),
         "outputs": {"notebooks": list(cfg["outputs"]["notebooks"]),
                     "error_estimate": bool(cfg["outputs"]["error_estimate"])},
-        # where chunks run; not part of scene_settings, so never of a chunk's identity
-        "execution": {"device": cfg["execution"]["device"], "chunk_size": int(cfg["execution"]["chunk_size"])},
     }
     if check_scenes:
         check_scenes_valid(settings)
@@ -545,28 +561,6 @@ def plan_chunks(settings: Mapping) -> dict[str, Chunk]:
             cid, text = chunk_id_of(part, points, core)
             chunks[cid] = Chunk(cid, tuple(points), text)
     return chunks
-
-
-def plan_device_jobs(plan: Mapping[str, Chunk], scenes_per_job: int) -> dict[str, list[str]]:
-    """Device `cuda`: the chunks of `plan` (in plan order) cut into GPU jobs of consecutive chunks
-    with at most `scenes_per_job` scenes in all (a chunk larger than that is a job of its own).
-    Job id: the hash of its chunk ids, so an unchanged run of chunks keeps its job."""
-    jobs: dict[str, list[str]] = {}
-    cur: list[str] = []
-    n = 0
-
-    def close():
-        if cur:
-            jobs[sha256_hex(",".join(cur))[:CHUNK_ID_HEX]] = list(cur)
-
-    for cid, chunk in plan.items():
-        if cur and n + len(chunk.points) > scenes_per_job:
-            close()
-            cur, n = [], 0
-        cur.append(cid)
-        n += len(chunk.points)
-    close()
-    return jobs
 
 
 def grid_index(settings: Mapping) -> dict[str, dict[float, int]]:

@@ -86,7 +86,7 @@ VARIABLES: tuple[Var, ...] = (
         "counted normal-force maxima before the level (1 % hysteresis)", lambda lv: lv["normal_force_hz"],
         per_level=True, numerical_error=True),
     # the discrete sequence can hinge on a near-tangent crossing (a slip demand or a spin that only
-    # grazes its threshold: docs/performance.md, 'Stop 29'), so the counts and the slip share get
+    # grazes its threshold: docs/pipeline.md, 'Error bars'), so the counts and the slip share get
     # error bars too: a nonzero count error marks a cell whose event sequence the numerics decide
     Var("slip_fraction", "float", "1", "fraction of the simulated time spent slipping",
         lambda s: s["slip_fraction"], numerical_error=True, whole_run=True),

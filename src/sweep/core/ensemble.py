@@ -3,13 +3,8 @@
 `solve_scene` integrates one scene with `integrate.run`, the same kernel `sweep.simulate` calls,
 and computes the summary's fitted numbers (halt time and its error, approach and ramp exponents)
 with `summary_fits`, which `sweep.simulate` calls too. Every buffer has a size fixed by layout.py
-and MAX_LEVELS / PEAK_RING, so the same functions run
-
-  * on the CPU: `solve_index` on the buffers each thread allocates once (`work_buffers`;
-    sweep.ensemble's threads);
-  * on CUDA: numba-cuda compiles these @kernel (numba njit) functions, and everything they call, as
-    device functions of the persistent-thread kernel (sweep.gpu) with the same buffers in
-    `cuda.local.array`s. There is no second copy of the physics or of the event logic.
+and MAX_LEVELS / PEAK_RING: `solve_index` runs on the buffers each of sweep.ensemble's threads
+allocates once (`work_buffers`).
 
 The arrays travel in named groups (namedtuples of arrays, which numba passes as their arrays): the
 batch's BatchInputs and BatchOutputs, a worker's SceneInputs and Fits, and the run's layout.Work and
@@ -37,7 +32,7 @@ from .model import N_FULL, N_PARAMS
 from .roots import location_tol
 from .dop853 import N_DENSE
 
-# Levels per scene on the batch path (the per-thread buffers have a fixed size on CUDA).
+# Levels per scene on the batch path (a worker's buffers have a fixed size, allocated once).
 MAX_LEVELS = 16
 # Rows of the ring of normal-force maxima: the level frequencies look back at most ~3 maxima.
 PEAK_RING = 16
@@ -156,7 +151,7 @@ def summary_fits(level_t, prec_hz, levels, nl, lay_flat, fstats, chi, out):
 # --- one scene on fixed buffers -----------------------------------------------------------------
 @kernel
 def zero_rows(a, rows):
-    """a[:rows, :] = 0 (a loop: the same source compiles as a CUDA device function)."""
+    """a[:rows, :] = 0 (a loop over the rows of a worker's buffer)."""
     for r in range(rows):
         for c in range(a.shape[1]):
             a[r, c] = 0.0
@@ -209,8 +204,7 @@ def solve_scene(inp, chi, work, rec, fits):
 
 # --- a worker over the batch ---------------------------------------------------------------------
 def work_buffers():
-    """One worker's buffers (CPU), (SceneInputs, Work, Record, Fits): the shapes the CUDA kernel
-    gives its local arrays."""
+    """One worker's buffers, (SceneInputs, Work, Record, Fits), allocated once per thread."""
     inp = SceneInputs(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_SETTINGS), np.zeros(MAX_LEVELS),
                       np.zeros(MAX_LEVELS))
     work = Work(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),

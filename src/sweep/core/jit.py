@@ -1,12 +1,12 @@
 """How the core kernels are compiled for the CPU: `@kernel`, and where their machine code is cached.
 
 `kernel` is numba's `njit` with the compiled code cached on disk, without numba's reference-
-counting runtime (NRT), and with NumPy's floating-point error model, the one numba-cuda compiles the
-same source with: a division by zero gives inf or NaN, which the integrator's checks turn into a
-rejected try (a non-finite stage) or a failure outcome, instead of a ZeroDivisionError that ends
-the whole run and loses the scene (harness seed 20261136 scene 465 at rtol 1e-9: a bisection closed
-on a Painleve pole, where Phi's coefficient was exactly 0). Results where nothing divides by zero
-are the same to the bit; the divisions no longer test their divisor.
+counting runtime (NRT), and with NumPy's floating-point error model: a division by zero gives inf
+or NaN, which the integrator's checks turn into a rejected try (a non-finite stage) or a failure
+outcome, instead of a ZeroDivisionError that ends the whole run and loses the scene (harness seed
+20261136 scene 465 at rtol 1e-9: a bisection closed on a Painleve pole, where Phi's coefficient was
+exactly 0). Results where nothing divides by zero are the same to the bit; the divisions no longer
+test their divisor.
 
 The kernels never allocate (every buffer comes from the caller) and never return arrays, so nothing
 in them needs a reference count; with the runtime on, every row view
@@ -20,14 +20,11 @@ invalidates a function only when *its own* file changes ("cache invalidation fai
 changes in symbols defined in a different file", numba's caching notes): the cached machine code of
 `integrate.run` contains the `contact`, `model` and `dop853` kernels it calls, and after an edit of
 model.py alone it went on running the old model. Here the cache of every kernel lives in a folder
-named by the SHA-256 of all the sources they are compiled from (`KERNEL_SOURCES`: this package,
-outcomes.py, whose codes the kernels return, and gpu.py, the CUDA kernel), and that digest is also
+named by the SHA-256 of all the sources they are compiled from (`KERNEL_SOURCES`: this package and
+outcomes.py, whose codes the kernels return), and that digest is also
 each entry's source stamp: any change of any of them compiles everything once, nothing stale is
 ever loaded. The folder is `src/sweep/core/__pycache__/numba-<digest>/`, or
 `$NUMBA_CACHE_DIR/sweep-core-<digest>/` where NUMBA_CACHE_DIR is set.
-
-numba-cuda compiles the same Python functions as device code (sweep.gpu); it ignores the CPU options,
-and sweep.gpu registers the same locator with numba-cuda's cache for its kernel.
 """
 from __future__ import annotations
 
@@ -43,7 +40,7 @@ from numba.core import config as _config
 CPU_OPTIONS = {"cache": True, "_nrt": False, "error_model": "numpy"}
 
 PACKAGE = Path(__file__).resolve().parents[1]
-KERNEL_SOURCES = tuple(sorted((PACKAGE / "core").glob("*.py"))) + (PACKAGE / "outcomes.py", PACKAGE / "gpu.py")
+KERNEL_SOURCES = tuple(sorted((PACKAGE / "core").glob("*.py"))) + (PACKAGE / "outcomes.py",)
 
 
 def sources_digest(paths=KERNEL_SOURCES, root: Path = PACKAGE) -> str:

@@ -116,8 +116,8 @@ L_PENDING = LEVEL_COLS         # column of the level buffer: 1 while the level's
 PEAK_COLS = 3                  # tau, Phi, theta
 
 # --- the buffers of one run, grouped ------------------------------------------------------------
-# numba passes a namedtuple of arrays as its arrays (no copy, no cost), on the CPU and in CUDA
-# device code alike; a kernel takes the group and unpacks what it uses.
+# numba passes a namedtuple of arrays as its arrays (no copy, no cost); a kernel takes the group
+# and unpacks what it uses.
 # Work: what the integrator integrates and works in: the state y (N_FULL, in place: the initial
 # state in, the last state out), the parameters p (N_PARAMS), the contact state cs (N_CS), the work
 # buffer wk (N_WORK x N_WCOLS), the RK stages K (N_KROWS x N_FULL), the dense output F (14 x N_FULL)
