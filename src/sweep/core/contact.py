@@ -234,8 +234,8 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
     1), else among those where it has none (flag -1 on both sides: the scene ends as `painleve`
     there), else the guess itself. A sign change whose final bracket has flag 1 on one side and -1
     on the other is no root but a pole: across a Painleve boundary (Phi's coefficient through 0,
-    model.tilt_balance) the accelerations pass through infinity (harness seed 20261136 scene 465,
-    where the bisection landed on the pole itself).
+    model.tilt_balance) the accelerations pass through infinity (a bisection once landed on the
+    pole itself: docs/model.md, 'Roll -> slip').
     """
     dy = wk[W_DYTMP]
     aux = wk[W_AUXTMP]
@@ -506,7 +506,7 @@ def decision_rhs(i, t, y, p, cs, n, dy, aux, wk, istats):
     hypothesis: holding omega.a_i changes the slip dynamics, and a root of those (if any:
     confirm_slaved looks for it after the update) is where the direction relaxes to, not where it
     is; a secant that fails there left its last iterate, a direction set by the iteration, to
-    decide the stick (seed 20261128 scene 70)."""
+    decide the stick (docs/model.md, 'The moment a decision reads in a slaved slip')."""
     slaved = cs[CS_MODE] == SLAVED
     nu = cs[CS_NU]
     if slaved:

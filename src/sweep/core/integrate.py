@@ -55,8 +55,9 @@ STATE_BALANCE_ROUNDOFF = 4.0 * EPS
 # dissipated power leaves of 0 at a step's ends) enters the increment as h times a weighted sum of
 # its values at the stages; the floor takes DEFECT_FACTOR times the larger end value. Near flat the
 # gyroscopic terms (tan(alpha) ~ 1e6) carry it far above the energy's own round-off, and it scales
-# with h like a step's dissipation, so without it every shorter step failed alike (harness seed
-# 20261125 scenes 32, 489: step_size_underflow at rtol 1e-12, 1e-13).
+# with h like a step's dissipation, so without it every shorter step failed alike (slides at
+# beta ~ 1e-6 ended in step_size_underflow at rtol 1e-12, 1e-13: docs/model.md, 'Energy and the
+# dissipation budget').
 DEFECT_FACTOR = 16.0
 
 # Within SLIP_NEAR x slip_tol of u = 0 the slip components are held to rtol SLIP_NEAR slip_tol rather
@@ -66,7 +67,7 @@ DEFECT_FACTOR = 16.0
 SLIP_NEAR = 100.0
 # The slip is the contact point's velocity, a difference of O(|omega|) terms: its round-off, and its
 # step's round-off in the error estimate, is ~EPS |omega|. A tolerance below it failed every shorter
-# step alike (harness seed 20261124 scene 91 at rtol 1e-13: step_size_underflow).
+# step alike (a random-scene harness run at rtol 1e-13 ended in step_size_underflow that way).
 SLIP_ROUNDOFF = 4.0 * EPS
 
 # A dip whose dense-output value at the cubic Hermite minimum is below DIP_REFINE times the lower end

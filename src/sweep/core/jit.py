@@ -3,16 +3,16 @@
 `kernel` is numba's `njit` with the compiled code cached on disk, without numba's reference-
 counting runtime (NRT), and with NumPy's floating-point error model: a division by zero gives inf
 or NaN, which the integrator's checks turn into a rejected try (a non-finite stage) or a failure
-outcome, instead of a ZeroDivisionError that ends the whole run and loses the scene (harness seed
-20261136 scene 465 at rtol 1e-9: a bisection closed on a Painleve pole, where Phi's coefficient was
-exactly 0). Results where nothing divides by zero are the same to the bit; the divisions no longer
+outcome, instead of a ZeroDivisionError that ends the whole run and loses the scene (a slip onset's
+bisection can close on a Painleve pole, where Phi's coefficient is exactly 0: docs/model.md,
+'Roll -> slip'). Results where nothing divides by zero are the same to the bit; the divisions no longer
 test their divisor.
 
 The kernels never allocate (every buffer comes from the caller) and never return arrays, so nothing
 in them needs a reference count; with the runtime on, every row view
 (`wk[W_YTMP]`, `K[s]`, `cs[CS_SIG:CS_SIG + 3]`) cost a pair of out-of-line incref/decref calls,
-and those calls made a right-hand-side evaluation cost three times its arithmetic (docs/
-performance.md, 'Cost of the core'). An allocation added to a kernel now fails to compile instead of
+and those calls made a right-hand-side evaluation cost three times its arithmetic (measured when
+the runtime was switched off; CHANGELOG.md). An allocation added to a kernel now fails to compile instead of
 slowing it; tests/test_jit.py checks that no kernel returns an array.
 
 **The cache is keyed by every kernel source at once** (`CoreCacheLocator`). numba's own cache
@@ -113,7 +113,7 @@ def kernel(fn=None, **options):
     `@kernel(inline="always")` has numba inline fn into each caller before LLVM sees it: the parts of
     `model.rhs` use it, since LLVM alone kept the larger ones as calls, and a call that returns a
     tuple through memory made a right-hand side ~20 % slower than the one-function version it
-    replaced (docs/performance.md, 'Stop 32')."""
+    replaced (CHANGELOG.md)."""
     opts = {**CPU_OPTIONS, **options}
     if fn is None:
         return njit(**opts)

@@ -179,8 +179,9 @@ def energy_increment_trig(y, d, p, side, slip, s, c):
 
     d is a step's increment before it is rounded into the state. Evaluated as the difference of two
     energies, the change carries the round-off of E itself: near flat E << G, and alpha's last bit
-    alone moves G (e - |h|) by ~EPS G, which hid a step's truncation error in the energy (harness
-    seed 20261125 scene 191: ~1e-14 E0 per step, summed over 1.4 M steps to 1.5e-9 E0). Here every
+    alone moves G (e - |h|) by ~EPS G, which hid a step's truncation error in the energy (a slide
+    near flat: ~1e-14 E0 per step, summed over 1.4 M steps to 1.5e-9 E0; docs/model.md, 'Energy and
+    the dissipation budget'). Here every
     term is (change of q) x (q + change/2), the cosine and sine by their half-angle products, so the
     round-off is relative to the change. Returns (change, scale): scale bounds the change's round-off
     in units of EPS. s, c: sin, cos of y's inclination."""

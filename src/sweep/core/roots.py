@@ -19,9 +19,9 @@ from .model import X_PHI, Y_U1, Y_U2, sign_rate
 # Events are located to 4 ulp of tau, where the bracket cannot shrink further, with this floor near
 # tau = 0. The restart point is the bracket's right end, so each event restarts up to the tolerance
 # past its root: a one-sided error that no rtol removes. At the former tolerance of 1e-12 tau it
-# summed, over the 2159 events of harness seed 20261130 scene 8 (a disk rocking near upright, alpha
-# at tau 300 = -6.4e-4 rad), to 4.7e-11 rad, 7e-8 of the value, on which the kernel's runs at rtol
-# 1e-12..1e-14 agreed to 3e-12 (docs/performance.md, 'Stop 32').
+# summed, over the 2159 events of a harness scene (a disk rocking near upright, alpha at tau 300 =
+# -6.4e-4 rad), to 4.7e-11 rad, 7e-8 of the value, on which the kernel's runs at rtol 1e-12..1e-14
+# agreed to 3e-12 (docs/model.md, 'Modes, signs and sticking').
 EVENT_TOL_TAU = 1e-15
 EPS = 2.220446049250313e-16
 # Step (tau) of the forward difference that gives the rate of an event function without a closed form.
@@ -101,9 +101,9 @@ def slip_closest_approach(y0, f0, y1, f1, h):
 
     |u| less a speed (slip_tol, the slaving speed) has a V-shaped minimum where a slip passes by
     u = 0, as wide as (miss distance) / (slip rate): often far narrower than the step and than
-    RATE_STEP, so that neither a cubic in g nor a difference quotient of g sees it (harness seed
-    20261128 scene 39: |u| dipped 1e-12 below slip_tol inside a V ~4e-9 tau wide, and the runs at
-    rtol 1e-10, 1e-11 and 1e-13 stepped over it). The components are smooth: U'(x).U(x) changes
+    RATE_STEP, so that neither a cubic in g nor a difference quotient of g sees it (a harness scene
+    whose |u| dipped 1e-12 below slip_tol inside a V ~4e-9 tau wide was stepped over at three of
+    four rtols: docs/model.md, 'Modes, signs and sticking'). The components are smooth: U'(x).U(x) changes
     sign once across the V, and bisection on it finds the place to 2^-60 of the step."""
     a0x, a0y, a1x, a1y = y0[Y_U1], y0[Y_U2], y1[Y_U1], y1[Y_U2]
     d0x, d0y, d1x, d1y = h * f0[Y_U1], h * f0[Y_U2], h * f1[Y_U1], h * f1[Y_U2]
