@@ -110,7 +110,7 @@ def draw_scene(rng: np.random.Generator) -> dict:
 
 def _valid_levels(cfg: dict) -> dict:
     """Keep only the levels for which the energy-equivalent inclination is defined for this disk."""
-    from sweep import model
+    from sweep.core import model
     from sweep.scene import SHAPES, max_level
 
     d, c = cfg["disk"], cfg["contact"]

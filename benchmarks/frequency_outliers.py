@@ -95,7 +95,7 @@ def grid_scenes() -> list[dict]:
 
 
 def steady_hz(cfg: dict, beta: float) -> float:
-    from sweep import model
+    from sweep.core import model
     from sweep.scene import load_scene
 
     sc = load_scene(cfg)

@@ -1,4 +1,4 @@
-"""Verify sweep.model against an independent world-frame Newton-Euler formulation.
+"""Verify sweep.core.model against an independent world-frame Newton-Euler formulation.
 
 The reference (tests/reference/newton_euler.py) works in SI units with random m, R, g and a
 random body orientation (theta, psi), solves accelerations and contact reactions as one linear
@@ -32,7 +32,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from reference import newton_euler as ne  # noqa: E402
 
-from sweep import model as M  # noqa: E402
+from sweep.core import model as M  # noqa: E402
 from sweep.core import layout as L  # noqa: E402
 from sweep.core.impulse import project_velocity, stop_axis_rate  # noqa: E402
 

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import sweep
-from sweep import model, outcomes
+from sweep import outcomes
+from sweep.core import model
 from sweep.scene import load_scene
 
 from conftest import CHI_PAPER, make_scene

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import sweep
-from sweep import model
+from sweep.core import model
 from sweep.scene import DEFAULTS, load_scene
 
 ROOT = Path(__file__).resolve().parents[1]

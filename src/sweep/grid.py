@@ -33,6 +33,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .core.jit import kernel_sources, sources_digest
+
 AXES = ("mu_d", "k1", "k2", "k3", "alpha0", "omega0")
 OUTER_AXES = AXES[:4]
 INNER_AXES = AXES[4:]
@@ -524,18 +526,16 @@ def split_inner(inner_points: list[tuple[float, ...]], chunk_size: int) -> list[
 # What decides a scene's result: the physics core package and the modules that turn a scene file
 # into kernel inputs and a summary. Front ends, plots and the pipeline's own modules are not in it
 # (chunk files carry CHUNK_FORMAT for those), so editing them does not recompute chunks.
-CORE_MODULES = ("scene.py", "simulate.py", "diagnostics.py", "outcomes.py")
+# the modules besides the kernels (core.jit.kernel_sources) whose change gives every chunk a new
+# identity: they turn a scene into the kernel's inputs and its outputs into the summary
+CHUNK_MODULES = ("scene.py", "simulate.py", "diagnostics.py")
 
 
 def core_fingerprint() -> str:
-    """SHA-256 of the physics core's source files (src/sweep/core/*.py and CORE_MODULES), so that
-    a change of the core gives every chunk a new identity."""
+    """SHA-256 (core.jit.sources_digest) of the sources a chunk's numbers come from: the kernels'
+    and CHUNK_MODULES, so that a change of any gives every chunk a new identity."""
     pkg = Path(__file__).resolve().parent
-    h = hashlib.sha256()
-    paths = sorted((pkg / "core").glob("*.py")) + [pkg / m for m in CORE_MODULES]
-    for path in paths:
-        h.update(path.relative_to(pkg).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
-    return h.hexdigest()
+    return sources_digest(kernel_sources(pkg) + tuple(pkg / m for m in CHUNK_MODULES), root=pkg)
 
 
 def chunk_id_of(settings_part: Mapping, points: list[tuple[float, ...]],

@@ -9,7 +9,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from . import model  # noqa: E402
+from .core import model  # noqa: E402
 from .simulate import SimulationResult  # noqa: E402
 
 

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from . import model, yamlio
+from . import yamlio
+from .core import model
 from .errors import ConfigError
 
 DEFAULTS: dict[str, Any] = {

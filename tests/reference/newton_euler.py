@@ -1,6 +1,6 @@
 """Independent world-frame Newton-Euler reference for the Kessler & O'Reilly (2002) disk.
 
-Nothing here is taken from ``sweep.model``'s equations: the body is described by a rotation
+Nothing here is taken from ``sweep.core.model``'s equations: the body is described by a rotation
 matrix built from the 3-1-2 Euler angles, the balances of linear and angular momentum are written
 with world-frame vectors (inertia tensor I_w = Q I_body Q^T), and all contact reactions (normal
 force, friction, the magnitudes of "stuck" dry-friction moment components) are solved together

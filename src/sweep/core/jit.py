@@ -40,7 +40,14 @@ from numba.core import config as _config
 CPU_OPTIONS = {"cache": True, "_nrt": False, "error_model": "numpy"}
 
 PACKAGE = Path(__file__).resolve().parents[1]
-KERNEL_SOURCES = tuple(sorted((PACKAGE / "core").glob("*.py"))) + (PACKAGE / "outcomes.py",)
+
+
+def kernel_sources(package: Path = PACKAGE) -> tuple[Path, ...]:
+    """The sources the kernels are compiled from: the core and outcomes.py (their return codes)."""
+    return tuple(sorted((package / "core").glob("*.py"))) + (package / "outcomes.py",)
+
+
+KERNEL_SOURCES = kernel_sources()
 
 
 def sources_digest(paths=KERNEL_SOURCES, root: Path = PACKAGE) -> str:
