@@ -26,8 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core.ensemble import (D_APPROACH, D_HALT_FINITE, D_THALT, D_THALT_ERR, N_DERIVED, halt_fit, halt_from_three)
-from .core.ensemble import ramp_fit as _ramp_fit
+from .core.fits import (D_APPROACH, D_HALT_FINITE, D_THALT, D_THALT_ERR, N_DERIVED, halt_fit, halt_from_three)
+from .core.fits import ramp_fit as _ramp_fit
 
 
 def _halt_from_three(t: np.ndarray, b: np.ndarray) -> tuple[float, float]:
@@ -41,7 +41,7 @@ def halt_time(level_t: np.ndarray, levels: np.ndarray) -> dict:
     Returns t_halt, t_halt_error (the extrapolated remainder t_halt - t_last, see the module
     docstring), approach exponent
     p (beta ~ (t_halt - t)^p), and halt_finite (False where the gaps do not shrink fast enough).
-    The numbers come from the numba kernel `core.ensemble.halt_fit`, which the batch path runs on
+    The numbers come from the numba kernel `core.fits.halt_fit`, which the batch path runs on
     its device.
     """
     lt = np.ascontiguousarray(level_t, dtype=float)
@@ -59,7 +59,7 @@ def ramp_exponent(level_t: np.ndarray, precession: np.ndarray, t_halt: float) ->
 def ramp_fit(level_t: np.ndarray, precession: np.ndarray, t_halt: float) -> tuple[float, float]:
     """(n, standard error of n): n in Omega ~ (t_halt - t)^(-n) by least squares of ln Omega
     against ln(t_halt - t) over the levels with finite values; NaN if fewer than 2 (error: 3).
-    The numba kernel `core.ensemble.ramp_fit`, which the batch path runs on its device."""
+    The numba kernel `core.fits.ramp_fit`, which the batch path runs on its device."""
     lt = np.ascontiguousarray(level_t, dtype=float)
     n, err = _ramp_fit(lt, np.ascontiguousarray(precession, dtype=float), lt.shape[0], float(t_halt))
     return float(n), float(err)

@@ -1,7 +1,7 @@
 """Many scenes at once on the CPU's cores: `simulate_batch(scenes) -> [summary, ...]`.
 
 Each summary equals `sweep.simulate(scene).summary` (the batch runs the same numba kernels:
-core.ensemble.solve_scene calls core.integrate.run and core.ensemble.summary_fits). Only the summary
+core.ensemble.solve_scene calls core.integrate.run and core.fits.summary_fits). Only the summary
 is returned: no samples, trajectory or peak list (use `sweep.simulate` for those).
 
 Worker threads (all cores by default), each with its own buffers, take the next scene when theirs

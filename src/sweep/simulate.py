@@ -9,7 +9,7 @@ import numpy as np
 
 from . import outcomes
 from .core import model
-from .core.ensemble import D_APPROACH, D_HALT_FINITE, D_RAMP, D_RAMP_ERR, D_THALT, D_THALT_ERR, N_DERIVED, summary_fits
+from .core.fits import D_APPROACH, D_HALT_FINITE, D_RAMP, D_RAMP_ERR, D_THALT, D_THALT_ERR, N_DERIVED, summary_fits
 from .core.integrate import integrate
 from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_FLAT, I_IMPACTS,
                           I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
@@ -96,7 +96,7 @@ def _finite_or_nan(x: float) -> float:
 def summary_from(sc: Scene, istats: np.ndarray, fstats: np.ndarray, lev: np.ndarray, y_end: np.ndarray,
                  wall: float, fits: np.ndarray | None = None) -> dict:
     """The JSON-able summary (SI) of a scene from the kernel's outputs: istats, fstats, lev (levels x
-    layout.LEVEL_COLS: tau, alpha, mean dtheta/dtau, f_hat, ringing ratio, window cycles), y_end. fits: the scene's `core.ensemble.summary_fits` (D_*),
+    layout.LEVEL_COLS: tau, alpha, mean dtheta/dtau, f_hat, ringing ratio, window cycles), y_end. fits: the scene's `core.fits.summary_fits` (D_*),
     computed here unless the caller has them (the batch path computes them per scene on its device)."""
     chi = sc.chi
     escale = sc.energy_scale

@@ -13,7 +13,8 @@
     tracking.py  halt levels, samples, normal-force maxima, trajectory
     frequency.py precession, ringing and f_hat at the levels over whole precession cycles
     integrate.py the main loop (`run`) and its CPU entry point (`integrate`)
-    ensemble.py  one scene on fixed-size buffers (the batch path) and the summary fits
+    fits.py      the summary's fits: halt time (also after the halt, on deeper levels), ramp exponent
+    ensemble.py  one scene on fixed-size buffers (the batch path)
 
 Everything here decides the result of a scene: the sweep's chunk fingerprint hashes this package.
 """

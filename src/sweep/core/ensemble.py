@@ -1,8 +1,8 @@
-"""The batch path: one scene per worker on fixed-size per-worker buffers, and the summary fits.
+"""The batch path: one scene per worker on fixed-size per-worker buffers.
 
 `solve_scene` integrates one scene with `integrate.run`, the same kernel `sweep.simulate` calls,
 and computes the summary's fitted numbers (halt time and its error, approach and ramp exponents)
-with `summary_fits`, which `sweep.simulate` calls too. Every buffer has a size fixed by layout.py
+with `fits.summary_fits`, which `sweep.simulate` calls too. Every buffer has a size fixed by layout.py
 and MAX_LEVELS / PEAK_RING: `solve_index` runs on the buffers each of sweep.ensemble's threads
 allocates once (`work_buffers`).
 
@@ -23,15 +23,18 @@ from collections import namedtuple
 import numpy as np
 
 from .frequency import FQ_COLS, FQ_LEVEL0
-from .halt import halt_from_three
+from .fits import N_DERIVED, summary_fits
 from .integrate import run
 from .jit import kernel
-from .layout import (F_APPROACH, F_TEND, F_THALT, F_THALT_ERR, I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
+from .layout import (I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
                      N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS, Record, Work)
 from .model import N_FULL, N_PARAMS
-from .roots import location_tol
 from .dop853 import N_DENSE
 
+# rows of the per-scene scratch: level times (s), precession frequencies (Hz)
+R_LEVEL_T, R_PREC_HZ = 0, 1
+N_SCRATCH = 2
+TWO_PI = 2.0 * math.pi
 # Levels per scene on the batch path (a worker's buffers have a fixed size, allocated once).
 MAX_LEVELS = 16
 # Rows of the ring of normal-force maxima: the level frequencies look back at most ~3 maxima.
@@ -48,105 +51,6 @@ BatchOutputs = namedtuple("BatchOutputs", "ISTATS FSTATS LEV YEND DER")
 SceneInputs = namedtuple("SceneInputs", "y0 p settings level_e levels")
 # What a worker fits after the run: scratch (N_SCRATCH x MAX_LEVELS), derived (N_DERIVED, D_*).
 Fits = namedtuple("Fits", "scratch derived")
-
-# --- the summary's fitted numbers (SI: s) ------------------------------------------------------
-D_THALT, D_THALT_ERR, D_HALT_FINITE, D_APPROACH, D_RAMP, D_RAMP_ERR = range(6)
-N_DERIVED = 6
-# rows of the per-scene scratch: level times (s), precession frequencies (Hz)
-R_LEVEL_T, R_PREC_HZ = 0, 1
-N_SCRATCH = 2
-TWO_PI = 2.0 * math.pi
-
-
-# --- halt time and exponents (diagnostics.py explains the method; halt_from_three: core/halt.py) ----
-@kernel
-def halt_fit(level_t, levels, nl, out):
-    """out[D_THALT, D_THALT_ERR, D_HALT_FINITE, D_APPROACH] from the last reached levels
-    (diagnostics.halt_time: the fit on the last three; its error bar is the extrapolated remainder
-    t_halt - t_last, the part of t_halt the fit adds)."""
-    out[D_THALT] = math.nan
-    out[D_THALT_ERR] = math.nan
-    out[D_HALT_FINITE] = 0.0
-    out[D_APPROACH] = math.nan
-    i1 = i2 = i3 = -1   # the last three reached levels, i1 the last
-    count = 0
-    for i in range(nl):
-        if math.isfinite(level_t[i]):
-            i3, i2, i1 = i2, i1, i
-            count += 1
-    if count < 3:
-        return
-    th, p = halt_from_three(level_t[i3], level_t[i2], level_t[i1], levels[i3], levels[i2], levels[i1])
-    if not math.isfinite(th):
-        return
-    out[D_THALT] = th
-    out[D_APPROACH] = p
-    out[D_HALT_FINITE] = 1.0
-    out[D_THALT_ERR] = th - level_t[i1]
-
-
-@kernel
-def ramp_fit(level_t, precession, nl, t_halt):
-    """(n, standard error of n), n in Omega ~ (t_halt - t)^(-n): least squares of ln|Omega| on
-    ln(t_halt - t) over the levels with finite values before t_halt; NaN if fewer than two (the
-    error: fewer than three)."""
-    if not math.isfinite(t_halt):
-        return math.nan, math.nan
-    m = 0
-    sx = 0.0
-    sy = 0.0
-    for i in range(nl):
-        om = abs(precession[i])
-        if math.isfinite(level_t[i]) and math.isfinite(om) and om > 0.0 and level_t[i] < t_halt:
-            m += 1
-            sx += math.log(t_halt - level_t[i])
-            sy += math.log(om)
-    if m < 2:
-        return math.nan, math.nan
-    mx = sx / m
-    my = sy / m
-    sxx = 0.0
-    sxy = 0.0
-    for i in range(nl):
-        om = abs(precession[i])
-        if math.isfinite(level_t[i]) and math.isfinite(om) and om > 0.0 and level_t[i] < t_halt:
-            dx = math.log(t_halt - level_t[i]) - mx
-            sxx += dx * dx
-            sxy += dx * (math.log(om) - my)
-    if not sxx > 0.0:
-        return math.nan, math.nan
-    slope = sxy / sxx
-    if m < 3:
-        return -slope, math.nan
-    ssr = 0.0
-    for i in range(nl):
-        om = abs(precession[i])
-        if math.isfinite(level_t[i]) and math.isfinite(om) and om > 0.0 and level_t[i] < t_halt:
-            r = math.log(om) - my - slope * (math.log(t_halt - level_t[i]) - mx)
-            ssr += r * r
-    return -slope, math.sqrt(ssr / (m - 2) / sxx)
-
-
-@kernel
-def summary_fits(level_t, prec_hz, levels, nl, lay_flat, fstats, chi, out):
-    """The summary's fitted numbers into out (D_*). level_t (s), prec_hz (Hz), levels (rad): the
-    first nl entries; fstats: the run's (layout.F_*). A disk that lay flat halted at the located
-    event fstats[F_TEND]; where the configured levels give no finite halt, the integrator's fit on
-    the levels below them (fstats[F_THALT], tracking.deep_levels) is taken."""
-    if lay_flat:
-        out[D_THALT] = fstats[F_TEND] * chi
-        out[D_THALT_ERR] = location_tol(fstats[F_TEND]) * chi
-        out[D_HALT_FINITE] = 1.0
-        out[D_APPROACH] = math.nan
-    else:
-        halt_fit(level_t, levels, nl, out)
-        if math.isnan(out[D_THALT]) and not math.isnan(fstats[F_THALT]):
-            out[D_THALT] = fstats[F_THALT] * chi
-            out[D_THALT_ERR] = fstats[F_THALT_ERR] * chi
-            out[D_HALT_FINITE] = 1.0
-            out[D_APPROACH] = fstats[F_APPROACH]
-    out[D_RAMP], out[D_RAMP_ERR] = ramp_fit(level_t, prec_hz, nl, out[D_THALT])
-
 
 # --- one scene on fixed buffers -----------------------------------------------------------------
 @kernel

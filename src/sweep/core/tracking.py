@@ -11,7 +11,7 @@ import math
 from .contact import EV_LEVEL, eval_rhs, mode_energy
 from .dop853 import N_DENSE, dense_coeffs, dense_eval
 from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_step, open_level, peak_candidate, peak_confirmed
-from .halt import halt_from_three
+from .fits import halt_from_three
 from .jit import kernel
 from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_B, T_DEEP_E, T_FIT_B, T_FIT_T, CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_CS, T_NEXT_LEVEL, T_PREV_DENSE,
                      T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
