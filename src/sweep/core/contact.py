@@ -25,32 +25,16 @@ from __future__ import annotations
 import math
 
 from .. import outcomes as oc
+from .events import (C_CONTACT_LOST, C_FACE, C_MOMENT, C_SIDE, E_CLASS, E_COMPONENT, E_FORCES, EV_AGAINST1,  # noqa: F401
+                     EV_CONE, EV_CONTACT, EV_FACE, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SIGN2, EV_SIGN3, EV_SLAVE,
+                     EV_SLAVE_LOST, EV_SLIP_FAST, EV_SLIP_SLOW, EV_SLIP_STOP, EV_SPIN1, EV_SPIN2, EV_SPIN3,
+                     EV_UNSTICK1, EV_UNSTICK2, EV_UNSTICK3, EVENTS, N_DYN_EVENTS, N_EVENTS)
 from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
 from .model import (N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
                     Y_DSLIDE, Y_U1, Y_U2, Y_W1, energy_from_trig, moment_axes_rates, rhs, sign_rate)
-
-# event identifiers: g_k(state) > 0 before the event, the event is where g_k first reaches 0
-EV_SIGN1, EV_SIGN2, EV_SIGN3 = 0, 1, 2          # omega.a_i crosses 0 against its moment's sign
-EV_UNSTICK1, EV_UNSTICK2, EV_UNSTICK3 = 3, 4, 5  # a stuck component needs more than k_i |N|
-EV_CONE = 6        # ROLL: the friction needed leaves the static cone, mu_s Phi - |F| = 0
-EV_SLIP_SLOW = 7   # SLIDE: |u| falls to slip_tol (slip_floor) -> its fate (slow_slide)
-EV_SLIP_STOP = 8   # SLAVED: u.s reaches 0 -> ROLL
-EV_SLIP_FAST = 9   # SLAVED: |u| grows to SLAVE_EXIT x the slaving speed -> SLIDE (and SLIDE re-arms the hand-over)
-EV_SLAVE = 10      # SLIDE: |u| falls to the slaving speed -> SLAVED if the direction has relaxed
-EV_CONTACT = 11    # Phi = 0: contact lost
-EV_SIDE = 12       # alpha = 0: the other rim edge takes the contact
-EV_FACE = 13       # pi/2 - |alpha| = BETA_FACE: the face reaches the table
-EV_SLAVE_LOST = 14  # SLAVED: the slaved direction stops attracting (d cross/d nu -> 0, a fold) -> SLIDE
-EV_SPIN1, EV_SPIN2, EV_SPIN3 = 15, 16, 17  # a free component slows to spin_tol: sticks if it can be held
-N_DYN_EVENTS = 18
-EV_LEVEL = 18      # energy reaches the next halt level (recorded, no restart)
-N_EVENTS = 19
-# not event functions: EV_AGAINST1 + i is the sign event of component i found at the restart itself
-# (omega.a_i moves against its new moment sign at once: the un-stick only grazed |sigma| = 1)
-EV_AGAINST1 = 19
 
 # Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
 # is then 1e-6 R above the table (38 nm for the paper's disk), below any real table's flatness. A disk
@@ -711,20 +695,17 @@ def consistent_signs(t, y, p, cs, n, wk, istats):
 
 @kernel
 def reads_forces(k):
-    """Does event k's function read the right-hand side's aux (the contact forces, or the slaved
-    direction at the state: the slip's end, EV_SLIP_STOP; the normal force in the slip's round-off
-    floor, EV_SLIP_SLOW)? The others (moment signs and spin_tol, side, face, level) are functions
-    of the state alone: on a step's dense output
-    they cost no right-hand-side evaluation (state_event_value)."""
-    return (EV_UNSTICK1 <= k <= EV_UNSTICK3 or k == EV_CONE or k == EV_SLIP_STOP or k == EV_SLIP_FAST
-            or k == EV_SLAVE or k == EV_CONTACT or k == EV_SLAVE_LOST or k == EV_SLIP_SLOW)
+    """Does event k's function read the right-hand side's aux (events.EVENTS[k, E_FORCES])? The
+    others are functions of the state alone: on a step's dense output they cost no right-hand-side
+    evaluation (state_event_value)."""
+    return EVENTS[k, E_FORCES] != 0
 
 
 @kernel
 def state_event_value(k, t, y, p, cs, u_tol, level_e):
     """g_k of an active event that does not read the forces (not reads_forces(k))."""
     if k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
-        i = k if k <= EV_SIGN3 else k - EV_SPIN1
+        i = EVENTS[k, E_COMPONENT]
         r1, r2, r3 = moment_axes_rates(y)
         g = cs[CS_SIG + i] * (r1 if i == 0 else (r2 if i == 1 else r3))
         return g if k <= EV_SIGN3 else g - p[P_WTOL]
@@ -792,13 +773,13 @@ def moment_event(k, t, y, p, cs, n, wk, istats):
     release (EV_UNSTICK*). Returns (own, held): own, the component this event put on its surface
     (settle_signs leaves it; -1: none); held, True where a stop at spin_tol holds the stuck
     components, so that the rates after it are those that release_moved compares with."""
+    i = EVENTS[k, E_COMPONENT]
     if k <= EV_SIGN3:
-        stick_or_flip(k, t, y, p, cs, n, wk, istats)
+        stick_or_flip(i, t, y, p, cs, n, wk, istats)
         return -1, False
     if k >= EV_AGAINST1:
         # neither sign holds (the one just set fails at once, the other opposes the motion):
         # the Filippov solution stays on omega.a_i = 0
-        i = k - EV_AGAINST1
         sig_failed = cs[CS_SIG + i]
         stick_or_flip(i, t, y, p, cs, n, wk, istats)
         if cs[CS_STUCK + i] == 0.0 and cs[CS_SIG + i] == sig_failed:
@@ -807,8 +788,7 @@ def moment_event(k, t, y, p, cs, n, wk, istats):
             return i, False
         return -1, False
     if EV_SPIN1 <= k <= EV_SPIN3:
-        return -1, stick_at_spin_tol(k - EV_SPIN1, t, y, p, cs, n, wk, istats)
-    i = k - EV_UNSTICK1
+        return -1, stick_at_spin_tol(i, t, y, p, cs, n, wk, istats)
     eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
     cs[CS_SIG + i] = 1.0 if wk[W_AUXTMP, X_SIG1 + i] > 0.0 else -1.0
     cs[CS_STUCK + i] = 0.0
@@ -855,15 +835,16 @@ def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     """
     g_before = moment_axes_rates(y)
     own = -1   # the component this event puts on its surface (settle_signs)
-    if k <= EV_UNSTICK3 or EV_SPIN1 <= k <= EV_SPIN3 or k >= EV_AGAINST1:
+    cls = EVENTS[k, E_CLASS]
+    if cls == C_MOMENT:
         own, held = moment_event(k, t, y, p, cs, n, wk, istats)
         if held:
             g_before = moment_axes_rates(y)   # the stop holds the stuck components: they stay stuck
-    elif k == EV_CONTACT:
-        return 1   # outcomes.CONTACT_LOST
-    elif k == EV_FACE:
-        return 8   # outcomes.FACE_CONTACT (the caller records it as a halt)
-    elif k == EV_SIDE:
+    elif cls == C_CONTACT_LOST:
+        return oc.CONTACT_LOST
+    elif cls == C_FACE:
+        return oc.FACE_CONTACT   # the caller records it as a halt
+    elif cls == C_SIDE:
         return side_change(t, y, p, cs, n, u_tol, wk, istats, fstats)
     else:
         code = slip_event(k, t, y, p, cs, n, wk, istats)
@@ -916,7 +897,7 @@ def side_change(t, y, p, cs, n, u_tol, wk, istats, fstats):
     zeno = t - fstats[F_TIMPACT] < ZENO_DTAU
     fstats[F_TIMPACT] = t
     if y[Y_W1] * cs[CS_SIDE] <= 0.0 or zeno:
-        return 4   # outcomes.LINE_CONTACT: the disk stands on its flat edge
+        return oc.LINE_CONTACT   # the disk stands on its flat edge
     if mode != ROLL:
         code = set_slip(t, y, p, cs, n, u_tol, wk, istats)
         if code >= 0:

@@ -14,9 +14,11 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
-from .contact import (EV_AGAINST1, EV_LEVEL, EV_SIDE, EV_SIGN3, EV_SLAVE, EV_SLIP_SLOW, EV_SPIN1, EV_SPIN3, N_DYN_EVENTS, apply_event, confirm_slaved, spin_reaches_rest,
+from .contact import (apply_event, confirm_slaved, spin_reaches_rest,
                       consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
+from .events import (C_MOMENT, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
+                     EV_LEVEL, EVENTS, N_DYN_EVENTS, R_SPIN, R_SURFACE)
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
 from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_E, I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
@@ -155,13 +157,13 @@ def first_event(t, h, n, u_tol, lev, work, istats):
         gb = 0.0
         if g_old[k] > 0.0 and g_new[k] <= 0.0:
             ta, ga, tb, gb = t, g_old[k], t + h, g_new[k]
-        elif (k == EV_SIDE or k <= EV_SIGN3) and g_old[k] <= 0.0 and g_new[k] <= 0.0:
+        elif EVENTS[k, E_RESTART] == R_SURFACE and g_old[k] <= 0.0 and g_new[k] <= 0.0:
             # the step starts on the surface (alpha = 0 after a side change; a moment component
             # released at an un-stick, omega.a_i = 0 up to its drift while held) and ends on or
             # past it: it left and came back within the step (a rocking bounce), or it never left
             have_dense = dense_built(have_dense, t, h, n, work, istats)
             ta, ga, tb, gb, k_event = surface_bracket(k, t, h, n, u_tol, lev, work, istats)
-        elif EV_SPIN1 <= k <= EV_SPIN3 and g_old[k] <= 0.0 and g_new[k] <= 0.0:
+        elif EVENTS[k, E_RESTART] == R_SPIN and g_old[k] <= 0.0 and g_new[k] <= 0.0:
             ta, ga, have_dense = spin_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense)
             tb, gb = t + h, g_new[k]
         elif g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf and g_new[k] != math.inf:
@@ -173,8 +175,8 @@ def first_event(t, h, n, u_tol, lev, work, istats):
         if ta >= 0.0 and ta < first_t:
             have_dense = dense_built(have_dense, t, h, n, work, istats)
             ra, rb = locate(k, ta, ga, tb, gb, span, n, u_tol, lev, work, istats)
-            if (rb < first_t or first_k < 0) and (k < EV_SPIN1 or k > EV_SPIN3
-                                                  or spin_holds(k - EV_SPIN1, rb, span, n, work, istats)):
+            if (rb < first_t or first_k < 0) and (EVENTS[k, E_HOLDS] == 0
+                                                  or spin_holds(EVENTS[k, E_COMPONENT], rb, span, n, work, istats)):
                 first_k = k_event
                 first_t = rb
                 trk[T_DIP_END] = dip_end
@@ -201,16 +203,18 @@ def surface_bracket(k, t, h, n, u_tol, lev, work, istats):
     g0 = wk[W_GOLD, k]
     g1 = wk[W_GNEW, k]
     y_new = wk[W_YNEW]
-    if k == EV_SIDE:
+    i = EVENTS[k, E_COMPONENT]
+    if EVENTS[k, E_DIP] == D_SIDE:
         # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
         d0 = cs[CS_SIDE] * y[Y_W1] * h
         d1 = cs[CS_SIDE] * y_new[Y_W1] * h
     else:
-        d0, d1 = sign_slopes(k, cs[CS_SIG + k], y, wk[W_F], y_new, wk[W_FNEW], h)
+        d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], y_new, wk[W_FNEW], h)
     ta, ga = lift_off(k, t, h, g0, d0, g1, d1, n, u_tol, lev, work, istats)
     tb, gb = t + h, g1
     k_event = k
-    if ta < 0.0 and k <= EV_SIGN3 and g0 < 0.0 and d0 > 0.0:
+    moment = EVENTS[k, E_CLASS] == C_MOMENT
+    if ta < 0.0 and moment and g0 < 0.0 and d0 > 0.0:
         # released with omega.a_i on the far side of its new sign (an impulse's residual, below
         # spin_tol) and moving towards it, as its sign says: no event while it rises (however
         # short the step); turned back below the surface inside the step, it moves against its
@@ -218,13 +222,13 @@ def surface_bracket(k, t, h, n, u_tol, lev, work, istats):
         x_turn = hermite_peak(g0, d0, g1, d1) if d1 <= 0.0 else -1.0
         if x_turn > 0.0:
             ta, tb = t + x_turn * h, t + x_turn * h
-            k_event = EV_AGAINST1 + k
+            k_event = EV_AGAINST1 + i
     elif ta < 0.0:
         # it never leaves: at once (a moment component moving against its new sign means the
         # un-stick only grazed |sigma| = 1: contact.apply_event sticks it)
         ta, tb = t, t
-        if k <= EV_SIGN3:
-            k_event = EV_AGAINST1 + k
+        if moment:
+            k_event = EV_AGAINST1 + i
     return ta, ga, tb, gb, k_event
 
 
@@ -235,7 +239,7 @@ def spin_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
     peak of the Hermite interpolant of g_k (exact end slopes), confirmed on the dense output.
     Returns (the peak's time, g_k there, have_dense); the time is -1 where g_k stays below spin_tol."""
     y, cs, wk = work.y, work.cs, work.wk
-    i = k - EV_SPIN1
+    i = EVENTS[k, E_COMPONENT]
     d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], wk[W_YNEW], wk[W_FNEW], h)
     peak = hermite_peak(wk[W_GOLD, k], d0, wk[W_GNEW, k], d1)
     if peak > 0.0:
@@ -259,15 +263,16 @@ def dip_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
     f = wk[W_F]
     y_new = wk[W_YNEW]
     f_new = wk[W_FNEW]
-    if k == EV_SIDE:
+    how = EVENTS[k, E_DIP]
+    if how == D_SIDE:
         # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
         dip = hermite_dip(g0, cs[CS_SIDE] * y[Y_W1] * h, g1, cs[CS_SIDE] * y_new[Y_W1] * h)
-    elif k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
+    elif how == D_SIGN:
         # sigma_i omega.a_i (less spin_tol): exact slopes from the state
-        i = k if k <= EV_SIGN3 else k - EV_SPIN1
+        i = EVENTS[k, E_COMPONENT]
         d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, f, y_new, f_new, h)
         dip = hermite_dip(g0, d0, g1, d1)
-    elif k == EV_SLIP_SLOW or k == EV_SLAVE:
+    elif how == D_SLIP:
         # |u| less a speed: a V where the slip passes by u = 0, placed from the slip's own smooth
         # components (a cubic in g, or its difference quotient, can step over it)
         dip = slip_closest_approach(y, f, y_new, f_new, h)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections import namedtuple
 
+from .events import N_EVENTS
 from .model import N_AUX, N_FULL  # noqa: F401  (re-exported sizes)
 from .tableau import N_STAGES_EXTENDED
 
@@ -63,7 +64,7 @@ W_RATEOLD = 29    # d g_k/d tau at the step start (forward difference; roots.eve
 W_RATENEW = 30    # ... at the step end
 W_DELTA = 31      # the step's (or kept segment's) increment y_new - y before rounding (energy balance)
 N_WORK = 32
-N_WCOLS = 19     # columns of the work buffer: >= N_FULL, N_AUX and the number of events
+N_WCOLS = max(N_FULL, N_AUX, N_EVENTS)   # columns of the work buffer: a state, an aux or every event's value
 
 # --- settings vector ----------------------------------------------------------------------------
 S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS = 0, 1, 2, 3, 4, 5, 6, 7
