@@ -55,3 +55,33 @@ def coerce_numbers(obj: Any, wants_number: Callable[[list], bool], path: list | 
                 obj[key] = x
                 changed.append(sub)
     return changed
+
+
+def load_file(path, allowed: str) -> dict:
+    """The mapping in the YAML file `path` (read by `load`). A file that is missing, unreadable,
+    not YAML, empty (no content, or only comments) or not a mapping at its top level raises
+    ConfigError (field '': the file as a whole; `allowed` says what it should hold)."""
+    from pathlib import Path
+
+    from .errors import ConfigError
+
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError("", None, allowed, problem="no such file" if not p.exists() else "not a file")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError("", None, allowed, problem=f"cannot be read ({exc})") from None
+    try:
+        data = load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        what = getattr(exc, "problem", None) or type(exc).__name__
+        raise ConfigError("", None, allowed, problem=f"not valid YAML ({what}{where})") from None
+    if data is None:
+        raise ConfigError("", None, allowed, problem="the file is empty")
+    if not isinstance(data, dict):
+        raise ConfigError("", None, allowed,
+                          problem=f"its top level is a {type(data).__name__}, not a mapping of keys")
+    return data
