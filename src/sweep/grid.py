@@ -50,7 +50,7 @@ AXIS_LONG_NAMES = {
 
 # Bump when the chunk file layout or the meaning of its variables changes: every chunk's
 # identity includes it, so old chunk files are then recomputed instead of being gathered.
-CHUNK_FORMAT = 2     # 2: error bars of the counts and slip_fraction (stop 29)
+CHUNK_FORMAT = 3     # 2: error bars of the counts and slip_fraction (stop 29); 3: the *_flag variables (sweep.reasons)
 
 # Length of the hex chunk id: 16 hex digits = 64 bits, so a collision among even 10^6 chunks
 # has probability ~ n^2 / 2^65 < 3e-8.

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from . import grid as _grid
-from . import outcomes
+from . import outcomes, reasons
 
 log = logging.getLogger("sweep.io")
 
@@ -42,7 +42,7 @@ CUBE_CHUNK_ELEMENTS = 2 ** 15
 class Var:
     """One output variable: how to take it from a `SimulationResult.summary`, and its CF metadata."""
     name: str
-    kind: str                      # "float" | "int" | "bool" | "outcome"
+    kind: str                      # "float" | "int" | "bool" | "outcome" | "flag" (sweep.reasons)
     units: str
     long_name: str
     get: Callable[[Mapping], Any]  # summary -> scalar, or (for per_level) level dict -> scalar
@@ -108,6 +108,12 @@ VARIABLES: tuple[Var, ...] = (
     Var("n_rhs", "int", "1", "number of right-hand-side evaluations", lambda s: s["n_rhs"]),
     Var("n_events", "int", "1", "number of located events", lambda s: s["n_events"]),
     Var("wall_time", "float", "s", "wall-clock time of the integration", lambda s: s["wall_time"]),
+) + tuple(
+    # why a frequency or a fitted number is missing (sweep.reasons): int8 CF flags, 0 = has a value
+    Var(flag, "flag", "1", reasons.FLAGS[flag][2],
+        (lambda lv, f=flag: lv[f]) if flag in reasons.PER_LEVEL else (lambda s, f=flag: s[f]),
+        per_level=flag in reasons.PER_LEVEL)
+    for flag in reasons.FLAGS
 )
 VARIABLE_NAMES = tuple(v.name for v in VARIABLES)
 LEVEL_ATTRS = {"units": "rad", "long_name": "inclination level"}
@@ -197,6 +203,15 @@ def error_summary(n_levels: int, outcome_code: int = outcomes.NUMERICAL_ERROR, w
     }
 
 
+def value_of(var: Var, summary: Mapping):
+    """What `var` holds for a scene's `summary`: a scalar, or a list over the levels (a flag is
+    derived from the summary by sweep.reasons where the summary does not carry it yet)."""
+    if var.kind == "flag" and var.name not in summary and not (
+            summary["levels"] and var.name in summary["levels"][0]):
+        summary = reasons.add_flags(summary)
+    return [var.get(lv) for lv in summary["levels"]] if var.per_level else var.get(summary)
+
+
 def _column(var: Var, summaries: Sequence[Mapping], n_levels: int) -> np.ndarray:
     if var.per_level:
         raw = [[var.get(s["levels"][j]) for j in range(n_levels)] for s in summaries]
@@ -208,11 +223,18 @@ def _column(var: Var, summaries: Sequence[Mapping], n_levels: int) -> np.ndarray
         return np.array([INT_FILL if v is None else int(v) for v in raw], dtype=np.int32)
     if var.kind == "bool":
         return np.array([bool(v) for v in raw], dtype=bool)
+    if var.kind == "flag":
+        return np.array(raw, dtype=np.int8).reshape(len(summaries), *([n_levels] if var.per_level else []))
     return np.array([int(v) for v in raw], dtype=np.int8)
 
 
 def _var_attrs(var: Var) -> dict:
+    if var.kind == "flag":
+        return reasons.flag_attrs(var.name)
     attrs = {"units": var.units, "long_name": var.long_name}
+    flag = reasons.flag_of(var.name)
+    if flag is not None:   # CF: the flag variable that says why a value is missing
+        attrs["ancillary_variables"] = flag
     if var.kind == "outcome":
         attrs["flag_values"] = np.array(outcomes.FLAG_VALUES, dtype=np.int8)
         attrs["flag_meanings"] = outcomes.FLAG_MEANINGS
@@ -298,6 +320,7 @@ def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
     pts = np.array(chunk.points, dtype=np.float64).reshape(len(chunk.points), len(_grid.AXES))
     coords = {a: ("point", pts[:, i], _coord_attrs(a)) for i, a in enumerate(_grid.AXES)}
     coords["level"] = ("level", np.array(levels, dtype=np.float64), dict(LEVEL_ATTRS))
+    summaries = [reasons.add_flags(s) for s in summaries]   # why each missing value is missing
     data = {}
     for var in variables(bool(spec["settings"].get("error_estimate", False))):
         dims = ("point", "level") if var.per_level else ("point",)
@@ -514,7 +537,7 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             dims = axes + (("level",) if var.per_level else ())
             if var.kind == "int":  # decoded with NaN for missing; stored as int32 with a fill value
                 enc = {"dtype": "int32", "_FillValue": np.int32(INT_FILL)}
-            elif var.kind == "outcome":
+            elif var.kind in ("outcome", "flag"):
                 enc = {"dtype": "int8", "_FillValue": None}
             elif var.kind == "bool":
                 enc = {"_FillValue": None}
