@@ -54,7 +54,9 @@ def test_bad_scene_exits_2_naming_the_field(tmp_path):
     assert "contact.mu_d" in proc.stderr and "allowed" in proc.stderr
     assert proc.stdout == ""
     proc = run("scene", str(tmp_path / "missing.yaml"))
-    assert proc.returncode == 2 and "existing YAML" in proc.stderr
+    assert proc.returncode == 2 and proc.stderr == f"error: {tmp_path / 'missing.yaml'}: no such file; allowed " \
+        "a YAML mapping of the sections disk, contact, gravity, initial, stop, solver, outputs, material " \
+        "(e.g. config/scenes/kessler2002.yaml)\n"
     proc = run("scene", str(short_scene(tmp_path)), "--sample-times", "1,x")
     assert proc.returncode == 2 and "--sample-times" in proc.stderr
 

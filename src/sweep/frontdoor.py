@@ -212,12 +212,14 @@ def prune_numba_caches(cache: Path | None = None) -> list[Path]:
 
 class StatusLine:
     """One status line: rewritten in place on a terminal (at most every `every_tty` s), printed as
-    a new line elsewhere when its text (less the clock) changed, at most every `every_log` s."""
+    a new line elsewhere (a log, CI) when its text (less the clock) changed, at most every
+    `every_log` s, and at least every `heartbeat` s."""
 
-    def __init__(self, stream=None, every_tty: float = 0.5, every_log: float = 10.0):
+    def __init__(self, stream=None, every_tty: float = 0.5, every_log: float = 10.0, heartbeat: float = 60.0):
         self.stream = stream or sys.stdout
         self.tty = self.stream.isatty()
         self.every = every_tty if self.tty else every_log
+        self.heartbeat = heartbeat
         self.last_key = None
         self.last_print = -math.inf
         self.lock = threading.Lock()
@@ -226,7 +228,8 @@ class StatusLine:
         key = text.rsplit(" | ", 1)[0]
         now = time.monotonic()
         with self.lock:
-            if not force and (now - self.last_print < self.every or (not self.tty and key == self.last_key)):
+            quiet = now - self.last_print
+            if not force and (quiet < self.every or (not self.tty and key == self.last_key and quiet < self.heartbeat)):
                 return
             if self.tty:
                 print("\r\033[K" + text, end="", file=self.stream, flush=True)
@@ -306,7 +309,7 @@ def compile_for_command(stream=None) -> None:
     except Exception:  # noqa: BLE001 - a notice, never a reason to fail
         return
     if cold:
-        warm_numba(StatusLine(stream or sys.stderr, every_tty=1.0, every_log=30.0))
+        warm_numba(StatusLine(stream or sys.stderr, every_tty=1.0, every_log=30.0, heartbeat=30.0))
 
 
 # ------------------------------------------------------------------------------------- progress
@@ -594,7 +597,7 @@ def run(argv: list[str]) -> int:
 
     name = sweep.name
     resume = " ".join([command_prefix(), "sweep", *map(shlex.quote, argv)])
-    status = StatusLine(sys.stdout)
+    status = StatusLine(sys.stdout, heartbeat=30.0)
     state: dict = {"signal": None, "proc": None}
 
     def on_signal(signum, _frame):
