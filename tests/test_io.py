@@ -497,3 +497,32 @@ def test_notebooks_cope_with_length_one_axes_and_nans(tmp_path):
         fig = io.run_notebook(ROOT / "workflow" / "notebooks" / f"{nb}.ipynb", cube,
                               tmp_path / "figures" / f"{nb}.png", tmp_path / "executed" / f"{nb}.ipynb")
         assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_figure_helpers_name_the_sweep_fix_fraction_scales_and_keep_numbers_legible(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    settings = settings_for(mu_d=[0.2, 0.3], k3=[3e-4], alpha0=[0.9, 1.1], omega0=[14.0])
+    cube = io.gather(write_all(settings, tmp_path / "chunks"), settings, tmp_path / "cube.nc", name="tiny")
+    with xr.open_dataset(cube) as ds:
+        assert ds.attrs["sweep_name"] == "tiny" and "'tiny'" in ds.attrs["title"]
+        assert io.figure_caption(ds, "") == "sweep 'tiny': 4 scenes (mu_d 2 × k1 1 × k2 1 × k3 1 × alpha0 2 × omega0 1)"
+        frac = xr.DataArray([[0.96, 0.98], [1.0, 0.99]], dims=("alpha0", "mu_d"),
+                            coords={"alpha0": [0.9, 1.1], "mu_d": [0.2, 0.3]})
+        fig, ax = plt.subplots()
+        mesh = io.plot_map(ax, frac, "fraction halted", vmin=0.0, vmax=1.0)
+        assert (mesh.norm.vmin, mesh.norm.vmax) == (0.0, 1.0)       # 0.96 is not drawn as the bottom
+        assert ax.get_xlabel() == "dynamic friction coefficient μ_d" and ax.get_ylabel() == "initial tilt α0 (rad)"
+        # near the top of viridis (yellow) the numbers are black, near the bottom white
+        colours = {t.get_text(): t.get_color() for t in ax.texts}
+        assert colours["0.96"] == colours["1"] == "k"
+        plt.close(fig)
+        fig, ax = plt.subplots()
+        io.plot_map(ax, frac * 0 + [[0.0, 0.05], [0.9, 1.0]], "x", vmin=0.0, vmax=1.0)
+        assert {t.get_text(): t.get_color() for t in ax.texts}["0"] == "w"
+        plt.close(fig)
+    for nb in grid.NOTEBOOKS:   # every sweep figure has the caption on its top line
+        assert "sio.figure_caption(ds" in (ROOT / "workflow" / "notebooks" / f"{nb}.ipynb").read_text()
