@@ -485,7 +485,7 @@ def test_progress_names_its_phase_and_its_eta_covers_gather_and_figures(tmp_path
     p.line("tiny", t0 + 10)
     log.write_text(f"x INFO chunk {'a' * 16}: 2/3 ...\n")
     line = p.line("tiny", t0 + 20)
-    eta = 2 * 10 + frontdoor.GATHER_S + 4 * frontdoor.NOTEBOOK_S / 2
+    eta = 2 * 10 + frontdoor.GATHER_S + 2 * frontdoor.GATHER_S_PER_CHUNK + 4 * frontdoor.NOTEBOOK_S / 2
     assert f"0.10 scenes/s | ETA {frontdoor._clock(eta)}" in line, line
     # every scene done: the gather runs, then the figures; a finished job's time replaces the estimate
     for cid in plan:

@@ -75,14 +75,15 @@ JOB_START = re.compile(r"^(?:local)?rule (\w+):")
 JOB_ID = re.compile(r"^\s+jobid: (\d+)")
 JOB_DONE = re.compile(r"^Finished jobid: (\d+) \(Rule: (\w+)\)")
 JOB_STATS = re.compile(r"^(\w+)\s+(\d+)$")
-# The kernels' compilation (docs/pipeline.md, "Running"): measured on the 2-core machines this
-# project runs on, with other work beside it.
-COMPILE_ESTIMATE = "about 3 min on a busy 2-core machine, 1.5 min on an idle one"
-# After the last scene: the gather, then each figure notebook (a Jupyter kernel that imports the
-# package, reduces the cube and plots), measured on a busy 2-core machine (docs/pipeline.md);
-# the run's own durations replace them as soon as one has finished.
-GATHER_S = 5.0
-NOTEBOOK_S = 12.0
+# The kernels' compilation (docs/pipeline.md, "Running"): measured on 2-core machines shared with
+# other work: 75 s and 96 s here, 213 s on the fresh clone of issue #43.
+COMPILE_ESTIMATE = "usually 1-4 min on a 2-core machine, by how busy it is"
+# After the last scene: the gather (opening every chunk file: 0.5 s + 0.4 s per chunk file), then
+# each figure notebook (a Jupyter kernel that imports the package, reduces the cube and plots:
+# 9 s), measured on a busy 2-core machine (tiny sweep: 2 s, 9-10 s; default: 8 s, 8-10 s); the
+# run's own durations replace them as soon as one has finished.
+GATHER_S, GATHER_S_PER_CHUNK = 0.5, 0.4
+NOTEBOOK_S = 9.0
 SIGNAL_GRACE_S = 60.0            # after the forwarded SIGINT, before SIGKILL
 
 
@@ -446,15 +447,15 @@ class Progress:
 
     def eta(self, done: int, now: float) -> float | None:
         """Seconds until the run ends: the scenes left at the rate seen so far, then the gather
-        and the figures (GATHER_S, NOTEBOOK_S each, or what this run's finished ones took, the
-        notebooks `jobs` at a time). None while there is no rate yet."""
+        and the figures (GATHER_S + GATHER_S_PER_CHUNK per chunk file, NOTEBOOK_S per notebook,
+        or what this run's finished ones took; the notebooks `jobs` at a time). None while there is no rate yet."""
         left = 0.0
         if done < self.total:
             first, last = self.first_seen, self.last_seen
             if first is None or not (last[0] > first[0] and last[1] > first[1]):
                 return None
             left += (self.total - done) / ((last[1] - first[1]) / (last[0] - first[0]))
-        left += self._left("gather", GATHER_S, now)[1]
+        left += self._left("gather", GATHER_S + GATHER_S_PER_CHUNK * len(self.plan or ()), now)[1]
         n_nb, work = self._left("notebook", NOTEBOOK_S, now)
         if n_nb:
             left += work / min(self.jobs, n_nb)
