@@ -146,8 +146,9 @@ def _damage(path: Path, how: str) -> None:
             nc.delncattr("sweep_checksum")
 
 
-@pytest.mark.parametrize("how, reason", [("truncate", "unreadable"), ("empty", "empty"),
-                                         ("values", "checksum mismatch"), ("no_checksum", "sweep_checksum")])
+@pytest.mark.parametrize("how, reason", [
+    pytest.param("truncate", "unreadable", marks=pytest.mark.slow), pytest.param("empty", "empty", marks=pytest.mark.slow),
+    ("values", "checksum mismatch"), pytest.param("no_checksum", "sweep_checksum", marks=pytest.mark.slow)])
 def test_damaged_chunk_is_detected_and_quarantined(tmp_path, tiny, how, reason):
     plan = grid.plan_chunks(tiny)
     paths = write_all(tiny, tmp_path)
@@ -179,7 +180,7 @@ def test_gather_refuses_a_damaged_chunk(tmp_path, tiny):
 
 # ------------------------------------------------------------------------------- cube
 
-@pytest.mark.parametrize("shuffle", [False, True])
+@pytest.mark.parametrize("shuffle", [False, pytest.param(True, marks=pytest.mark.slow)])
 def test_cube_places_every_value_at_its_grid_point(tmp_path, tiny, shuffle):
     paths = write_all(tiny, tmp_path)
     if shuffle:  # the gather must not rely on the order of its inputs
@@ -477,6 +478,7 @@ def _rechecksum(tmp: Path) -> None:
 
 # ------------------------------------------------------------------------------- notebooks
 
+@pytest.mark.slow
 def test_notebooks_cope_with_length_one_axes_and_nans(tmp_path):
     """Every figure notebook runs on a cube whose axes have 1-2 values and where half the
     scenes failed (NaN everywhere) and one variable is NaN throughout."""
