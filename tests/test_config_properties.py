@@ -120,6 +120,7 @@ def valid_configs(draw, levels_max: float = HALF_PI, ordinary_disk: bool = False
     return cfg
 
 
+@pytest.mark.slow
 @settings(max_examples=200, **HSETTINGS)
 @given(valid_configs())
 def test_valid_config_validates_and_yields_a_plan(cfg):

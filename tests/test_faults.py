@@ -305,6 +305,7 @@ batch.run_chunk(chunk, sys.argv[2], simulate=lambda sc: SimpleNamespace(summary=
 """
 
 
+@pytest.mark.slow
 def test_kill_9_while_writing_a_chunk_leaves_no_file_under_its_name(tmp_path, monkeypatch):
     # A deterministic SIGKILL inside the chunk write (after the netCDF data, before the checksum
     # and the rename): only a temporary file remains, which no check or gather ever reads.

@@ -99,6 +99,7 @@ outputs: {notebooks: []}
 """
 
 
+@pytest.mark.slow
 def test_dry_run_of_a_config_without_name_plans_its_own_folder_and_reads_1e_minus_8(tmp_path):
     wd = copy_workflow(tmp_path / "wf")
     (wd / "config" / "exponents.yaml").write_text(EXPONENTS)
@@ -380,13 +381,20 @@ def test_scene_paths_are_taken_from_the_users_directory(tmp_path):
     assert p.returncode == 2 and p.stderr.startswith("error: nowhere/missing.yaml: no such file;"), p.stderr
 
 
-def test_sweep_config_paths_are_taken_from_the_users_directory(tmp_path):
+@pytest.mark.slow
+def test_a_dry_run_from_another_directory_finds_the_project_and_the_users_config(tmp_path):
+    """Without --directory: the project's Snakefile and config/config.yaml, the user's file."""
     (tmp_path / "mytiny.yaml").write_text((ROOT / "config" / "tiny.yaml").read_text().replace("name: tiny", "name: mytiny"))
     p = run_py("sweep", "--configfile", "mytiny.yaml", "-n", cwd=tmp_path)
     out = p.stdout + p.stderr
     assert p.returncode == 0, out
     assert "results/mytiny/cube.nc" in out and "Traceback" not in out
     assert not (ROOT / "results" / "mytiny").exists()          # a dry run writes nothing
+
+
+def test_a_missing_sweep_config_is_named_as_given(tmp_path):
+    """(The fast tier's run of the tiny grid, below, reads its config relative to the user's
+    directory too.)"""
     p = run_py("sweep", "--configfile", "missing.yaml", "-n", cwd=tmp_path)
     assert p.returncode == 2 and p.stdout == "", p.stdout
     assert p.stderr == ("error: missing.yaml: no such file; allowed a YAML mapping of sweep config keys "

@@ -210,6 +210,7 @@ def test_cube_places_every_value_at_its_grid_point(tmp_path, tiny, shuffle):
             tuple(len(tiny["grid"][a]) for a in grid.AXES) + (len(tiny["levels"]),))
 
 
+@pytest.mark.slow
 def test_gather_requires_every_grid_point(tmp_path, tiny):
     paths = write_all(tiny, tmp_path)
     with pytest.raises(RuntimeError, match="grid has"):
@@ -285,6 +286,7 @@ def test_chunk_job_checks_its_id(tmp_path, tiny):
         batch.run_chunk_job(chunk.spec_json, "0" * 16, tmp_path / "x.nc")
 
 
+@pytest.mark.slow
 def test_verification_cache_skips_unchanged_files_only(tmp_path, tiny, monkeypatch):
     plan = grid.plan_chunks(tiny)
     paths = write_all(tiny, tmp_path)
