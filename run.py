@@ -4,6 +4,7 @@
     python3 run.py sweep [snakemake args...]   # default sweep -> results/default/{cube.nc,figures/}
     python3 run.py test  [pytest args...]      # the fast tests (~2-3 min on 2 cores)
     python3 run.py test --all [pytest args...] # the whole test suite (what CI runs, ~12 min)
+                                               # (tests named by path, -k or -m run whatever their tier)
     python3 run.py scene FILE.yaml [...]       # one scene (same as `python -m sweep scene ...`)
     python3 run.py bench [...]                 # work-precision benchmark (benchmarks/work_precision.py)
 
@@ -152,11 +153,20 @@ def main(argv: list[str]) -> int:
     env["PATH"] = f"{BIN}{os.pathsep}{env.get('PATH', '')}"
     cwd = Path.cwd()
     if cmd == "test":
-        # `test`: the fast tier (tests not marked slow); `test --all`: every test (CI: .ci/run)
-        tier = ["-m", "not slow"] if "--all" not in rest else []
+        # `test`: the fast tier (tests not marked slow); `test --all`: every test (CI: .ci/run);
+        # tests named on the command line (paths, node ids, -k, -m) run whatever their tier
+        named = any(not a.startswith("-") for a in rest) or any(a.split("=", 1)[0] in ("-k", "-m") for a in rest)
+        tier = ["-m", "not slow"] if "--all" not in rest and not named else []
         rest = _absolute_paths([a for a in rest if a != "--all"], cwd)
         args = [str(PY), "-m", "pytest", "-p", "no:cacheprovider", *tier, *rest]
         os.chdir(ROOT)
+        # kernels not compiled yet (a fresh clone, a change of src/sweep/core): compile them first,
+        # with the notice and the ticking elapsed time, rather than silently inside the first test
+        try:
+            subprocess.run([str(PY), "-c", "from sweep.frontdoor import compile_for_command; compile_for_command()"],
+                           env=env, check=False)
+        except KeyboardInterrupt:
+            return 130
     elif cmd == "sweep":
         # -j2 unless the arguments or a --profile set jobs; paths relative to the user's
         # directory; the resume command names run.py as the user did (see sweep.frontdoor)

@@ -70,7 +70,6 @@ _SIM_SCRIPT = textwrap.dedent("""
 """)
 
 
-@pytest.mark.slow
 def test_cuda_kernel_under_simulator_equals_simulate(reference):
     """The CUDA kernel (persistent threads, atomic counter, local arrays, device-side fits) run by
     numba's simulator: 2 threads share the 3 scenes, every summary equals sweep.simulate's."""
