@@ -154,10 +154,10 @@ def test_stored_notebooks_have_no_outputs():
 
 
 @pytest.mark.parametrize("mutate, fragment", [
-    (lambda c: c["grid"].__setitem__("mu_d", [0.2, 0.7]), "`grid.mu_d[1]`"),
-    (lambda c: c.__setitem__("levels", [0.3, 2.0]), "`levels[1]`"),
-    (lambda c: c["grid"].__setitem__("alpha0", [0.0]), "`grid.alpha0[0]`"),
-    (lambda c: c.__setitem__("extra", 1), "'extra'"),
+    (lambda c: c["grid"].__setitem__("mu_d", [0.2, 0.7]), "config/bad.yaml: grid.mu_d[1] = 0.7 is invalid"),
+    (lambda c: c.__setitem__("levels", [0.3, 2.0]), "config/bad.yaml: levels[1] = 2.0 is invalid"),
+    (lambda c: c["grid"].__setitem__("alpha0", [0.0]), "config/bad.yaml: grid.alpha0[0] = 0.0 is invalid"),
+    (lambda c: c.__setitem__("extra", 1), "config/bad.yaml: extra = 1 is invalid: no such key"),
 ])
 def test_invalid_config_fails_before_any_job(tmp_path, mutate, fragment):
     d = copy_workflow(tmp_path / "wf")
