@@ -421,22 +421,22 @@ BAD_CONFIGS = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(BAD_CONFIGS))
-def test_invalid_config_gives_one_line_per_field_naming_the_file_and_creates_nothing(tmp_path, name):
+@pytest.mark.parametrize("name, extra", [(name, []) for name in sorted(BAD_CONFIGS)]
+                         + [pytest.param("typo.yaml", ["-n"], marks=pytest.mark.slow)])
+def test_invalid_config_gives_one_line_per_field_naming_the_file_and_creates_nothing(tmp_path, name, extra):
     """Before Snakemake starts: exit status 2, one line per invalid field on stderr naming the file
     as the user gave it (a key merged from config/config.yaml names that file), nothing created
-    under results/ (nor Snakemake's .snakemake/), in a copy of the workflow."""
+    under results/ (nor Snakemake's .snakemake/), in a copy of the workflow; a dry run too."""
     wd = copy_workflow(tmp_path / "wf")
     text, lines = BAD_CONFIGS[name]
     (tmp_path / name).write_text(text)
-    for extra in ([], ["-n"]) if name == "typo.yaml" else ([],):   # -n: once (each call ~1.5 s)
-        p = run_py("sweep", "--directory", "wf", "--configfile", name, *extra, cwd=tmp_path, timeout=120)
-        assert p.returncode == 2, p.stdout + p.stderr
-        assert p.stdout == ""
-        # grid.mu_d comes from config/config.yaml, merged under the user's file
-        want = [f"error: {'wf/config/config.yaml' if 'grid.mu_d' in line else name}: {line}" for line in lines]
-        assert p.stderr.splitlines() == want
-        assert not (wd / "results").exists() and not (wd / ".snakemake").exists()
+    p = run_py("sweep", "--directory", "wf", "--configfile", name, *extra, cwd=tmp_path, timeout=120)
+    assert p.returncode == 2, p.stdout + p.stderr
+    assert p.stdout == ""
+    # grid.mu_d comes from config/config.yaml, merged under the user's file
+    want = [f"error: {'wf/config/config.yaml' if 'grid.mu_d' in line else name}: {line}" for line in lines]
+    assert p.stderr.splitlines() == want
+    assert not (wd / "results").exists() and not (wd / ".snakemake").exists()
 
 
 def test_a_config_error_reads_alike_from_the_workflow(tmp_path):

@@ -170,6 +170,7 @@ def test_chunk_of_another_plan_is_rejected(tmp_path, tiny):
     assert "chunk id" in io.verify_chunk(path, b)
 
 
+@pytest.mark.slow
 def test_gather_refuses_a_damaged_chunk(tmp_path, tiny):
     paths = write_all(tiny, tmp_path)
     _damage(paths[0], "values")
