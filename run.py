@@ -3,7 +3,7 @@
 
     python3 run.py sweep [snakemake args...]   # default sweep -> results/default/{cube.nc,figures/}
     python3 run.py test  [pytest args...]      # the fast tests (~2-3 min on 2 cores)
-    python3 run.py test --all [pytest args...] # the whole test suite (what CI runs, ~12 min)
+    python3 run.py test --all [pytest args...] # the whole test suite (what CI runs, ~9-11 min)
                                                # (tests named by path, -k or -m run whatever their tier)
     python3 run.py scene FILE.yaml [...]       # one scene (same as `python -m sweep scene ...`)
     python3 run.py bench [...]                 # work-precision benchmark (benchmarks/work_precision.py)
