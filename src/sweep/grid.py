@@ -57,8 +57,8 @@ CHUNK_FORMAT = 3     # 2: error bars of the counts and slip_fraction (stop 29); 
 CHUNK_ID_HEX = 16
 
 # The config schema ships as package data (sweep/schema/config.schema.yaml, see pyproject.toml),
-# so an installed (non-editable) package finds it too; the Snakemake workflow validates against
-# this same file (workflow/rules/common.smk).
+# so an installed (non-editable) package finds it too; the front door and the Snakemake workflow
+# validate against this same file (load_sweep, called by sweep.frontdoor and workflow/rules/common.smk).
 SCHEMA_RESOURCE = ("schema", "config.schema.yaml")
 
 
