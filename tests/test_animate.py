@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -111,3 +112,20 @@ def test_gif_has_the_frames_and_the_first_frame_shows_the_initial_tilt(tmp_path)
     # a disk lying flat would look different: the upright extent at alpha = pi/2 - 1e-4 is far off
     flat = 2 * R * math.hypot(up @ e1, up @ np.array([0, -1.0, 0])) + L * abs(up @ np.array([0, 0, 1.0]))
     assert abs(flat * scale - extent_px) > 10.0
+
+
+def test_frames_say_what_the_marks_are_and_how_fast_the_clock_runs():
+    """A caption names the red dot, the orange line and the green path; the clock says how the
+    shown time relates to real time."""
+    res, fr = animate.frame_samples(PAPER, 5)
+    rnd = animate.Renderer(fr, res.scene.config["disk"]["radius"], fps=10.0)
+    try:
+        rnd.draw(2)
+        texts = [t.get_text() for t in rnd.fig.texts]
+        assert animate.LEGEND in texts
+        for mark in ("red dot: contact point", "orange line: a radius painted on the disk", "green: path of the centre of mass"):
+            assert mark in animate.LEGEND
+        clock = rnd.text.get_text().splitlines()[0]
+        assert re.fullmatch(r"t = +[\d.]+ s   shown at [\d.e+-]+x real time", clock), clock
+    finally:
+        rnd.close()

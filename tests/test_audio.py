@@ -183,3 +183,21 @@ def test_material_does_not_change_the_physics():
 def test_cli_rejects_bad_audio_name_before_work(capsys):
     assert main(["scene", PAPER, "--audio", "ringing.mp3"]) == 2
     assert "--audio" in capsys.readouterr().err
+
+
+def test_spectrogram_has_a_colour_bar_and_keeps_its_legend_off_the_data(paper_wav):
+    import matplotlib.pyplot as plt
+
+    _, _, res, spec = paper_wav
+    assert spec.read_bytes()[:4] == b"\x89PNG"
+    ring = audio.synthesize(res)
+    fig = audio.spectrogram_figure(res, ring)
+    try:
+        ax, cbar = fig.axes
+        assert cbar.get_ylabel() == "power (dB below the loudest)" and cbar.get_ylim() == (-90.0, 0.0)
+        assert ax.get_xlabel() == "time t (s)" and ax.get_ylabel() == "frequency (Hz)"
+        fig.canvas.draw()
+        legend = ax.get_legend().get_window_extent()
+        assert legend.y1 <= ax.get_window_extent().y0    # below the axes, not over the spectrogram
+    finally:
+        plt.close(fig)

@@ -40,6 +40,7 @@ def test_scenes_cover_rolling_slip_and_sticking(reference):
         assert s["outcome"] == "halted" and s["halt_finite"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("workers", [1, 2])
 def test_cpu_batch_equals_simulate(reference, workers):
     stats = {}

@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import xarray as xr
 import yaml
 
@@ -54,7 +55,9 @@ def test_bad_scene_exits_2_naming_the_field(tmp_path):
     assert "contact.mu_d" in proc.stderr and "allowed" in proc.stderr
     assert proc.stdout == ""
     proc = run("scene", str(tmp_path / "missing.yaml"))
-    assert proc.returncode == 2 and "existing YAML" in proc.stderr
+    assert proc.returncode == 2 and proc.stderr == f"error: {tmp_path / 'missing.yaml'}: no such file; allowed " \
+        "a YAML mapping of the sections disk, contact, gravity, initial, stop, solver, outputs, material " \
+        "(e.g. config/scenes/kessler2002.yaml)\n"
     proc = run("scene", str(short_scene(tmp_path)), "--sample-times", "1,x")
     assert proc.returncode == 2 and "--sample-times" in proc.stderr
 
@@ -72,3 +75,41 @@ def test_trajectory_and_plots(tmp_path):
     ds.close()
     figs = sorted(p.name for p in (tmp_path / "figs").glob("*.png"))
     assert figs == ["fig3_alpha_energy.png", "fig4_normal_force.png", "fig5_centre_path.png", "fig6_precession.png"]
+
+
+def test_paper_figures_are_against_time_in_seconds(tmp_path, monkeypatch):
+    """The analogues of the paper's Figs 3, 4 and 6 plot against t (s), with the paper's tau = t/chi
+    on the top edge; SI values (J, N, Hz) stand beside the dimensionless ones."""
+    import matplotlib.pyplot as plt
+
+    import sweep
+    from sweep import plots
+
+    figures = {}
+
+    def keep(fig, path, paths):   # plots._save, keeping the figure for a look
+        fig.canvas.draw()
+        figures[path.name] = fig
+        paths.append(path)
+
+    monkeypatch.setattr(plots, "_save", keep)
+    res = sweep.simulate(str(short_scene(tmp_path)), trajectory=True)
+    plots.paper_figures(res, tmp_path)
+    try:
+        def axes(fig):   # with the secondary axes (children of the axes they annotate)
+            return [b for a in fig.axes for b in (a, *a.child_axes)]
+
+        for name in ("fig3_alpha_energy.png", "fig4_normal_force.png", "fig6_precession.png"):
+            fig = figures[name]
+            labels = [a.get_xlabel() for a in axes(fig)] + [a.get_ylabel() for a in axes(fig)]
+            assert "time t (s)" in labels, (name, labels)
+            assert any("tau = t/\\chi" in lab for lab in labels), (name, labels)
+            main_ax = [a for a in fig.axes if a.get_xlabel() == "time t (s)"][0]
+            t_end = res.summary["t_end"]
+            assert main_ax.get_xlim()[1] == pytest.approx(t_end, rel=0.1)   # seconds, not tau
+        assert "energy E (J)" in [a.get_ylabel() for a in axes(figures["fig3_alpha_energy.png"])]
+        assert "normal force N (N)" in [a.get_ylabel() for a in axes(figures["fig4_normal_force.png"])]
+        assert any("(Hz)" in a.get_ylabel() for a in axes(figures["fig6_precession.png"]))
+    finally:
+        for fig in figures.values():
+            plt.close(fig)

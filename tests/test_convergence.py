@@ -44,6 +44,7 @@ def runs():
     return out
 
 
+@pytest.mark.slow
 def test_random_scenes_end_physically_without_failures(runs):
     for cfg, *rs in runs:
         for r in rs:
@@ -58,6 +59,7 @@ def test_random_scenes_end_physically_without_failures(runs):
             assert r["budget"] < 1e-9, (cfg, r["budget"])
 
 
+@pytest.mark.slow
 def test_well_conditioned_quantities_converge_with_the_same_events(runs):
     n_wc = n_ok = 0
     bad = []
@@ -243,6 +245,7 @@ def _peer_end(cfg):
     return peer["outcome"], peer["t_end"] * sc.chi
 
 
+@pytest.mark.slow
 def test_a_slip_carried_into_the_painleve_singularity_ends_as_painleve_at_every_rtol():
     """Seed 20261125, scene 472 (a 4.6 mm disk, mu_d 1.53): at tau 7.84396 a decaying slip reaches
     the slaving speed, and the direction dynamics carry it not to a root of cross but to the
@@ -302,6 +305,7 @@ def test_a_slide_near_flat_is_not_stopped_by_the_round_off_of_its_energy_balance
     assert all(r["budget"] < 1e-9 for r in res.values())
 
 
+@pytest.mark.slow
 def test_a_slip_spiralling_into_slip_tol_late_in_a_scene_is_not_a_step_size_underflow():
     """Seed 20261127, scene 421 (a 14 mm disk, thickness 0.81 R, mu_d 0.93): near flat, at
     t = 216.09 s (tau ~ 5094), a slide's slip spirals into u = 0 and each step covers a fixed share
@@ -318,6 +322,7 @@ def test_a_slip_spiralling_into_slip_tol_late_in_a_scene_is_not_a_step_size_unde
     assert all(r["budget"] < 1e-9 for r in res.values())
 
 
+@pytest.mark.slow
 def test_a_slip_passing_by_zero_within_slip_tol_ends_at_every_rtol():
     """Seed 20261128, scene 39 (a 58 mm disk, mu_s 0.055, near upright): at tau 827.823 a slide's
     slip passes by u = 0 with a miss distance 1e-12 (0.07 %) below slip_tol in the runs at rtol
@@ -382,6 +387,7 @@ def test_micro_sticks_at_a_moment_limit_are_counted_alike_at_every_rtol():
     assert abs(t12 - t_pure) < 1e-7 * t_pure
 
 
+@pytest.mark.slow
 def test_spin_tolerance_convergence():
     """The sticking at spin_tol converges to the pure Filippov rule at first order in spin_tol:
     the last level time of harness scene 252 (the micro-stick regime above) at rtol 1e-12 moves by
@@ -418,6 +424,7 @@ def test_the_peer_comparison_counts_totals_only_in_calm_scenes():
     assert [q[0] for q in sensitive["wc"]] == ["t_level_0.1"]
 
 
+@pytest.mark.slow
 def test_events_restart_at_their_roots_so_many_impacts_add_no_error_that_rtol_leaves():
     """Seed 20261130, scene 8: a disk rocking near upright through 1268 rim impacts and 891 stick
     phases to tau 300, where alpha = -6.381e-4 rad. Each event restarts at the right end of its

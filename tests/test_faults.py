@@ -36,7 +36,7 @@ import xarray as xr
 import yaml
 
 import sweep
-from sweep import batch, grid, io, outcomes
+from sweep import batch, grid, io, outcomes, reasons
 from conftest import copy_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -246,9 +246,11 @@ def test_failing_points_never_fail_their_chunk(tmp_path, faulty_kernel, caplog):
         assert (float(row.alpha0), float(row.omega0)) == inner
         if inner in want_outcome:
             assert int(row.outcome) == want_outcome[inner], (inner, outcomes.NAMES[int(row.outcome)])
-        if inner == RAISES:  # nothing was computed: NaN everywhere, counts missing
+        if inner == RAISES:  # nothing was computed: NaN everywhere, counts missing, flags say why
             for var in io.VARIABLES:
-                if var.name not in ("outcome", "halt_finite", "wall_time"):
+                if var.kind == "flag":
+                    assert (row[var.name].values == reasons.NO_RESULT).all(), var.name
+                elif var.name not in ("outcome", "halt_finite", "wall_time"):
                     assert np.isnan(row[var.name].values).all(), var.name
             assert not bool(row.halt_finite)
             continue
@@ -258,7 +260,7 @@ def test_failing_points_never_fail_their_chunk(tmp_path, faulty_kernel, caplog):
         for var in io.VARIABLES:
             if var.name == "wall_time":
                 continue
-            want = [var.get(lv) for lv in alone["levels"]] if var.per_level else var.get(alone)
+            want = io.value_of(var, alone)
             np.testing.assert_array_equal(np.asarray(row[var.name].values, dtype=float),
                                           np.asarray(want, dtype=float), err_msg=f"{var.name} at {inner}")
         # NaN only where the scene could not compute: what it always computes is finite ...
@@ -303,6 +305,7 @@ batch.run_chunk(chunk, sys.argv[2], simulate=lambda sc: SimpleNamespace(summary=
 """
 
 
+@pytest.mark.slow
 def test_kill_9_while_writing_a_chunk_leaves_no_file_under_its_name(tmp_path, monkeypatch):
     # A deterministic SIGKILL inside the chunk write (after the netCDF data, before the checksum
     # and the rename): only a temporary file remains, which no check or gather ever reads.

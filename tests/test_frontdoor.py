@@ -71,10 +71,15 @@ def test_results_folder_is_named_by_the_config(tmp_path):
     (tmp_path / "my_sweep.yaml").write_text("grid: {mu_d: [0.2]}\n")
     assert grid.sweep_name(tmp_path / "my_sweep.yaml") == "my_sweep"   # no name: the file's stem
     (tmp_path / "bad.yaml").write_text("name: ../elsewhere\n")
-    with pytest.raises(grid.SweepConfigError, match=r"`name`.*'\.\./elsewhere'.*allowed"):
-        grid.sweep_name(tmp_path / "bad.yaml")
-    wd, cfg = frontdoor.locations(["--configfile", str(tmp_path / "my_sweep.yaml"), "--directory", str(tmp_path)])
-    assert (wd, cfg) == (tmp_path.resolve(), tmp_path / "my_sweep.yaml")
+    with pytest.raises(grid.SweepConfigError, match=r"^bad.yaml: name = '\.\./elsewhere' is invalid: allowed "):
+        grid.sweep_name(tmp_path / "bad.yaml", "bad.yaml")
+    # the front door's run: Snakemake's working directory, the config files in Snakemake's order
+    argv, given = frontdoor.absolute_paths(["--configfile", "my_sweep.yaml", "--directory", "."], tmp_path)
+    args = frontdoor.parsed_args(argv)
+    wd, files, overrides = frontdoor.config_files(args, given, tmp_path)
+    assert wd == tmp_path and overrides is None
+    assert files == [(tmp_path / "config" / "config.yaml", "config/config.yaml"),
+                     (tmp_path / "my_sweep.yaml", "my_sweep.yaml")]
 
 
 EXPONENTS = """\
@@ -94,6 +99,7 @@ outputs: {notebooks: []}
 """
 
 
+@pytest.mark.slow
 def test_dry_run_of_a_config_without_name_plans_its_own_folder_and_reads_1e_minus_8(tmp_path):
     wd = copy_workflow(tmp_path / "wf")
     (wd / "config" / "exponents.yaml").write_text(EXPONENTS)
@@ -106,21 +112,30 @@ def test_dry_run_of_a_config_without_name_plans_its_own_folder_and_reads_1e_minu
     assert "results/default/" not in out and not re.search(r"results/(chunks|cube)", out)
 
 
-def test_exponent_numbers_are_numbers(tmp_path):
-    cfg = yaml.safe_load(EXPONENTS)          # what Snakemake hands the workflow
-    assert cfg["solver"]["rtol"] == "1e-8"    # (YAML 1.1)
-    s = grid.normalize(cfg, SCHEMA)
+def test_one_rule_for_numbers_in_configs_and_scene_files(tmp_path):
+    """1e-8 is a number (YAML 1.2, though YAML 1.1, hence Snakemake's loader, reads a string);
+    '1e-8' in quotes is text, rejected where a number is expected, in a sweep config as in a
+    scene file, with the same message."""
+    (tmp_path / "exponents.yaml").write_text(EXPONENTS)
+    assert yaml.safe_load(EXPONENTS)["solver"]["rtol"] == "1e-8"    # YAML 1.1
+    s = grid.load_sweep([(tmp_path / "exponents.yaml", "exponents.yaml")]).settings
     assert s["solver"]["rtol"] == 1e-8 and s["levels"] == [0.3, 0.1, 0.03, 0.01]
     assert s["grid"]["k2"] == [3e-5] and s["stop"]["max_steps"] == 200000
-    # a string where the schema wants a string stays a string (and fails as one)
-    bad = dict(cfg, solver={"method": "1e-8"})
-    with pytest.raises(grid.SweepConfigError, match="solver.method"):
-        grid.normalize(bad, SCHEMA)
     scene = tmp_path / "scene.yaml"
     scene.write_text("solver: {rtol: 1e-8, atol: 1E-10}\nstop: {levels: [1e-1, 1e-2], max_steps: 2e5}\n")
     sc = load_scene(scene).config
     assert sc["solver"]["rtol"] == 1e-8 and sc["solver"]["atol"] == 1e-10
     assert sc["stop"]["levels"] == [0.1, 0.01] and sc["stop"]["max_steps"] == 200000
+    # quoted: the same complaint from both
+    (tmp_path / "quoted.yaml").write_text(EXPONENTS.replace("rtol: 1e-8", "rtol: '1e-8'"))
+    with pytest.raises(grid.SweepConfigError) as err:
+        grid.load_sweep([(tmp_path / "quoted.yaml", "quoted.yaml")])
+    (line,) = str(err.value).splitlines()
+    scene.write_text("solver: {rtol: '1e-8'}\n")
+    with pytest.raises(sweep.ConfigError) as err2:
+        load_scene(scene)
+    hint = "solver.rtol = '1e-8' is invalid: a number in quotes is text: remove the quotes; allowed"
+    assert line.startswith(f"quoted.yaml: {hint}") and str(err2.value).startswith(f"{scene}: {hint}")
 
 
 @pytest.mark.parametrize("section, key, value", [("disk", "radius", -0.03), ("disk", "radius", "big"),
@@ -130,9 +145,9 @@ def test_one_invalid_value_gives_one_message(section, key, value):
     (cfg[section] if section else cfg)[key] = value
     with pytest.raises(grid.SweepConfigError) as err:
         grid.normalize(cfg, SCHEMA)
-    lines = str(err.value).splitlines()[1:]
+    lines = str(err.value).splitlines()
     assert len(lines) == 1, str(err.value)
-    assert f"`{section + '.' if section else ''}{key}`" in lines[0] and "allowed" in lines[0]
+    assert lines[0].startswith(f"{section + '.' if section else ''}{key} = ") and "allowed" in lines[0]
 
 
 # ------------------------------------------------------------------------------- first-run messages
@@ -293,7 +308,8 @@ def test_ctrl_c_and_sigterm_then_resume(tmp_path, src):
     assert kept and int(m.group(1)) == len(kept) and int(m.group(3)) == len(kept) and int(m.group(4)) == n_chunks
     assert m.group(5) == str(results)
     resume = shlex.split(m.group(6))
-    assert resume[:3] == ["python3", "run.py", "sweep"] and resume[3:] == argv, \
+    # run.py named as the user named it (here: its absolute path), then the same arguments
+    assert resume[:3] == ["python3", str(ROOT / "run.py"), "sweep"] and resume[3:] == argv, \
         (results / "logs" / "sweep.log").read_text()[-6000:]
     assert not (wd / ".snakemake" / "locks").exists()
     mtimes = {c: (results / "chunks" / f"{c}.nc").stat().st_mtime_ns for c in kept}
@@ -308,7 +324,7 @@ def test_ctrl_c_and_sigterm_then_resume(tmp_path, src):
     assert_clean_console(out)
     last = out.rstrip("\n").splitlines()[-1]
     assert re.match(rf"sweep tiny: interrupted \(SIGTERM\) .*; kept 8 of 8 scenes \({n_chunks} of {n_chunks} "
-                    r"chunk files\) .*; resume with: python3 run.py sweep ", last), out
+                    rf"chunk files\) .*; resume with: python3 {ROOT / 'run.py'} sweep ", last), out
 
     # 3. the same command again finishes: figures made, nothing kept recomputed
     run = Run(resume[3:], src)
@@ -341,3 +357,228 @@ def test_ctrl_c_and_sigterm_then_resume(tmp_path, src):
     # 4. and once more: nothing to do
     code, out = Run(resume[3:], src).finish()
     assert code == 0 and "nothing to do" in out, out
+
+
+# ------------------------------------------------------------------------------- from another directory (issue #43)
+
+def run_py(*args: str, cwd: Path, timeout: float = TIMEOUT_S) -> subprocess.CompletedProcess:
+    """`python3 <project>/run.py ARGS` as a user starts it from `cwd`."""
+    return subprocess.run([sys.executable, str(ROOT / "run.py"), *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+
+
+def test_scene_paths_are_taken_from_the_users_directory(tmp_path):
+    cfg = yaml.safe_load((ROOT / "config" / "scenes" / "kessler2002.yaml").read_text())
+    cfg["stop"]["levels"] = [0.3]
+    (tmp_path / "short.yaml").write_text(yaml.safe_dump(cfg))
+    p = run_py("scene", "short.yaml", "--audio", "out.wav", "--json", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout)["outcome"] == "halted"
+    assert re.search(r"^wrote out\.wav \(", p.stderr, flags=re.M), p.stderr   # as given ...
+    assert (tmp_path / "out.wav").read_bytes()[:4] == b"RIFF"                  # ... and where the user is
+    assert not (ROOT / "out.wav").exists()
+    p = run_py("scene", "nowhere/missing.yaml", cwd=tmp_path)
+    assert p.returncode == 2 and p.stderr.startswith("error: nowhere/missing.yaml: no such file;"), p.stderr
+
+
+@pytest.mark.slow
+def test_a_dry_run_from_another_directory_finds_the_project_and_the_users_config(tmp_path):
+    """Without --directory: the project's Snakefile and config/config.yaml, the user's file."""
+    (tmp_path / "mytiny.yaml").write_text((ROOT / "config" / "tiny.yaml").read_text().replace("name: tiny", "name: mytiny"))
+    p = run_py("sweep", "--configfile", "mytiny.yaml", "-n", cwd=tmp_path)
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out
+    assert "results/mytiny/cube.nc" in out and "Traceback" not in out
+    assert not (ROOT / "results" / "mytiny").exists()          # a dry run writes nothing
+
+
+def test_a_missing_sweep_config_is_named_as_given(tmp_path):
+    """(The fast tier's run of the tiny grid, below, reads its config relative to the user's
+    directory too.)"""
+    p = run_py("sweep", "--configfile", "missing.yaml", "-n", cwd=tmp_path)
+    assert p.returncode == 2 and p.stdout == "", p.stdout
+    assert p.stderr == ("error: missing.yaml: no such file; allowed a YAML mapping of sweep config keys "
+                        "(grid, levels, solver, ...: docs/pipeline.md)\n")
+
+
+BAD_CONFIGS = {
+    # file text -> the lines the user sees (after "error: <file>: ")
+    "typo.yaml": ("name: typo\nchunk_sise: 3\n", [
+        "chunk_sise = 3 is invalid: no such key; allowed keys: chunk_size, disk, execution, gravity, grid, "
+        "levels, mu_s, name, outputs, solver, stop"]),
+    "quoted.yaml": ("name: quoted\nsolver: {rtol: '1e-10'}\nmu_s: 0.25\n", [
+        "solver.rtol = '1e-10' is invalid: a number in quotes is text: remove the quotes; allowed [1e-14, 1e-2] "
+        "(relative error tolerance of the adaptive method, dimensionless)",
+        "grid.mu_d[2] = 0.3 is invalid: exceeds mu_s = 0.25; allowed [0, mu_s] = [0, 0.25] (with mu_d > mu_s the "
+        "slip onset is inconsistent)",
+        "grid.mu_d[3] = 0.4 is invalid: exceeds mu_s = 0.25; allowed [0, mu_s] = [0, 0.25] (with mu_d > mu_s the "
+        "slip onset is inconsistent)"]),
+    "empty.yaml": ("# nothing yet\n", [
+        "the file is empty; allowed a YAML mapping of sweep config keys (grid, levels, solver, ...: docs/pipeline.md)"]),
+    "list.yaml": ("- 1\n- 2\n", [
+        "its top level is a list, not a mapping of keys; allowed a YAML mapping of sweep config keys "
+        "(grid, levels, solver, ...: docs/pipeline.md)"]),
+}
+
+
+@pytest.mark.parametrize("name, extra", [(name, []) for name in sorted(BAD_CONFIGS)]
+                         + [pytest.param("typo.yaml", ["-n"], marks=pytest.mark.slow)])
+def test_invalid_config_gives_one_line_per_field_naming_the_file_and_creates_nothing(tmp_path, name, extra):
+    """Before Snakemake starts: exit status 2, one line per invalid field on stderr naming the file
+    as the user gave it (a key merged from config/config.yaml names that file), nothing created
+    under results/ (nor Snakemake's .snakemake/), in a copy of the workflow; a dry run too."""
+    wd = copy_workflow(tmp_path / "wf")
+    text, lines = BAD_CONFIGS[name]
+    (tmp_path / name).write_text(text)
+    p = run_py("sweep", "--directory", "wf", "--configfile", name, *extra, cwd=tmp_path, timeout=120)
+    assert p.returncode == 2, p.stdout + p.stderr
+    assert p.stdout == ""
+    # grid.mu_d comes from config/config.yaml, merged under the user's file
+    want = [f"error: {'wf/config/config.yaml' if 'grid.mu_d' in line else name}: {line}" for line in lines]
+    assert p.stderr.splitlines() == want
+    assert not (wd / "results").exists() and not (wd / ".snakemake").exists()
+
+
+def test_a_config_error_reads_alike_from_the_workflow(tmp_path):
+    """Snakemake run directly (no front door) stops at parse time with the same lines, under
+    one header, before any job."""
+    wd = copy_workflow(tmp_path / "wf")
+    (wd / "config" / "typo.yaml").write_text(BAD_CONFIGS["typo.yaml"][0])
+    p = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--configfile", "config/typo.yaml"], cwd=wd,
+                       capture_output=True, text=True, timeout=TIMEOUT_S)
+    out = p.stdout + p.stderr
+    assert p.returncode != 0 and "invalid sweep configuration:" in out
+    assert f"{wd / 'config' / 'typo.yaml'}: {BAD_CONFIGS['typo.yaml'][1][0]}" in out, out
+    assert not (wd / "results").exists()
+
+
+# ------------------------------------------------------------------------------- progress (issue #43)
+
+SNAKEMAKE_LINES = """\
+Building DAG of jobs...
+Job stats:
+job               count
+--------------  -------
+simulate_chunk        4
+gather                1
+notebook              4
+all                   1
+total                10
+
+[Fri Nov 27 13:23:45 2026]
+localrule simulate_chunk:
+    output: results/tiny/chunks/48475ec4dcaccf60.nc
+    jobid: 4
+1 of 10 steps (10%) done
+"""
+
+
+def test_progress_names_its_phase_and_its_eta_covers_gather_and_figures(tmp_path):
+    results = tmp_path / "results" / "tiny"
+    (results / "chunks").mkdir(parents=True)
+    t0 = time.time()
+    plan = {"a" * 16: 3, "b" * 16: 1}
+    (results / "plan.json").write_text(json.dumps({"name": "tiny", "scenes": 4, "chunks": plan}))
+    p = frontdoor.Progress(results, t0 - 1, jobs=2, t_origin=t0 - 100)
+    for line in SNAKEMAKE_LINES.splitlines(True):
+        p.feed(line, now=t0)
+    assert p.counts == {"simulate_chunk": 4, "gather": 1, "notebook": 4, "all": 1}
+    assert p.running == {"4": ("simulate_chunk", t0)}
+    line = p.line("tiny", t0)
+    assert line.startswith("sweep tiny: scenes 0/4 (0%) | ") and line.endswith(" | jobs 1/10 | 1:40"), line
+    # scenes come in at 1 scene / 10 s: ETA = 2 scenes left at that rate + gather + 4 notebooks 2 at a time
+    (results / "logs" / "chunks").mkdir(parents=True)
+    log = results / "logs" / "chunks" / f"{'a' * 16}.log"
+    log.write_text(f"x INFO chunk {'a' * 16}: 1/3 ...\n")
+    p.line("tiny", t0 + 10)
+    log.write_text(f"x INFO chunk {'a' * 16}: 2/3 ...\n")
+    line = p.line("tiny", t0 + 20)
+    eta = 2 * 10 + frontdoor.GATHER_S + 2 * frontdoor.GATHER_S_PER_CHUNK + 4 * frontdoor.NOTEBOOK_S / 2
+    assert f"0.10 scenes/s | ETA {frontdoor._clock(eta)}" in line, line
+    # every scene done: the gather runs, then the figures; a finished job's time replaces the estimate
+    for cid in plan:
+        (results / "chunks" / f"{cid}.nc").write_bytes(b"")
+    p.feed("Finished jobid: 4 (Rule: simulate_chunk)\n", now=t0 + 30)
+    p.feed("localrule gather:\n", now=t0 + 30)
+    p.feed("    jobid: 1\n", now=t0 + 30)
+    line = p.line("tiny", t0 + 31)
+    assert line.startswith("sweep tiny: gather (4 scenes into cube.nc) | ETA "), line
+    p.feed("Finished jobid: 1 (Rule: gather)\n", now=t0 + 33)
+    for jid in ("6", "8"):
+        p.feed("localrule notebook:\n", now=t0 + 33)
+        p.feed(f"    jobid: {jid}\n", now=t0 + 33)
+    p.feed("Finished jobid: 6 (Rule: notebook)\n", now=t0 + 41)
+    line = p.line("tiny", t0 + 41)
+    # 3 notebooks left at the 8 s the first took, 2 at a time: (max(8 - 8, 1) + 8 + 8) / 2
+    assert line.startswith("sweep tiny: figures 1/4 | ETA 0:08 | "), line
+
+
+def test_compile_shows_a_ticking_elapsed_time_and_the_estimate(monkeypatch, capsys):
+    """A cold numba cache: the line saying why and how long it usually takes, the ticking
+    elapsed time while it compiles, then how long it took (here a stand-in that takes 2.3 s)."""
+    from sweep import batch
+
+    monkeypatch.setattr(frontdoor, "numba_cache_cold", lambda cache=None: True)
+    monkeypatch.setattr(frontdoor, "prune_numba_caches", lambda cache=None: [])
+    monkeypatch.setattr(batch, "warm_up", lambda scene, simulate=None: time.sleep(2.3))
+    took = frontdoor.warm_numba(frontdoor.StatusLine(sys.stdout, every_tty=0.0, every_log=0.0, heartbeat=0.9),
+                                label="sweep tiny: compile")
+    out = capsys.readouterr().out.splitlines()
+    assert 2.3 <= took < 10
+    assert out[0] == frontdoor.COMPILE_LINE and frontdoor.COMPILE_ESTIMATE in out[0]
+    ticks = [line for line in out if line.startswith("sweep tiny: compile | ")]
+    assert ticks[:3] == ["sweep tiny: compile | 0:00", "sweep tiny: compile | 0:01", "sweep tiny: compile | 0:02"]
+    assert re.fullmatch(r"numba: kernels compiled and cached in 0:0[23]", out[-1]), out
+
+
+def test_setup_prints_one_line_per_step_and_logs_pip(tmp_path, monkeypatch, capsys):
+    run_py_module = load_run_py()
+    monkeypatch.setattr(run_py_module, "SETUP_LOG", tmp_path / "setup.log")
+    noisy = [sys.executable, "-c", "import sys; print('WARNING: Location ... is ignored\\n' * 50); "
+             "print('stderr noise', file=sys.stderr)"]
+    with open(tmp_path / "setup.log", "a") as log:
+        run_py_module._step("run.py: set-up 2/3: installing ...", noisy, log)
+    assert capsys.readouterr().out == "run.py: set-up 2/3: installing ... done in 0:00\n"
+    text = (tmp_path / "setup.log").read_text()
+    assert text.count("WARNING: Location ... is ignored\n") == 50 and "stderr noise" in text
+    failing = [sys.executable, "-c", "print('ERROR: no matching distribution for numpy==0'); raise SystemExit(1)"]
+    with open(tmp_path / "setup.log", "a") as log, pytest.raises(subprocess.CalledProcessError):
+        run_py_module._step("run.py: set-up 3/3: installing this package ...", failing, log)
+    out = capsys.readouterr().out
+    assert out.startswith("run.py: set-up 3/3: installing this package ... failed after 0:00; the end of ")
+    assert "ERROR: no matching distribution" in out   # the cause is shown, from the log
+
+
+# ------------------------------------------------------------------------------- the tiny grid, end to end
+
+def test_tiny_sweep_through_the_front_door(tmp_path):
+    """The fast tier's end-to-end run: config/tiny.yaml through `python3 run.py sweep` in a copy
+    of the workflow (numba kernels cached), from the directory above it: progress lines naming
+    their phase, the closing line with paths as seen from there, a CF cube whose every missing
+    frequency or fit has its reason, and the four figures."""
+    from sweep import reasons
+
+    wd = copy_workflow(tmp_path / "wf")
+    # the tiny grid in 2 jobs instead of 4 (each job starts Python and loads the kernels: ~4-8 s)
+    tiny = (wd / "config" / "tiny.yaml").read_text()
+    (wd / "config" / "tiny.yaml").write_text(tiny.replace("chunk_size: 3", "chunk_size: 5"))
+    p = run_py("sweep", "--directory", "wf", "--configfile", "wf/config/tiny.yaml", cwd=tmp_path)
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out
+    assert_clean_console(out)
+    lines = out.rstrip("\n").splitlines()
+    assert re.fullmatch(r"sweep tiny: done in \d+:\d\d: 8 scenes \(8 computed now\); wf/results/tiny/cube\.nc, "
+                        r"wf/results/tiny/figures/; Snakemake's output: wf/results/tiny/logs/sweep\.log", lines[-1]), out
+    for line in lines[:-1]:
+        assert re.match(r"sweep tiny: (plan|scenes|gather|figures) ", line), line
+    with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as cube:
+        assert cube.attrs["sweep_name"] == "tiny"
+        for name, var in cube.variables.items():
+            assert var.attrs.get("units") and var.attrs.get("long_name"), name
+        for flag, (explained, codes, _) in reasons.FLAGS.items():
+            assert set(np.unique(cube[flag].values)) <= set(codes), flag
+            for name in explained:
+                np.testing.assert_array_equal(cube[flag].values == reasons.VALUE, np.isfinite(cube[name].values),
+                                              err_msg=name)
+    for nb in grid.NOTEBOOKS:
+        assert (wd / "results" / "tiny" / "figures" / f"{nb}.png").read_bytes()[:4] == b"\x89PNG"

@@ -77,7 +77,7 @@ def test_chunk_round_trip(tmp_path, tiny):
         for var in io.VARIABLES:
             got = ds[var.name].values
             for j, s in enumerate(sums):
-                want = ([var.get(lv) for lv in s["levels"]] if var.per_level else var.get(s))
+                want = io.value_of(var, s)
                 want = np.array(np.nan if want is None else want, dtype=float)
                 np.testing.assert_array_equal(np.asarray(got[j], dtype=float), want, err_msg=var.name)
         assert ds.outcome.values[0] == outcomes.NUMERICAL_ERROR
@@ -146,8 +146,9 @@ def _damage(path: Path, how: str) -> None:
             nc.delncattr("sweep_checksum")
 
 
-@pytest.mark.parametrize("how, reason", [("truncate", "unreadable"), ("empty", "empty"),
-                                         ("values", "checksum mismatch"), ("no_checksum", "sweep_checksum")])
+@pytest.mark.parametrize("how, reason", [
+    pytest.param("truncate", "unreadable", marks=pytest.mark.slow), pytest.param("empty", "empty", marks=pytest.mark.slow),
+    ("values", "checksum mismatch"), pytest.param("no_checksum", "sweep_checksum", marks=pytest.mark.slow)])
 def test_damaged_chunk_is_detected_and_quarantined(tmp_path, tiny, how, reason):
     plan = grid.plan_chunks(tiny)
     paths = write_all(tiny, tmp_path)
@@ -169,6 +170,7 @@ def test_chunk_of_another_plan_is_rejected(tmp_path, tiny):
     assert "chunk id" in io.verify_chunk(path, b)
 
 
+@pytest.mark.slow
 def test_gather_refuses_a_damaged_chunk(tmp_path, tiny):
     paths = write_all(tiny, tmp_path)
     _damage(paths[0], "values")
@@ -179,7 +181,7 @@ def test_gather_refuses_a_damaged_chunk(tmp_path, tiny):
 
 # ------------------------------------------------------------------------------- cube
 
-@pytest.mark.parametrize("shuffle", [False, True])
+@pytest.mark.parametrize("shuffle", [False, pytest.param(True, marks=pytest.mark.slow)])
 def test_cube_places_every_value_at_its_grid_point(tmp_path, tiny, shuffle):
     paths = write_all(tiny, tmp_path)
     if shuffle:  # the gather must not rely on the order of its inputs
@@ -195,7 +197,7 @@ def test_cube_places_every_value_at_its_grid_point(tmp_path, tiny, shuffle):
             s = fake_summary(point, tiny["levels"])
             at = cube.sel(dict(zip(grid.AXES, point)))
             for var in io.VARIABLES:
-                want = [var.get(lv) for lv in s["levels"]] if var.per_level else var.get(s)
+                want = io.value_of(var, s)
                 np.testing.assert_array_equal(np.asarray(at[var.name].values, dtype=float),
                                               np.asarray(want, dtype=float), err_msg=var.name)
         cfg = cube.attrs["config_json"]
@@ -209,6 +211,7 @@ def test_cube_places_every_value_at_its_grid_point(tmp_path, tiny, shuffle):
             tuple(len(tiny["grid"][a]) for a in grid.AXES) + (len(tiny["levels"]),))
 
 
+@pytest.mark.slow
 def test_gather_requires_every_grid_point(tmp_path, tiny):
     paths = write_all(tiny, tmp_path)
     with pytest.raises(RuntimeError, match="grid has"):
@@ -284,6 +287,7 @@ def test_chunk_job_checks_its_id(tmp_path, tiny):
         batch.run_chunk_job(chunk.spec_json, "0" * 16, tmp_path / "x.nc")
 
 
+@pytest.mark.slow
 def test_verification_cache_skips_unchanged_files_only(tmp_path, tiny, monkeypatch):
     plan = grid.plan_chunks(tiny)
     paths = write_all(tiny, tmp_path)
@@ -477,6 +481,7 @@ def _rechecksum(tmp: Path) -> None:
 
 # ------------------------------------------------------------------------------- notebooks
 
+@pytest.mark.slow
 def test_notebooks_cope_with_length_one_axes_and_nans(tmp_path):
     """Every figure notebook runs on a cube whose axes have 1-2 values and where half the
     scenes failed (NaN everywhere) and one variable is NaN throughout."""
@@ -497,3 +502,32 @@ def test_notebooks_cope_with_length_one_axes_and_nans(tmp_path):
         fig = io.run_notebook(ROOT / "workflow" / "notebooks" / f"{nb}.ipynb", cube,
                               tmp_path / "figures" / f"{nb}.png", tmp_path / "executed" / f"{nb}.ipynb")
         assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_figure_helpers_name_the_sweep_fix_fraction_scales_and_keep_numbers_legible(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    settings = settings_for(mu_d=[0.2, 0.3], k3=[3e-4], alpha0=[0.9, 1.1], omega0=[14.0])
+    cube = io.gather(write_all(settings, tmp_path / "chunks"), settings, tmp_path / "cube.nc", name="tiny")
+    with xr.open_dataset(cube) as ds:
+        assert ds.attrs["sweep_name"] == "tiny" and "'tiny'" in ds.attrs["title"]
+        assert io.figure_caption(ds, "") == "sweep 'tiny': 4 scenes (mu_d 2 × k1 1 × k2 1 × k3 1 × alpha0 2 × omega0 1)"
+        frac = xr.DataArray([[0.96, 0.98], [1.0, 0.99]], dims=("alpha0", "mu_d"),
+                            coords={"alpha0": [0.9, 1.1], "mu_d": [0.2, 0.3]})
+        fig, ax = plt.subplots()
+        mesh = io.plot_map(ax, frac, "fraction halted", vmin=0.0, vmax=1.0)
+        assert (mesh.norm.vmin, mesh.norm.vmax) == (0.0, 1.0)       # 0.96 is not drawn as the bottom
+        assert ax.get_xlabel() == "dynamic friction coefficient μ_d" and ax.get_ylabel() == "initial tilt α0 (rad)"
+        # near the top of viridis (yellow) the numbers are black, near the bottom white
+        colours = {t.get_text(): t.get_color() for t in ax.texts}
+        assert colours["0.96"] == colours["1"] == "k"
+        plt.close(fig)
+        fig, ax = plt.subplots()
+        io.plot_map(ax, frac * 0 + [[0.0, 0.05], [0.9, 1.0]], "x", vmin=0.0, vmax=1.0)
+        assert {t.get_text(): t.get_color() for t in ax.texts}["0"] == "w"
+        plt.close(fig)
+    for nb in grid.NOTEBOOKS:   # every sweep figure has the caption on its top line
+        assert "sio.figure_caption(ds" in (ROOT / "workflow" / "notebooks" / f"{nb}.ipynb").read_text()

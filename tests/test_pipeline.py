@@ -154,10 +154,10 @@ def test_stored_notebooks_have_no_outputs():
 
 
 @pytest.mark.parametrize("mutate, fragment", [
-    (lambda c: c["grid"].__setitem__("mu_d", [0.2, 0.7]), "`grid.mu_d[1]`"),
-    (lambda c: c.__setitem__("levels", [0.3, 2.0]), "`levels[1]`"),
-    (lambda c: c["grid"].__setitem__("alpha0", [0.0]), "`grid.alpha0[0]`"),
-    (lambda c: c.__setitem__("extra", 1), "'extra'"),
+    (lambda c: c["grid"].__setitem__("mu_d", [0.2, 0.7]), "config/bad.yaml: grid.mu_d[1] = 0.7 is invalid"),
+    (lambda c: c.__setitem__("levels", [0.3, 2.0]), "config/bad.yaml: levels[1] = 2.0 is invalid"),
+    (lambda c: c["grid"].__setitem__("alpha0", [0.0]), "config/bad.yaml: grid.alpha0[0] = 0.0 is invalid"),
+    (lambda c: c.__setitem__("extra", 1), "config/bad.yaml: extra = 1 is invalid: no such key"),
 ])
 def test_invalid_config_fails_before_any_job(tmp_path, mutate, fragment):
     d = copy_workflow(tmp_path / "wf")
@@ -225,7 +225,7 @@ def test_cube_equals_scenes_run_one_by_one(wd, first_run):
             for var in io.VARIABLES:
                 if var.name == "wall_time":  # a measurement, not a result
                     continue
-                want = [var.get(lv) for lv in s["levels"]] if var.per_level else var.get(s)
+                want = io.value_of(var, s)
                 # same code, same machine, same inputs: the integration is deterministic
                 np.testing.assert_array_equal(np.asarray(at[var.name].values, dtype=float),
                                               np.asarray(want, dtype=float), err_msg=f"{var.name} at {point}")
@@ -333,7 +333,7 @@ def test_error_estimate_puts_error_bars_in_the_cube(wd, first_run):
             at = cube.sel(dict(zip(grid.AXES, point)))
             assert int(at.reference_outcome) == r["outcome_code"] == m["outcome_code"] == outcomes.HALTED
             for var in io.ERROR_VARIABLES:
-                w = [var.get(lv) for lv in want["levels"]] if var.per_level else var.get(want)
+                w = io.value_of(var, want)
                 got = np.asarray(at[var.name].values, dtype=float)
                 np.testing.assert_array_equal(got, np.asarray(w, dtype=float), err_msg=f"{var.name} at {point}")
                 if var.name != "reference_outcome":

@@ -154,6 +154,7 @@ def test_stress_scene(name, mods, allowed):
 
 # --- the SciPy driver as a second implementation ------------------------------------------------
 
+@pytest.mark.slow
 def test_scipy_driver_agrees_with_sweep_on_the_paper_case():
     """SciPy DOP853 (rtol 1e-12) with the same model and event logic reproduces sweep (rtol 1e-12).
 

@@ -11,8 +11,9 @@ Frames are uniform in a time-warped clock: frame k of K shows t_k with t_h - t_k
 t_h to t_h - t_end (t_h = t_halt, or 1.05 t_end when the scene has no halt time beyond t_end),
 so the clock slows as the disk flattens and the last second of the motion stays visible. Each frame
 shows the disk (faces, rim and side), the contact point, the centre-of-mass path of the last frames
-(from dense-output samples between frames), the clock, the inclination and the precession frequency
-(mean rate of theta over the frame interval).
+(from dense-output samples between frames), the clock with its speed against real time, the
+inclination and the precession frequency (mean rate of theta over the frame interval), and a
+caption saying what the marks are (LEGEND).
 """
 from __future__ import annotations
 
@@ -40,6 +41,9 @@ RIM_COLOR = "#1b2a6b"
 FACE_COLOR = "#b8c4da"
 SIDE_COLOR = "#7f8fb0"
 N_RIM = 96
+VIEW_BOTTOM, VIEW_HEIGHT = 0.085, 0.755     # the 3-D view between the caption (below) and the text (above)
+LEGEND = ("red dot: contact point with the table (a ring where the disk hides it)\n"
+          "orange line: a radius painted on the disk (its spin)   green: path of the centre of mass")
 
 
 def camera(azimuth: float = AZIMUTH, elevation: float = ELEVATION):
@@ -182,9 +186,9 @@ class Renderer:
         u = np.concatenate([u, self.table @ self.right])
         v = np.concatenate([v, self.table @ self.up])
         self.fig = plt.figure(figsize=(WIDTH_PX / DPI, HEIGHT_PX / DPI), dpi=DPI)
-        ax = self.fig.add_axes((0.0, 0.0, 1.0, 0.84))
+        ax = self.fig.add_axes((0.0, VIEW_BOTTOM, 1.0, VIEW_HEIGHT))
         ax.set_axis_off()
-        w_px, h_px = WIDTH_PX, 0.84 * HEIGHT_PX
+        w_px, h_px = WIDTH_PX, VIEW_HEIGHT * HEIGHT_PX
         span_u, span_v = (u.max() - u.min()) * 1.05, (v.max() - v.min()) * 1.05
         self.scale_px_per_m = min(w_px / span_u, h_px / span_v)
         cu, cv = 0.5 * (u.max() + u.min()), 0.5 * (v.max() + v.min())
@@ -201,6 +205,7 @@ class Renderer:
         # contact point: filled where it faces the camera, a hollow ring where the disk hides it
         self.contact, = ax.plot([], [], "o", color="#e00000", mfc="#e00000", ms=6, mew=1.5, zorder=5)
         self.text = self.fig.text(0.02, 0.985, "", va="top", ha="left", family="monospace", fontsize=9)
+        self.fig.text(0.02, 0.012, LEGEND, va="bottom", ha="left", fontsize=7.5, color="0.15", linespacing=1.3)
 
     def _uv(self, p):
         return np.stack([p @ self.right, p @ self.up], -1)
@@ -240,7 +245,7 @@ class Renderer:
         rate = ""
         if len(fr.t) > 1:   # simulated seconds per second of animation around this frame
             lo, hi = max(k - 1, 0), min(k + 1, len(fr.t) - 1)
-            rate = f"   clock x{(fr.t[hi] - fr.t[lo]) / (hi - lo) * self.fps:.3g}"
+            rate = f"   shown at {(fr.t[hi] - fr.t[lo]) / (hi - lo) * self.fps:.3g}x real time"
         self.text.set_text(f"t = {fr.t[k]:9.5f} s{rate}\n"
                            f"tilt alpha = {a:+.5f} rad   beta = pi/2-|alpha| = {beta:.2e} rad\n"
                            f"precession {fr.precession_hz[k]:8.2f} Hz")

@@ -165,8 +165,21 @@ def precession_track(t: np.ndarray, theta: np.ndarray, window_s: float) -> tuple
 
 
 def spectrogram_png(result, ring: Ringing, path, nfft: int = 4096) -> Path:
-    """Spectrogram (dB, log frequency) of the sound with the simulation's precession frequency and
-    normal-force frequency overlaid, and the plate modes marked."""
+    """Write `spectrogram_figure` as a PNG at `path`."""
+    import matplotlib.pyplot as plt
+
+    fig = spectrogram_figure(result, ring, nfft)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def spectrogram_figure(result, ring: Ringing, nfft: int = 4096):
+    """Spectrogram (dB below the loudest, log frequency, with its colour bar) of the sound with
+    the simulation's precession frequency and normal-force frequency overlaid (legend below the
+    axes) and the plate modes marked."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -184,10 +197,12 @@ def spectrogram_png(result, ring: Ringing, path, nfft: int = 4096) -> Path:
         rows.append(S[lo:hi].mean(axis=0) if hi > lo else S[min(lo, len(f) - 1)])
     db = 10.0 * np.log10(np.array(rows) + 1e-30)
     vmax = float(db.max())
-    fig, ax = plt.subplots(figsize=(8.0, 4.2), dpi=100)
+    fig, ax = plt.subplots(figsize=(8.0, 5.0), dpi=100)
     dt = tt[1] - tt[0] if len(tt) > 1 else ring.t[-1]
     t_edges = np.concatenate([tt - 0.5 * dt, [tt[-1] + 0.5 * dt]])
-    ax.pcolormesh(t_edges, edges, db, shading="flat", cmap="magma", vmin=vmax - 90.0, vmax=vmax, rasterized=True)
+    mesh = ax.pcolormesh(t_edges, edges, db - vmax, shading="flat", cmap="magma", vmin=-90.0, vmax=0.0,
+                         rasterized=True)
+    fig.colorbar(mesh, ax=ax, label="power (dB below the loudest)", pad=0.02)
     ax.set_yscale("log")
     ax.set_ylim(10.0, 0.5 * ring.rate_hz)
     ax.set_xlim(0.0, ring.t[-1])
@@ -200,13 +215,12 @@ def spectrogram_png(result, ring: Ringing, path, nfft: int = 4096) -> Path:
         ax.axhline(md.frequency_hz, color="white", lw=0.6, ls="--")
         ax.text(0.01 * ring.t[-1], md.frequency_hz * 1.03, f"mode ({md.n},{md.s}) {md.frequency_hz / 1e3:.2f} kHz",
                 color="white", fontsize=7)
-    ax.set_xlabel("t (s)")
+    ax.set_xlabel("time t (s)")
     ax.set_ylabel("frequency (Hz)")
-    ax.set_title("Ringing of the disk: spectrogram of the synthesised sound", fontsize=10)
-    ax.legend(loc="lower right", fontsize=7, framealpha=0.6)
+    ax.set_title("Ringing of the disk: spectrogram of the synthesised sound\n"
+                 f"({len(ring.signal) / ring.rate_hz:.2f} s at {ring.rate_hz} Hz; dashed: the plate modes heard)",
+                 fontsize=10)
+    # below the axes, not over the data
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=8, frameon=False, markerscale=4)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return fig

@@ -133,6 +133,8 @@ def main(argv=None) -> int:
     sp.add_argument("--spectrogram", metavar="FILE.png", help="write the spectrogram of the ringing")
     args = ap.parse_args(argv)
 
+    from .frontdoor import compile_for_command
+    from .scene import load_scene
     from .simulate import simulate
 
     try:
@@ -145,6 +147,8 @@ def main(argv=None) -> int:
         for opt, name, ext in (("--audio", args.audio, ".wav"), ("--spectrogram", args.spectrogram, ".png")):
             if name and not name.lower().endswith(ext):
                 raise ConfigError(opt, name, f"a file name ending in {ext}")
+        load_scene(args.file)   # a bad scene file says so before any compilation
+        compile_for_command()   # a compilation of the kernels shows its progress (on stderr)
         res = simulate(args.file, sample_times=times, trajectory=want_traj)
         _media(args, res)
     except ConfigError as exc:

@@ -1,11 +1,19 @@
 """`python3 run.py sweep [snakemake args...]`: Snakemake as a user meets it.
 
+* paths on the command line (`--configfile`, `--snakefile`, `--directory`, a `--profile` folder)
+  are taken relative to the directory the user stands in, and messages show them as given;
+  Snakemake itself runs in the project root (where the Snakefile is) unless `--directory` says
+  otherwise, so results go to `<project>/results/<name>/` from wherever it is started;
+* the config is read and validated before Snakemake starts, by the code the workflow runs
+  (`sweep.grid.load_sweep`): an invalid config gives one line per invalid field, naming its file,
+  and exit status 2, and nothing is created under results/;
 * results per config: the sweep's folder is `results/<name>/` (`sweep.grid.sweep_name`); the
   whole Snakemake output of the run is appended to `results/<name>/logs/sweep.log`;
-* one progress line (scenes done / total, scenes/s, ETA, Snakemake jobs) instead of Snakemake's
-  and the jobs' own output; per-scene lines stay in the chunk logs;
-* the numba kernels are compiled (or loaded from their cache) once, here, before any job, with
-  a message when a compilation is due;
+* one progress line naming its phase (compile, plan, scenes, gather, figures) with scenes done /
+  total, scenes/s, an ETA that covers the phases still to come, Snakemake's jobs and the elapsed
+  time, instead of Snakemake's and the jobs' own output; per-scene lines stay in the chunk logs;
+* the numba kernels are compiled (or loaded from their cache) once, here, before any job; a
+  compilation shows its ticking elapsed time and the estimate COMPILE_ESTIMATE;
 * Ctrl-C (SIGINT) and SIGTERM stop the run and print one line: what was kept and the exact
   command that resumes it. Snakemake runs in its own session, so the terminal's Ctrl-C reaches
   this process only; it is passed on as one SIGINT to Snakemake's process group (Snakemake and
@@ -16,7 +24,7 @@
   command is the command that was interrupted.
 
 Options that only inform or maintain (`-n`, `--unlock`, `--lint`, `--list...`, `--help`, ...)
-run Snakemake with its own output, as does `--verbose`/`--debug`.
+run Snakemake with its own output, as does `--verbose`/`--debug` (after the same validation).
 """
 from __future__ import annotations
 
@@ -24,6 +32,7 @@ import collections
 import contextlib
 import io as _stdio
 import json
+import math
 import os
 import re
 import shlex
@@ -33,10 +42,19 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
-RESUME_PREFIX = "python3 run.py sweep"
+from . import grid
+
+# the project root: the Snakefile, config/, workflow/ (src/sweep/frontdoor.py -> ../..)
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_JOBS = "2"
+# options whose values are paths (taken relative to the user's directory): how many values
+PATH_OPTIONS = {"--configfile": "+", "--configfiles": "+", "--snakefile": 1, "-s": 1, "--directory": 1,
+                "-d": 1, "--profile": 1}
+# options after which nothing is validated: Snakemake answers without reading the workflow
+HELP_OPTIONS = {"-h", "--help", "--version", "-v"}
 # Snakemake options after which its own console output is what the user wants
 RAW_OPTIONS = {
     "-n", "--dry-run", "--dryrun", "--unlock", "--lint", "-l", "--list", "--list-rules",
@@ -53,17 +71,31 @@ RAW_OPTIONS = {
 JOB_LOG_LINE = re.compile(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ (DEBUG|INFO|WARNING) ")
 STEPS = re.compile(r"(\d+) of (\d+) steps \(\d+%\) done")
 NOTHING = "Nothing to be done"
-EXPECTED_COMPILE_S = "up to 90 s"  # measured: 21 s alone, ~50 s on a loaded 2-core machine
+JOB_START = re.compile(r"^(?:local)?rule (\w+):")
+JOB_ID = re.compile(r"^\s+jobid: (\d+)")
+JOB_DONE = re.compile(r"^Finished jobid: (\d+) \(Rule: (\w+)\)")
+JOB_STATS = re.compile(r"^(\w+)\s+(\d+)$")
+# The kernels' compilation (docs/pipeline.md, "Running"): measured on 2-core machines shared with
+# other work: 75 s and 96 s here, 213 s on the fresh clone of issue #43.
+COMPILE_ESTIMATE = "usually 1-4 min on a 2-core machine, by how busy it is"
+# After the last scene: the gather (opening every chunk file: 0.5 s + 0.4 s per chunk file), then
+# each figure notebook (a Jupyter kernel that imports the package, reduces the cube and plots:
+# 9 s), measured on a busy 2-core machine (tiny sweep: 2 s, 9-10 s; default: 8 s, 8-10 s); the
+# run's own durations replace them as soon as one has finished.
+GATHER_S, GATHER_S_PER_CHUNK = 0.5, 0.4
+NOTEBOOK_S = 9.0
 SIGNAL_GRACE_S = 60.0            # after the forwarded SIGINT, before SIGKILL
 
 
 # ------------------------------------------------------------------------------------- arguments
 
-def parsed_args(argv: list[str]):
-    """Snakemake's own parse of `argv` (profile defaults applied), or None if it rejects it."""
+def parsed_args(argv: list[str], cwd: Path = PROJECT_ROOT):
+    """Snakemake's own parse of `argv` (profile defaults applied, a relative profile path found
+    from `cwd`, where Snakemake runs), or None if it rejects it."""
     from snakemake.cli import parse_args
 
-    with contextlib.redirect_stderr(_stdio.StringIO()), contextlib.redirect_stdout(_stdio.StringIO()):
+    with contextlib.redirect_stderr(_stdio.StringIO()), contextlib.redirect_stdout(_stdio.StringIO()), \
+            contextlib.chdir(cwd):
         try:
             return parse_args(list(argv))[1]
         except SystemExit:
@@ -86,15 +118,69 @@ def is_raw(argv: list[str]) -> bool:
     return any(a.split("=", 1)[0] in RAW_OPTIONS for a in argv)
 
 
-def locations(argv: list[str]) -> tuple[Path, Path]:
-    """(working directory, config file whose name names the results folder) of a run."""
-    args = parsed_args(argv)
-    workdir = Path(args.directory).resolve() if args is not None and args.directory else Path.cwd()
-    if args is not None and args.configfile:
-        return workdir, Path(args.configfile[-1]).absolute()
-    from . import grid
+def absolute_paths(argv: list[str], cwd: Path) -> tuple[list[str], dict[str, str]]:
+    """`argv` with the values of PATH_OPTIONS made absolute against `cwd` (a `--profile` only if
+    it names a folder or file there; else it is a profile name or a path in the project), and
+    {absolute path: the path as the user wrote it}, to name files as given."""
+    out: list[str] = []
+    given: dict[str, str] = {}
 
-    return workdir, workdir / grid.DEFAULT_CONFIG
+    def absolute(opt: str, value: str) -> str:
+        p = Path(value).expanduser()
+        if opt == "--profile" and not (cwd / p).exists():
+            return value
+        full = str(p if p.is_absolute() else cwd / p)
+        given.setdefault(full, value)
+        return full
+
+    i = 0
+    while i < len(argv):
+        a = argv[i]
+        opt, eq, value = a.partition("=")
+        if eq and opt.startswith("--") and opt in PATH_OPTIONS:
+            out.append(f"{opt}={absolute(opt, value)}")
+        elif a in PATH_OPTIONS:
+            out.append(a)
+            n = 0
+            while i + 1 < len(argv) and not argv[i + 1].startswith("-") and (PATH_OPTIONS[a] == "+" or n < 1):
+                i += 1
+                n += 1
+                out.append(absolute(a, argv[i]))
+        else:
+            out.append(a)
+        i += 1
+    return out, given
+
+
+def shown_path(path: Path, cwd: Path | None = None) -> str:
+    """A path as a message shows it: relative to the user's directory if inside it."""
+    cwd = cwd or Path.cwd()
+    path = Path(path)
+    return str(path.relative_to(cwd)) if path.is_absolute() and path.is_relative_to(cwd) else str(path)
+
+
+def command_prefix() -> str:
+    """How the user started the front door, for the resume command: `python3 run.py` as typed
+    (run.py passes it in SWEEP_COMMAND), e.g. `python3 ../sweep/run.py` from another directory."""
+    return os.environ.get("SWEEP_COMMAND", "python3 run.py")
+
+
+def config_files(args, given: Mapping[str, str], cwd: Path) -> tuple[Path, list[tuple[Path, str]], dict | None]:
+    """(Snakemake's working directory, the config files in Snakemake's order as (path, as the
+    user named it), the --config overrides) of a run parsed as `args` (absolute paths)."""
+    from snakemake.cli import parse_config
+
+    workdir = Path(args.directory) if args.directory else PROJECT_ROOT
+    files: list[tuple[Path, str]] = []
+    if not getattr(args, "replace_workflow_config", False):
+        default = workdir / grid.DEFAULT_CONFIG
+        files.append((default, shown_path(default, cwd)))
+    for f in args.configfile or []:
+        f = Path(f)
+        if all(f != p for p, _ in files):
+            files.append((f, given.get(str(f), shown_path(f, cwd))))
+    overrides = parse_config(args.config) if args.config else None
+    return workdir, files, overrides
 
 
 # ---------------------------------------------------------------------------------------- numba
@@ -125,22 +211,106 @@ def prune_numba_caches(cache: Path | None = None) -> list[Path]:
     return gone
 
 
-def warm_numba(say) -> None:
-    """Compile (or load) the kernels once in this process, so the jobs find them cached."""
+class StatusLine:
+    """One status line: rewritten in place on a terminal (at most every `every_tty` s), printed as
+    a new line elsewhere (a log, CI) when its text (less the clock) changed, at most every
+    `every_log` s, and at least every `heartbeat` s."""
+
+    def __init__(self, stream=None, every_tty: float = 0.5, every_log: float = 10.0, heartbeat: float = 60.0):
+        self.stream = stream or sys.stdout
+        self.tty = self.stream.isatty()
+        self.every = every_tty if self.tty else every_log
+        self.heartbeat = heartbeat
+        self.last_key = None
+        self.last_print = -math.inf
+        self.lock = threading.Lock()
+
+    def show(self, text: str, force: bool = False) -> None:
+        key = text.rsplit(" | ", 1)[0]
+        now = time.monotonic()
+        with self.lock:
+            quiet = now - self.last_print
+            if not force and (quiet < self.every or (not self.tty and key == self.last_key and quiet < self.heartbeat)):
+                return
+            if self.tty:
+                print("\r\033[K" + text, end="", file=self.stream, flush=True)
+            else:
+                print(text, file=self.stream, flush=True)
+            self.last_key, self.last_print = key, now
+
+    def say(self, text: str) -> None:
+        """A line of its own (clears a status line being rewritten)."""
+        with self.lock:
+            print(("\r\033[K" if self.tty else "") + text, file=self.stream, flush=True)
+            self.last_key, self.last_print = None, -math.inf
+
+    def clear(self) -> None:
+        if self.tty:
+            with self.lock:
+                print("\r\033[K", end="", file=self.stream, flush=True)
+
+
+@contextlib.contextmanager
+def ticking(status: StatusLine, text, period: float = 1.0):
+    """While the block runs, show `text(elapsed seconds)` on `status` every `period` s (from a
+    thread: the block keeps the main thread, where signals arrive)."""
+    t0 = time.monotonic()
+    stop = threading.Event()
+
+    def tick():
+        while True:
+            status.show(text(time.monotonic() - t0))
+            if stop.wait(period):
+                return
+
+    thread = threading.Thread(target=tick, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(timeout=5)
+
+
+COMPILE_LINE = ("numba: compiling the integrator's kernels (once after a change of src/sweep/core; "
+                f"{COMPILE_ESTIMATE})")
+
+
+def warm_numba(status: StatusLine, label: str = "numba: compiling") -> float | None:
+    """Compile (or load) the kernels once in this process, so the jobs find them cached. A
+    compilation shows `label` with its ticking elapsed time and the estimate; returns its
+    duration (s), None where the cache was warm."""
     import copy
 
     from . import batch
     from .scene import DEFAULTS
 
     cold = numba_cache_cold()
-    if cold:
-        say("numba: compiling the integrator's kernels (the kernel sources changed or were never "
-            f"compiled); this happens once after a change of src/sweep/core and takes {EXPECTED_COMPILE_S} ...")
     t0 = time.monotonic()
-    batch.warm_up(copy.deepcopy(DEFAULTS))
+    if cold:
+        status.say(COMPILE_LINE)
+        with ticking(status, lambda s: f"{label} | {_clock(s)}"):
+            batch.warm_up(copy.deepcopy(DEFAULTS))
+    else:
+        batch.warm_up(copy.deepcopy(DEFAULTS))
     prune_numba_caches()
     if cold:
-        say(f"numba: kernels compiled and cached in {time.monotonic() - t0:.0f} s")
+        took = time.monotonic() - t0
+        status.say(f"numba: kernels compiled and cached in {_clock(took)}")
+        return took
+    return None
+
+
+def compile_for_command(stream=None) -> None:
+    """For a command that runs the kernels in its own process (`python3 run.py scene`): where
+    they are not compiled yet, compile them first with the notice and the ticking elapsed time
+    (on `stream`, default stderr, so a --json output stays clean)."""
+    try:
+        cold = numba_cache_cold()
+    except Exception:  # noqa: BLE001 - a notice, never a reason to fail
+        return
+    if cold:
+        warm_numba(StatusLine(stream or sys.stderr, every_tty=1.0, every_log=30.0, heartbeat=30.0))
 
 
 # ------------------------------------------------------------------------------------- progress
@@ -151,12 +321,17 @@ def _clock(seconds: float) -> str:
 
 
 class Progress:
-    """Scenes done / total from the run's plan (written by the workflow when it is parsed), the
-    chunk files and the chunk logs; steps from Snakemake's output."""
+    """The run's progress: scenes done / total from the run's plan (written by the workflow when
+    it is parsed), the chunk files and the chunk logs; Snakemake's jobs (which rule runs, how
+    many of each are planned and finished, how long they took) from its output, fed line by
+    line to `feed`. The phase is `plan` until the plan exists, `scenes` until every scene is
+    done, then `gather` and `figures` as their jobs run."""
 
-    def __init__(self, results: Path, t_start: float):
+    def __init__(self, results: Path, t_start: float, jobs: int = int(DEFAULT_JOBS), t_origin: float | None = None):
         self.results = results
-        self.t_start = t_start          # time.time() when the run started
+        self.t_start = t_start          # time.time() when Snakemake started
+        self.t_origin = t_origin if t_origin is not None else t_start   # for the elapsed clock
+        self.jobs = max(1, jobs)
         self.plan: dict[str, int] | None = None
         self.total = 0
         self.kept_at_start = 0
@@ -164,7 +339,45 @@ class Progress:
         self.last_seen: tuple[float, int] | None = None    # (time, done) at the latest increase
         self.finished: set[str] = set()
         self.steps: tuple[int, int] | None = None
+        self.counts: dict[str, int] = {}                   # Snakemake's "Job stats": rule -> jobs
+        self.running: dict[str, tuple[str, float]] = {}    # jobid -> (rule, start time)
+        self.done_jobs: dict[str, list[float]] = collections.defaultdict(list)  # rule -> durations
+        self._rule: str | None = None
+        self._in_stats = False
 
+    # --- Snakemake's output
+    def feed(self, text: str, now: float | None = None) -> None:
+        now = time.time() if now is None else now
+        line = text.rstrip("\n")
+        m = STEPS.search(line)
+        if m:
+            self.steps = (int(m.group(1)), int(m.group(2)))
+        if line.startswith("Job stats:"):
+            self._in_stats, self.counts = True, {}
+            return
+        if self._in_stats:
+            m = JOB_STATS.match(line.strip())
+            if (m and m.group(1) == "total") or not line.strip():
+                self._in_stats = False
+            elif m:
+                self.counts[m.group(1)] = int(m.group(2))
+            return
+        m = JOB_START.match(line)
+        if m:
+            self._rule = m.group(1)
+            return
+        m = JOB_ID.match(line)
+        if m and self._rule is not None:
+            self.running[m.group(1)] = (self._rule, now)
+            self._rule = None
+            return
+        m = JOB_DONE.match(line)
+        if m:
+            rule, t0 = self.running.pop(m.group(1), (m.group(2), None))
+            if t0 is not None:
+                self.done_jobs[rule].append(now - t0)
+
+    # --- scenes
     def _load_plan(self) -> None:
         path = self.results / "plan.json"
         try:
@@ -210,30 +423,73 @@ class Progress:
                 n += int(found[-1])
         return n
 
+    # --- after the scenes
+    def _left(self, rule: str, expected: float, now: float) -> tuple[int, float]:
+        """(jobs of `rule` not finished, seconds of work they have left, at `expected` s per job
+        or the mean of those finished)."""
+        took = self.done_jobs.get(rule)
+        per = sum(took) / len(took) if took else expected
+        running = [now - t0 for r, t0 in self.running.values() if r == rule]
+        n_left = max(self.counts.get(rule, 0) - len(took or ()), len(running))
+        work = sum(max(per - e, 1.0) for e in running) + per * max(n_left - len(running), 0)
+        return n_left, work
+
+    def phase(self, done: int | None) -> str:
+        if done is None:
+            return "plan"
+        if done < self.total:
+            return "scenes"
+        rules = {r for r, _ in self.running.values()}
+        if "notebook" in rules or ("gather" not in rules and self.counts.get("notebook", 0)
+                                   and self.counts.get("gather", 0) <= len(self.done_jobs.get("gather", ()))):
+            return "figures"
+        return "gather" if self.counts.get("gather", 0) else "finish"
+
+    def eta(self, done: int, now: float) -> float | None:
+        """Seconds until the run ends: the scenes left at the rate seen so far, then the gather
+        and the figures (GATHER_S + GATHER_S_PER_CHUNK per chunk file, NOTEBOOK_S per notebook,
+        or what this run's finished ones took; the notebooks `jobs` at a time). None while there is no rate yet."""
+        left = 0.0
+        if done < self.total:
+            first, last = self.first_seen, self.last_seen
+            if first is None or not (last[0] > first[0] and last[1] > first[1]):
+                return None
+            left += (self.total - done) / ((last[1] - first[1]) / (last[0] - first[0]))
+        left += self._left("gather", GATHER_S + GATHER_S_PER_CHUNK * len(self.plan or ()), now)[1]
+        n_nb, work = self._left("notebook", NOTEBOOK_S, now)
+        if n_nb:
+            left += work / min(self.jobs, n_nb)
+        return left
+
     def line(self, name: str, now: float) -> str:
         done = self.done()
-        elapsed = now - self.t_start
-        parts = [f"sweep {name}:"]
+        phase = self.phase(done)
+        parts = [f"sweep {name}: {phase}"]
         if done is None:
-            parts.append("preparing (validating the config, planning chunks)")
+            parts[0] += " (Snakemake reads the workflow, checks the chunk files, plans the jobs)"
         else:
             pct = 100.0 * done / self.total if self.total else 100.0
-            parts.append(f"{done}/{self.total} scenes ({pct:.0f}%)")
             if done > self.kept_at_start and self.first_seen is None:
                 self.first_seen = (now, done)
             if self.last_seen is None or done > self.last_seen[1]:
                 self.last_seen = (now, done)
+            if phase == "scenes":
+                parts[0] += f" {done}/{self.total} ({pct:.0f}%)"
+            elif phase == "gather":
+                parts[0] += f" ({self.total} scenes into cube.nc)"
+            else:
+                n_nb = self.counts.get("notebook", 0)
+                parts[0] += f" {min(len(self.done_jobs.get('notebook', ())), n_nb)}/{n_nb}"
             first, last = self.first_seen, self.last_seen
-            if first is not None and last[0] > first[0] and last[1] > first[1]:
-                # over the scenes seen so far; frozen once they are all done (gather, figures)
-                rate = (last[1] - first[1]) / (last[0] - first[0])
-                parts.append(f"{rate:.2f} scenes/s")
-                if done < self.total:
-                    parts.append(f"ETA {_clock((self.total - done) / rate)}")
+            if phase == "scenes" and first is not None and last[0] > first[0] and last[1] > first[1]:
+                parts.append(f"{(last[1] - first[1]) / (last[0] - first[0]):.2f} scenes/s")
+            eta = self.eta(done, now)
+            if eta is not None:
+                parts.append(f"ETA {_clock(eta)}")
             if self.steps:
                 parts.append(f"jobs {self.steps[0]}/{self.steps[1]}")
-        parts.append(_clock(elapsed))
-        return parts[0] + " " + " | ".join(parts[1:])
+        parts.append(_clock(now - self.t_origin))
+        return " | ".join(parts)
 
 
 # ----------------------------------------------------------------------------------------- run
@@ -304,18 +560,45 @@ def _end_group(pgid: int, wait_s: float = 5.0) -> None:
         time.sleep(0.05)
 
 
+def validate(argv: list[str], cwd: Path) -> tuple[list[str], Path, grid.Sweep | None] | int:
+    """The Snakemake arguments (paths made absolute), its working directory and the validated
+    sweep of a run; or, for an invalid config, the exit status 2 after one line per invalid
+    field on stderr (nothing is created). The sweep is None where Snakemake will answer without
+    reading the config (--help, --version) or rejects the arguments itself."""
+    sm_argv, given = absolute_paths(argv, cwd)
+    args = parsed_args(sm_argv)
+    if args is None or any(a in HELP_OPTIONS for a in argv):
+        return sm_argv, PROJECT_ROOT, None
+    try:
+        workdir, files, overrides = config_files(args, given, cwd)
+    except ValueError as exc:           # a --config entry Snakemake cannot parse
+        print(f"error: --config: {exc}", file=sys.stderr)
+        return 2
+    try:
+        return sm_argv, workdir, grid.load_sweep(files, overrides)
+    except grid.SweepConfigError as err:
+        for e in err.errors:
+            print(f"error: {e.line()}", file=sys.stderr)
+        return 2
+
+
 def run(argv: list[str]) -> int:
-    if is_raw(argv):
-        cmd = [sys.executable, "-m", "snakemake", *snakemake_argv(argv, progress=False)]
+    cwd = Path.cwd()
+    t_origin = time.time()
+    checked = validate(argv, cwd)
+    if isinstance(checked, int):
+        return checked
+    sm_argv, workdir, sweep = checked
+    if sweep is None or is_raw(argv):
+        cmd = [sys.executable, "-m", "snakemake", *snakemake_argv(sm_argv, progress=False)]
         try:
-            return subprocess.run(cmd).returncode
+            return subprocess.run(cmd, cwd=PROJECT_ROOT).returncode
         except KeyboardInterrupt:
             return 130
 
-    from . import grid
-
-    interactive = sys.stdout.isatty()
-    resume = " ".join([RESUME_PREFIX, *map(shlex.quote, argv)])
+    name = sweep.name
+    resume = " ".join([command_prefix(), "sweep", *map(shlex.quote, argv)])
+    status = StatusLine(sys.stdout, heartbeat=30.0)
     state: dict = {"signal": None, "proc": None}
 
     def on_signal(signum, _frame):
@@ -330,41 +613,37 @@ def run(argv: list[str]) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
 
-    def say(text: str) -> None:
-        print(("\r\033[K" if interactive else "") + text, flush=True)
-
+    results = workdir / "results" / name
+    shown = shown_path(results, cwd)
+    n_scenes = math.prod(grid.grid_shape(sweep.settings))
     try:
-        workdir, configfile = locations(argv)
         try:
-            name = grid.sweep_name(configfile)
-        except grid.SweepConfigError as err:
-            say(f"sweep: {err}")
-            return 2
-        results = workdir / "results" / name
-        shown = str(results.relative_to(Path.cwd())) if results.is_relative_to(Path.cwd()) else str(results)
-        try:
-            warm_numba(say)
+            warm_numba(status, label=f"sweep {name}: compile (numba kernels, then {n_scenes} scenes)")
         except _Stop:
             raise
         except Exception as exc:  # noqa: BLE001 - the jobs will report the same problem in full
-            say(f"numba: warm-up failed ({type(exc).__name__}: {exc}); the jobs will try again")
+            status.say(f"numba: warm-up failed ({type(exc).__name__}: {exc}); the jobs will try again")
         log_path = results / "logs" / "sweep.log"
         log_path.parent.mkdir(parents=True, exist_ok=True)
         t_start = time.time()
         t_locks = t_start - 1.0      # file times may be rounded down to the second
-        cmd = [sys.executable, "-m", "snakemake", *snakemake_argv(argv, progress=True)]
+        sm_cmd = snakemake_argv(sm_argv, progress=True)
+        cmd = [sys.executable, "-m", "snakemake", *sm_cmd]
         log = open(log_path, "a", encoding="utf-8")
         log.write(f"=== {time.strftime('%Y-%m-%d %H:%M:%S')} {resume}\n=== {shlex.join(cmd)}\n")
         log.flush()
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, start_new_session=True,
+                                stdin=subprocess.DEVNULL, start_new_session=True, cwd=PROJECT_ROOT,
                                 text=True, errors="replace", bufsize=1)
         state["proc"] = proc
     except _Stop:
-        say(f"sweep: interrupted before the sweep started; nothing was computed. Run again: {resume}")
+        status.say(f"sweep {name}: interrupted before the sweep started; nothing was computed. Run again: {resume}")
         return 128 + state["signal"]
 
-    progress = Progress(results, t_start)
+    args = parsed_args(sm_cmd)
+    jobs = (args.jobs or args.cores) if args is not None else None
+    progress = Progress(results, t_start, jobs=jobs if isinstance(jobs, int) else int(DEFAULT_JOBS),
+                        t_origin=t_origin)
     tail: collections.deque[str] = collections.deque(maxlen=60)
     flags = {"nothing": False}
 
@@ -372,9 +651,7 @@ def run(argv: list[str]) -> int:
         for text in proc.stdout:
             log.write(text)
             log.flush()   # `tail -f results/<name>/logs/sweep.log` follows the run
-            m = STEPS.search(text)
-            if m:
-                progress.steps = (int(m.group(1)), int(m.group(2)))
+            progress.feed(text)
             if NOTHING in text:
                 flags["nothing"] = True
             if not JOB_LOG_LINE.match(text):
@@ -383,7 +660,6 @@ def run(argv: list[str]) -> int:
 
     reader = threading.Thread(target=read, daemon=True)
     reader.start()
-    last_line, last_print = "", 0.0
     deadline = None
     while proc.poll() is None:
         time.sleep(0.25)
@@ -392,21 +668,12 @@ def run(argv: list[str]) -> int:
             if time.monotonic() > deadline:
                 _killpg(proc.pid, signal.SIGKILL)
             continue
-        now = time.time()
-        text = progress.line(name, now)
-        key = text.rsplit(" | ", 1)[0]
-        if interactive:
-            if now - last_print >= 0.5:
-                print("\r\033[K" + text, end="", flush=True)
-                last_print = now
-        elif key != last_line and now - last_print >= 10.0:
-            print(text, flush=True)
-            last_line, last_print = key, now
+        status.show(progress.line(name, time.time()))
     _end_group(proc.pid)
     reader.join(timeout=10)
     log.close()
     code = proc.returncode
-    elapsed = _clock(time.time() - t_start)
+    elapsed = _clock(time.time() - t_origin)
 
     if state["signal"] is not None:
         progress.done()
@@ -417,27 +684,27 @@ def run(argv: list[str]) -> int:
         if released:
             with open(log_path, "a", encoding="utf-8") as note:
                 note.write(f"=== sweep: released the lock this run's Snakemake left: "
-                          f"{', '.join(p.name for p in released)}\n")
+                           f"{', '.join(p.name for p in released)}\n")
         locked = any((workdir / ".snakemake" / "locks").glob("*"))
-        again = f"{RESUME_PREFIX} --unlock{resume[len(RESUME_PREFIX):]} && {resume}" if locked else resume
+        prefix = f"{command_prefix()} sweep"
+        again = f"{prefix} --unlock{resume[len(prefix):]} && {resume}" if locked else resume
         what = (f"kept {kept} of {progress.total} scenes ({len(present)} of {len(plan)} chunk files) "
                 f"in {shown}/chunks/" if plan else "nothing was computed yet")
-        say(f"sweep {name}: interrupted ({signal.Signals(state['signal']).name}) after {elapsed}; "
-            f"{what}; resume with: {again}")
+        status.say(f"sweep {name}: interrupted ({signal.Signals(state['signal']).name}) after {elapsed}; "
+                   f"{what}; resume with: {again}")
         return 128 + state["signal"]
     if code == 0:
         if flags["nothing"]:
-            say(f"sweep {name}: nothing to do, {shown}/ is up to date ({shown}/cube.nc, {shown}/figures/)")
+            status.say(f"sweep {name}: nothing to do, {shown}/ is up to date ({shown}/cube.nc, {shown}/figures/)")
         else:
             done = progress.done() or 0
-            say(f"sweep {name}: done in {elapsed}: {done} scenes ({done - progress.kept_at_start} computed now); "
-                f"{shown}/cube.nc, {shown}/figures/; Snakemake's output: {shown}/logs/sweep.log")
+            status.say(f"sweep {name}: done in {elapsed}: {done} scenes ({done - progress.kept_at_start} computed "
+                       f"now); {shown}/cube.nc, {shown}/figures/; Snakemake's output: {shown}/logs/sweep.log")
         return 0
-    if interactive:
-        print("\r\033[K", end="")
+    status.clear()
     print("\n".join(tail), flush=True)
-    say(f"sweep {name}: failed (Snakemake exit status {code}) after {elapsed}; "
-        f"full output: {shown}/logs/sweep.log")
+    status.say(f"sweep {name}: failed (Snakemake exit status {code}) after {elapsed}; "
+               f"full output: {shown}/logs/sweep.log")
     return code
 
 

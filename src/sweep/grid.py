@@ -28,12 +28,13 @@ import itertools
 import json
 import math
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from .core.jit import kernel_sources, sources_digest
+from .errors import MISSING, ConfigError, quoted_number
 
 AXES = ("mu_d", "k1", "k2", "k3", "alpha0", "omega0")
 OUTER_AXES = AXES[:4]
@@ -50,15 +51,15 @@ AXIS_LONG_NAMES = {
 
 # Bump when the chunk file layout or the meaning of its variables changes: every chunk's
 # identity includes it, so old chunk files are then recomputed instead of being gathered.
-CHUNK_FORMAT = 2     # 2: error bars of the counts and slip_fraction (CHANGELOG.md, 2026-11-26)
+CHUNK_FORMAT = 3     # 2: error bars of the counts and slip_fraction; 3: the *_flag variables (sweep.reasons)
 
 # Length of the hex chunk id: 16 hex digits = 64 bits, so a collision among even 10^6 chunks
 # has probability ~ n^2 / 2^65 < 3e-8.
 CHUNK_ID_HEX = 16
 
 # The config schema ships as package data (sweep/schema/config.schema.yaml, see pyproject.toml),
-# so an installed (non-editable) package finds it too; the Snakemake workflow validates against
-# this same file (workflow/rules/common.smk).
+# so an installed (non-editable) package finds it too; the front door and the Snakemake workflow
+# validate against this same file (load_sweep, called by sweep.frontdoor and workflow/rules/common.smk).
 SCHEMA_RESOURCE = ("schema", "config.schema.yaml")
 
 
@@ -77,7 +78,12 @@ NOTEBOOKS = ("halt_time", "frequency_ramps", "roll_slip", "cost")
 
 
 class SweepConfigError(ValueError):
-    """The sweep configuration is invalid; the message names every offending key."""
+    """The sweep configuration is invalid: `errors`, one ConfigError per invalid field (key,
+    value, allowed range; `source`, the file, where known). str(): one line per field."""
+
+    def __init__(self, errors: Sequence[ConfigError]):
+        self.errors = list(errors)
+        super().__init__("\n".join(e.line() for e in self.errors))
 
 
 # --------------------------------------------------------------------------------------------
@@ -167,176 +173,247 @@ EXECUTION_REMOVED = ("the GPU path was removed on 2026-11-27 (it ran slower than
                      "--profile workflow/profiles/slurm")
 
 
-def removed_key_errors(config: Mapping) -> list[str]:
-    """A one-line message naming the field where the config still has the `execution` section."""
+def removed_key_errors(config: Mapping) -> list[ConfigError]:
+    """One error naming the field where the config still has the `execution` section."""
     if "execution" not in config:
         return []
     section = config["execution"]
     if isinstance(section, Mapping) and "device" in section:
-        return [f"config key `execution.device`: {section['device']!r} is no longer accepted: {EXECUTION_REMOVED}"]
-    return [f"config key `execution`: no longer accepted: {EXECUTION_REMOVED}"]
+        return [ConfigError("execution.device", section["device"], "no `execution` section: " + EXECUTION_REMOVED,
+                            problem="no longer accepted")]
+    return [ConfigError("execution", section, "no `execution` section: " + EXECUTION_REMOVED,
+                        problem="no longer accepted")]
 
 
-def schema_errors(config: Mapping, schema: dict) -> list[str]:
-    """Readable messages for every JSON-schema violation and every non-finite number."""
+def schema_errors(config: Mapping, schema: dict) -> list[ConfigError]:
+    """Every JSON-schema violation and every non-finite number, one ConfigError per field (the
+    field, the value, what is allowed there: the schema's description)."""
     import jsonschema
 
-    messages: list[str] = removed_key_errors(config)
+    errors: dict[str, ConfigError] = {}
+
+    def add(err: ConfigError) -> None:
+        errors.setdefault(err.field, err)   # one message per field: the first problem found
+
+    for err in removed_key_errors(config):
+        add(err)
     config = {k: v for k, v in config.items() if k != "execution"}
     for path, value in _walk(config, []):
         if isinstance(value, float) and not math.isfinite(value):
-            # an axis item has no description of its own: its axis states the allowed range
-            desc = (_subschema(schema, path).get("description")
-                    or (_subschema(schema, path[:-1]).get("description", "") if path and isinstance(path[-1], int)
-                        else ""))
-            messages.append(f"config key `{_key(path)}`: {value!r} is not a finite number"
-                            + (f" ({desc})" if desc else ""))
+            add(ConfigError(_key(path), value, _allowed(schema, path), problem="not a finite number"))
     validator = jsonschema.Draft202012Validator(schema)
     for err in sorted(validator.iter_errors(config), key=lambda e: [str(p) for p in e.absolute_path]):
         path = list(err.absolute_path)
         value = err.instance
-        if isinstance(value, float) and not math.isfinite(value):
-            continue  # already reported above, with a clearer message
-        if err.validator == "additionalProperties":
-            node = _subschema(schema, path)
-            unknown = sorted(set(value) - set(node.get("properties", {})))
-            allowed = ", ".join(sorted(node.get("properties", {})))
-            messages.append(f"config key `{_key(path)}`: unknown key(s) {', '.join(map(repr, unknown))}; "
-                            f"allowed keys: {allowed}")
-            continue
-        if err.validator == "required":
-            messages.append(f"config key `{_key(path)}`: {err.message}")
-            continue
         node = _subschema(schema, path)
-        desc = node.get("description") or _subschema(schema, path[:-1]).get("description", "")
-        msg = f"config key `{_key(path)}`: {err.message}"
-        if err.validator == "minItems" and not value:
-            msg = f"config key `{_key(path)}`: the axis is empty; give at least one value"
+        if isinstance(value, float) and not math.isfinite(value):
+            continue  # already reported above
+        if err.validator == "additionalProperties":
+            known = sorted(node.get("properties", {}))
+            for k in sorted(set(value) - set(known), key=str):
+                add(ConfigError(_key(path + [k]), value[k], f"keys: {', '.join(known)}", problem="no such key"))
+        elif err.validator == "required":
+            for k in node.get("required", []):
+                if isinstance(value, Mapping) and k not in value:
+                    add(ConfigError(_key(path + [k]), MISSING, _allowed(schema, path + [k])))
+        elif err.validator == "type" and err.validator_value == "object":
+            add(ConfigError(_key(path), value, "a mapping of the keys " + ", ".join(sorted(node.get("properties", {}))),
+                            problem="not a mapping"))
+        elif err.validator == "type" and err.validator_value == "array":
+            add(ConfigError(_key(path), value, "a list: " + _allowed(schema, path), problem="not a list"))
+        elif err.validator == "type":
+            kind = {"integer": "an integer", "number": "a number", "string": "text",
+                    "boolean": "true or false"}.get(err.validator_value, err.validator_value)
+            add(ConfigError(_key(path), value, _allowed(schema, path),
+                            problem=None if quoted_number(value) else f"not {kind}"))
+        elif err.validator == "minItems" and not value:
+            add(ConfigError(_key(path), value, "at least one value: " + _allowed(schema, path),
+                            problem="the list is empty"))
         elif err.validator == "uniqueItems":
-            seen, dups = set(), []
+            seen, dups = [], []
             for v in value:
-                if v in seen:
-                    dups.append(v)
-                seen.add(v)
-            msg = f"config key `{_key(path)}`: duplicate value(s) {dups}; each value may appear once"
-        if isinstance(value, str) and err.validator == "type":
-            try:
-                float(value)
-                msg += " (a number in quotes is a string: remove the quotes)"
-            except ValueError:
-                pass
-        if desc:
-            msg += f" [{desc}]"
-        messages.append(msg)
-    return messages
+                (dups if v in seen else seen).append(v)
+            add(ConfigError(_key(path), value, "each value once: " + _allowed(schema, path),
+                            problem=f"duplicate value(s) {dups}"))
+        else:   # out of range, not one of the choices, not matching the pattern
+            add(ConfigError(_key(path), value, _allowed(schema, path)))
+    return list(errors.values())
+
+
+def _allowed(schema: dict, path: list[Any]) -> str:
+    """What the schema allows at `path`: its description's 'allowed ...' part, then the rest of
+    it in parentheses (an axis item: its axis's description)."""
+    desc = _subschema(schema, path).get("description")
+    if not desc and path and isinstance(path[-1], int):
+        desc = _subschema(schema, path[:-1]).get("description")
+    parts = re.split(r";\s*allowed:?\s+", desc or "", maxsplit=1)
+    return f"{parts[1]} ({parts[0]})" if len(parts) == 2 else (desc or "see docs/pipeline.md")
 
 
 def _valid_number(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
-def cross_field_errors(config: Mapping, invalid: set[str] = frozenset()) -> list[str]:
+def _number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def cross_field_errors(config: Mapping, invalid: set[str] = frozenset()) -> list[ConfigError]:
     """Rules JSON schema cannot express; `config` must have its defaults filled.
 
-    `invalid`: keys (as `_key` writes them) that already failed the schema; a rule that reads
-    one of them is skipped, so one bad value is reported once, not again as its consequences
-    (a negative radius is not also "k1 exceeds the radius").
+    `invalid`: fields that already failed the schema; a rule that reads one of them is skipped,
+    so one bad value is reported once, not again as its consequences (a negative radius is not
+    also "k1 exceeds the radius").
     """
-    messages = []
+    errors = []
     disk = config.get("disk", {})
+    grid_ = config.get("grid", {})
     radius = disk.get("radius")
     if _valid_number(radius) and radius > 0 and "disk.radius" not in invalid:
-        if _valid_number(disk.get("thickness", 0)) and disk.get("thickness", 0) > 4 * radius:
-            messages.append(f"config key `disk.thickness`: {disk['thickness']!r} exceeds 4*radius = "
-                            f"{4 * radius!r} m; allowed (0, 4*radius]")
+        thickness = disk.get("thickness", 0)
+        if _valid_number(thickness) and thickness > 4 * radius and "disk.thickness" not in invalid:
+            errors.append(ConfigError("disk.thickness", thickness, f"(0, 4*radius] = (0, {4 * radius!r}] m",
+                                      problem=f"exceeds 4*radius = {4 * radius!r} m"))
         for k in ("k1", "k2", "k3"):
-            for i, v in enumerate(config.get("grid", {}).get(k, [])):
-                if isinstance(v, (int, float)) and v > radius:
-                    messages.append(f"config key `grid.{k}[{i}]`: {v!r} m exceeds the disk radius "
-                                    f"{radius!r} m; allowed [0, radius]")
+            for i, v in enumerate(grid_.get(k, [])):
+                if _number(v) and v > radius and f"grid.{k}[{i}]" not in invalid:
+                    errors.append(ConfigError(f"grid.{k}[{i}]", v, f"[0, radius] = [0, {radius!r}] m",
+                                              problem=f"exceeds the disk radius {radius!r} m"))
     mu_s = config.get("mu_s")
-    grid = config.get("grid", {})
     if _valid_number(mu_s) and mu_s > 0 and "mu_s" not in invalid:
-        for i, mu_d in enumerate(grid.get("mu_d", [])):
-            if isinstance(mu_d, (int, float)) and mu_d > mu_s:
-                messages.append(f"config key `grid.mu_d[{i}]`: {mu_d!r} exceeds mu_s = {mu_s!r}; "
-                                "allowed [0, mu_s] (with mu_d > mu_s the slip onset is inconsistent)")
-    for i, a in enumerate(grid.get("alpha0", [])):
-        if isinstance(a, (int, float)) and a == 0:
-            messages.append(f"config key `grid.alpha0[{i}]`: 0 is not allowed; allowed (-pi/2, 0) or "
-                            "(0, pi/2) (alpha = 0 is the degenerate line-contact state of the model)")
+        for i, mu_d in enumerate(grid_.get("mu_d", [])):
+            if _number(mu_d) and mu_d > mu_s and f"grid.mu_d[{i}]" not in invalid:
+                errors.append(ConfigError(f"grid.mu_d[{i}]", mu_d, f"[0, mu_s] = [0, {mu_s!r}] (with mu_d > mu_s "
+                                          "the slip onset is inconsistent)", problem=f"exceeds mu_s = {mu_s!r}"))
+    for i, a in enumerate(grid_.get("alpha0", [])):
+        if _number(a) and a == 0:
+            errors.append(ConfigError(f"grid.alpha0[{i}]", a, "(-pi/2, 0) or (0, pi/2) (alpha = 0 is the "
+                                      "degenerate line-contact state of the model)", problem="0 is not allowed"))
     solver = config.get("solver", {})
     if solver.get("method") == "fixed" and "dt" not in solver:
-        messages.append("config key `solver.dt`: required when solver.method is 'fixed'; "
-                        "allowed (0, 1] s")
-    return messages
+        errors.append(ConfigError("solver.dt", MISSING, "(0, 1] s",
+                                  problem="required when solver.method is 'fixed'"))
+    return errors
 
 
 def check_config(config: Mapping, schema: dict | None = None) -> dict:
     """Validate a sweep config and return it with defaults filled.
 
-    Raises SweepConfigError listing every problem (key, value, allowed range) before any work.
+    Raises SweepConfigError listing every problem (one ConfigError per field: key, value,
+    allowed range) before any work. Numbers are what the YAML reader made of them: text (a
+    number in quotes) where a number is expected is an error (read files with `read_config`).
     """
     schema = schema if schema is not None else load_schema()
     config = copy.deepcopy(dict(config))
-    coerce_numbers(config, schema)
-    messages = schema_errors(config, schema)
-    # keys named by the schema's messages: cross-field rules reading them are skipped
-    invalid = set(re.findall(r"^config key `([^`]+)`", "\n".join(messages), flags=re.M))
+    errors = schema_errors(config, schema)
+    invalid = {e.field for e in errors}
     try:  # report cross-field problems together with the schema's, where the types allow it
-        messages += [m for m in cross_field_errors(fill_defaults(config, schema), invalid)
-                     if m not in messages and not any(f"`{k}`" in m for k in invalid)]
+        errors += [e for e in cross_field_errors(fill_defaults(config, schema), invalid) if e.field not in invalid]
     except (TypeError, AttributeError):
         pass  # a mistyped section: the schema errors above already say which
-    if messages:
-        raise SweepConfigError("invalid sweep configuration:\n  " + "\n  ".join(messages))
+    if errors:
+        raise SweepConfigError(errors)
     return fill_defaults(config, schema)
 
 
-def coerce_numbers(config: Any, schema: dict) -> list[str]:
-    """In place: numbers written like `1e-10` (a string to YAML 1.1, which Snakemake's config
-    loader follows) become floats wherever the schema expects a number. Returns the keys."""
-    from .yamlio import coerce_numbers as _coerce
-
-    def wants_number(path: list) -> bool:
-        return _subschema(schema, path).get("type") in ("number", "integer")
-
-    return [_key(p) for p in _coerce(config, wants_number)]
-
-
 # --------------------------------------------------------------------------------------------
-# results per sweep
+# config files: read, merged as Snakemake merges them, every key's file remembered
 # --------------------------------------------------------------------------------------------
 
 DEFAULT_CONFIG = "config/config.yaml"
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+NAME_ALLOWED = ("1-64 characters of letters, digits, '.', '_', '-', not starting with '.', '_' or '-' "
+                "(the results folder results/<name>/)")
+CONFIG_FILE = "a YAML mapping of sweep config keys (grid, levels, solver, ...: docs/pipeline.md)"
 
 
-def sweep_name(configfile: str | Path) -> str:
+@dataclass
+class ConfigSource:
+    """The sweep config as read from its files: `config` (merged), and for every key path the
+    file (as the user named it) that set it last, so that a message can name the file."""
+    config: dict
+    origins: dict[str, str]
+    last: str                 # the file given last (its name: is the sweep's name)
+
+    def source_of(self, field: str) -> str:
+        """The file that set `field` (or the nearest enclosing key), else the last file."""
+        key = field
+        while key:
+            if key in self.origins:
+                return self.origins[key]
+            m = re.match(r"^(.*?)(\.[^.\[\]]+|\[\d+\])$", key)
+            key = m.group(1) if m else ""
+        return self.last
+
+    def name_errors(self, err: SweepConfigError) -> SweepConfigError:
+        for e in err.errors:
+            e.with_source(self.source_of(e.field))
+        return SweepConfigError(err.errors)
+
+
+def _merge_into(base: dict, new: Mapping, label: str, origins: dict[str, str], path: list[Any]) -> None:
+    """Snakemake's update_config: nested mappings merge key by key, anything else replaces; every
+    key path set (leaves and the mappings holding them) is recorded in `origins` as `label`'s."""
+    for k, v in new.items():
+        sub = path + [k]
+        origins[_key(sub)] = label
+        if isinstance(v, Mapping) and isinstance(base.get(k), dict):
+            _merge_into(base[k], v, label, origins, sub)
+            continue
+        head = _key(sub)
+        for key in [o for o in origins if o.startswith(head + ".") or o.startswith(head + "[")]:
+            del origins[key]
+        base[k] = copy.deepcopy(dict(v) if isinstance(v, Mapping) else v)
+        for sub_path, _ in _walk(v, sub):
+            if isinstance(sub_path[-1], str):
+                origins[_key(sub_path)] = label
+
+
+def read_config(files: Sequence[tuple[str | Path, str]], overrides: Mapping | None = None) -> ConfigSource:
+    """Read sweep config files, in order, each given as (path, the name to show for it), and merge
+    them as Snakemake does (a later file's keys over an earlier's; nested mappings key by key),
+    then `overrides` (Snakemake's --config, shown as '--config'). Numbers are read as YAML 1.2
+    reads them (`sweep.yamlio`: 1e-10 is a number, '1e-10' in quotes is text), the same rule as
+    scene files. A file that is missing, empty, not YAML or not a mapping raises SweepConfigError
+    naming it."""
+    from .yamlio import load_file
+
+    merged: dict = {}
+    origins: dict[str, str] = {}
+    last = ""
+    for path, label in files:
+        try:
+            data = load_file(path, CONFIG_FILE)
+        except ConfigError as err:
+            raise SweepConfigError([err.with_source(label)]) from None
+        _merge_into(merged, data, label, origins, [])
+        last = label
+    if overrides:
+        _merge_into(merged, overrides, "--config", origins, [])
+    return ConfigSource(merged, origins, last)
+
+
+def sweep_name(configfile: str | Path, label: str | None = None) -> str:
     """The name of a sweep, hence its results folder `results/<name>/`: the `name:` set in its
     config file, else the file's stem (`config/my_sweep.yaml` -> `my_sweep`).
 
     Only the file itself counts, not config/config.yaml merged under it, so that a config file
-    without `name:` never writes into the default sweep's folder.
+    without `name:` never writes into the default sweep's folder. SweepConfigError (naming the
+    file as `label`, default the path) if the file cannot be read or the name is invalid.
     """
-    from .yamlio import load
+    from .yamlio import load_file
 
     path = Path(configfile)
+    label = label or str(configfile)
     try:
-        data = load(path.read_text(encoding="utf-8")) or {}
-    except (OSError, yaml_error()) as exc:
-        raise SweepConfigError(f"config file {str(path)!r} cannot be read: {exc}") from None
-    name = data.get("name", path.stem) if isinstance(data, Mapping) else path.stem
+        data = load_file(path, CONFIG_FILE)
+    except ConfigError as err:
+        raise SweepConfigError([err.with_source(label)]) from None
+    name = data.get("name", path.stem)
     if not isinstance(name, str) or not re.match(NAME_PATTERN, name):
-        raise SweepConfigError(f"config key `name` in {str(path)!r}: {name!r} is invalid; allowed 1-64 "
-                               "characters of letters, digits, '.', '_', '-', not starting with '.', '_' or '-'")
+        where = "name" if "name" in data else "name (the file's stem, no name: given)"
+        raise SweepConfigError([ConfigError(where, name, NAME_ALLOWED, source=label)])
     return name
-
-
-def yaml_error() -> type[Exception]:
-    import yaml
-
-    return yaml.YAMLError
 
 
 # --------------------------------------------------------------------------------------------
@@ -378,6 +455,31 @@ def normalize(config: Mapping, schema: dict | None = None, check_scenes: bool = 
     return settings
 
 
+@dataclass(frozen=True)
+class Sweep:
+    """A sweep as read and validated: its name (results/<name>/), the config with the schema's
+    defaults filled, and the normalised settings (`normalize`)."""
+    name: str
+    config: dict
+    settings: dict
+
+
+def load_sweep(files: Sequence[tuple[str | Path, str]], overrides: Mapping | None = None,
+               schema: dict | None = None, check_scenes: bool = True) -> Sweep:
+    """The sweep whose config files are `files` ((path, name to show) in Snakemake's order:
+    config/config.yaml, then each --configfile) with Snakemake's --config `overrides`. Raises
+    SweepConfigError, every message naming its file, before any work. What `python3 run.py
+    sweep` checks before Snakemake starts and the workflow when Snakemake parses it
+    (workflow/rules/common.smk): the same code."""
+    schema = schema if schema is not None else load_schema()
+    src = read_config(files, overrides)
+    name = sweep_name(*files[-1])
+    try:
+        return Sweep(name, check_config(src.config, schema), normalize(src.config, schema, check_scenes))
+    except SweepConfigError as err:
+        raise src.name_errors(err) from None
+
+
 # scene-file field (sweep.scene) -> sweep config key, to name the key the user wrote
 _SCENE_FIELD_TO_KEY = {
     "contact.mu_d": "grid.mu_d", "contact.k1": "grid.k1", "contact.k2": "grid.k2",
@@ -395,10 +497,9 @@ def check_scenes_valid(settings: Mapping) -> None:
     sum(len(axis)) scene validations (~ms each) instead of one per grid point.
     """
     from . import scene as _scene
-    from .errors import ConfigError
 
     first = {a: settings["grid"][a][0] for a in AXES}
-    messages = []
+    errors: dict[str, ConfigError] = {}
     for a in AXES:
         for v in settings["grid"][a]:
             point = dict(first, **{a: v})
@@ -408,23 +509,22 @@ def check_scenes_valid(settings: Mapping) -> None:
                 key = _SCENE_FIELD_TO_KEY.get(err.field, err.field)
                 if key.startswith("stop.levels["):
                     key = "levels"
-                msg = f"config key `{key}`: {err.value!r} is invalid; allowed {err.allowed}"
-                if msg not in messages:
-                    messages.append(msg)
+                if key.startswith("grid."):   # the axis value this scene had
+                    axis = key.split(".")[1]
+                    key = f"{key}[{settings['grid'][axis].index(point[axis])}]"
+                errors.setdefault(key, ConfigError(key, err.value, err.allowed,
+                                                   problem="rejected by the physics-core scene checks"))
             except (ArithmeticError, ValueError) as err:
                 # Values inside every documented range can still be numerically degenerate for
                 # the core's set-up (e.g. a subnormal radius: chi^2 = R/g underflows to 0). Stop
                 # here with a message rather than a traceback at parse time or a failed job; the
                 # disk and gravity are shared by every scene, so one message says it.
-                if not any(m.startswith("config keys `disk`, `gravity`") for m in messages):
-                    messages.append(
-                        f"config keys `disk`, `gravity`: the physics core cannot set up the scene at "
-                        f"{point} ({type(err).__name__}: {err}) with disk {settings['disk']} and "
-                        f"gravity {settings['gravity']!r}; allowed: values in the documented ranges "
-                        "that are not numerically degenerate (e.g. not a subnormal radius)")
-    if messages:
-        raise SweepConfigError("invalid sweep configuration (physics-core checks):\n  "
-                               + "\n  ".join(messages))
+                errors.setdefault("disk", ConfigError(
+                    "disk", settings["disk"], "values in the documented ranges that are not numerically "
+                    f"degenerate (e.g. not a subnormal radius), with gravity {settings['gravity']!r}",
+                    problem=f"the physics core cannot set up a scene with it ({type(err).__name__}: {err})"))
+    if errors:
+        raise SweepConfigError(list(errors.values()))
 
 
 def scene_settings(settings: Mapping) -> dict:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from . import grid as _grid
-from . import outcomes
+from . import outcomes, reasons
 
 log = logging.getLogger("sweep.io")
 
@@ -42,7 +42,7 @@ CUBE_CHUNK_ELEMENTS = 2 ** 15
 class Var:
     """One output variable: how to take it from a `SimulationResult.summary`, and its CF metadata."""
     name: str
-    kind: str                      # "float" | "int" | "bool" | "outcome"
+    kind: str                      # "float" | "int" | "bool" | "outcome" | "flag" (sweep.reasons)
     units: str
     long_name: str
     get: Callable[[Mapping], Any]  # summary -> scalar, or (for per_level) level dict -> scalar
@@ -108,6 +108,12 @@ VARIABLES: tuple[Var, ...] = (
     Var("n_rhs", "int", "1", "number of right-hand-side evaluations", lambda s: s["n_rhs"]),
     Var("n_events", "int", "1", "number of located events", lambda s: s["n_events"]),
     Var("wall_time", "float", "s", "wall-clock time of the integration", lambda s: s["wall_time"]),
+) + tuple(
+    # why a frequency or a fitted number is missing (sweep.reasons): int8 CF flags, 0 = has a value
+    Var(flag, "flag", "1", reasons.FLAGS[flag][2],
+        (lambda lv, f=flag: lv[f]) if flag in reasons.PER_LEVEL else (lambda s, f=flag: s[f]),
+        per_level=flag in reasons.PER_LEVEL)
+    for flag in reasons.FLAGS
 )
 VARIABLE_NAMES = tuple(v.name for v in VARIABLES)
 LEVEL_ATTRS = {"units": "rad", "long_name": "inclination level"}
@@ -197,6 +203,15 @@ def error_summary(n_levels: int, outcome_code: int = outcomes.NUMERICAL_ERROR, w
     }
 
 
+def value_of(var: Var, summary: Mapping):
+    """What `var` holds for a scene's `summary`: a scalar, or a list over the levels (a flag is
+    derived from the summary by sweep.reasons where the summary does not carry it yet)."""
+    if var.kind == "flag" and var.name not in summary and not (
+            summary["levels"] and var.name in summary["levels"][0]):
+        summary = reasons.add_flags(summary)
+    return [var.get(lv) for lv in summary["levels"]] if var.per_level else var.get(summary)
+
+
 def _column(var: Var, summaries: Sequence[Mapping], n_levels: int) -> np.ndarray:
     if var.per_level:
         raw = [[var.get(s["levels"][j]) for j in range(n_levels)] for s in summaries]
@@ -208,11 +223,18 @@ def _column(var: Var, summaries: Sequence[Mapping], n_levels: int) -> np.ndarray
         return np.array([INT_FILL if v is None else int(v) for v in raw], dtype=np.int32)
     if var.kind == "bool":
         return np.array([bool(v) for v in raw], dtype=bool)
+    if var.kind == "flag":
+        return np.array(raw, dtype=np.int8).reshape(len(summaries), *([n_levels] if var.per_level else []))
     return np.array([int(v) for v in raw], dtype=np.int8)
 
 
 def _var_attrs(var: Var) -> dict:
+    if var.kind == "flag":
+        return reasons.flag_attrs(var.name)
     attrs = {"units": var.units, "long_name": var.long_name}
+    flag = reasons.flag_of(var.name)
+    if flag is not None:   # CF: the flag variable that says why a value is missing
+        attrs["ancillary_variables"] = flag
     if var.kind == "outcome":
         attrs["flag_values"] = np.array(outcomes.FLAG_VALUES, dtype=np.int8)
         attrs["flag_meanings"] = outcomes.FLAG_MEANINGS
@@ -298,6 +320,7 @@ def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
     pts = np.array(chunk.points, dtype=np.float64).reshape(len(chunk.points), len(_grid.AXES))
     coords = {a: ("point", pts[:, i], _coord_attrs(a)) for i, a in enumerate(_grid.AXES)}
     coords["level"] = ("level", np.array(levels, dtype=np.float64), dict(LEVEL_ATTRS))
+    summaries = [reasons.add_flags(s) for s in summaries]   # why each missing value is missing
     data = {}
     for var in variables(bool(spec["settings"].get("error_estimate", False))):
         dims = ("point", "level") if var.per_level else ("point",)
@@ -460,11 +483,12 @@ def git_commit(path: str | Path) -> str:
 
 
 def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str | Path,
-           repo_path: str | Path | None = None, history: str = "") -> Path:
+           repo_path: str | Path | None = None, history: str = "", name: str | None = None) -> Path:
     """Gather verified chunk files into the cube at `out_path` (atomic write), lazily with dask.
 
-    `settings`: the normalised config (sweep.grid.normalize). Every grid point must be present
-    exactly once; a damaged chunk file raises (after quarantining it) instead of being gathered.
+    `settings`: the normalised config (sweep.grid.normalize); `name`: the sweep's name (global
+    attribute `sweep_name`, shown on the figures). Every grid point must be present exactly
+    once; a damaged chunk file raises (after quarantining it) instead of being gathered.
     """
     import xarray as xr
 
@@ -514,7 +538,7 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             dims = axes + (("level",) if var.per_level else ())
             if var.kind == "int":  # decoded with NaN for missing; stored as int32 with a fill value
                 enc = {"dtype": "int32", "_FillValue": np.int32(INT_FILL)}
-            elif var.kind == "outcome":
+            elif var.kind in ("outcome", "flag"):
                 enc = {"dtype": "int8", "_FillValue": None}
             elif var.kind == "bool":
                 enc = {"_FillValue": None}
@@ -531,7 +555,8 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
         created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
         attrs = {
             "Conventions": "CF-1.10",
-            "title": "Euler's disk (Kessler & O'Reilly 2002) parameter sweep",
+            "title": "Euler's disk (Kessler & O'Reilly 2002) parameter sweep" + (f" '{name}'" if name else ""),
+            "sweep_name": name or "",
             "history": f"{created}: gathered {len(paths)} chunk files ({n} scenes) into this cube"
                        + (f"; {history}" if history else ""),
             "source": f"sweep {__version__}: rigid-disk model of Kessler & O'Reilly (2002), "
@@ -650,12 +675,42 @@ def write_plan(path: str | Path, name: str, chunks: Mapping[str, _grid.Chunk]) -
     return path
 
 
-def plot_map(ax, da, label: str, log: bool = False, annotate_max_cells: int = 64):
+# axis labels of the figures: words, symbol, unit
+AXIS_LABELS = {
+    "mu_d": "dynamic friction coefficient μ_d",
+    "k1": "rolling resistance k1 (m)",
+    "k2": "pivoting resistance k2 (m)",
+    "k3": "rolling resistance k3 (m)",
+    "alpha0": "initial tilt α0 (rad)",
+    "omega0": "initial spin ω0 (rad/s)",
+    "level": "inclination level β (rad)",
+}
+
+
+def figure_caption(ds, reduced: str = "median over the axes not shown") -> str:
+    """What a figure of the cube `ds` shows, for its top line: the sweep's name, its number of
+    scenes and the grid (values per axis), and how the maps reduce the other axes."""
+    shape = " × ".join(f"{a} {ds.sizes[a]}" for a in _grid.AXES if a in ds.sizes)
+    n = math.prod(ds.sizes[a] for a in _grid.AXES if a in ds.sizes)
+    name = ds.attrs.get("sweep_name", "?")
+    return f"sweep '{name}': {n} scenes ({shape})" + (f"; {reduced}" if reduced else "")
+
+
+def _text_colour(rgba) -> str:
+    """Black on light cells, white on dark ones (relative luminance of the cell colour)."""
+    r, g, b = rgba[:3]
+    return "k" if 0.2126 * r + 0.7152 * g + 0.0722 * b > 0.45 else "w"
+
+
+def plot_map(ax, da, label: str, log: bool = False, annotate_max_cells: int = 64,
+             vmin: float | None = None, vmax: float | None = None):
     """Draw a 2-D DataArray (dims (y, x)) as a cell map on a matplotlib Axes.
 
     Cells sit at index positions with the coordinate values as tick labels, so axes of length
-    1, unevenly spaced or logarithmic values all display; NaN cells are grey. Grids with at
-    most `annotate_max_cells` cells (64: the numbers stay legible) get their values written in.
+    1, unevenly spaced or logarithmic values all display; NaN cells are grey. `vmin`, `vmax`
+    fix the colour scale (a fraction: 0 and 1). Grids with at most `annotate_max_cells` cells
+    (64: the numbers stay legible) get their values written in, black on light cells and white
+    on dark ones. Axis labels name the parameter and its unit (AXIS_LABELS).
     """
     import matplotlib as mpl
     import matplotlib.colors as mcolors
@@ -663,21 +718,22 @@ def plot_map(ax, da, label: str, log: bool = False, annotate_max_cells: int = 64
     ydim, xdim = da.dims
     z = np.asarray(da.values, dtype=float)
     finite = z[np.isfinite(z)]
-    norm = None
     if log and finite.size and (finite > 0).all():
-        norm = mcolors.LogNorm(vmin=finite.min(), vmax=max(finite.max(), finite.min() * (1 + 1e-12)))
+        norm = mcolors.LogNorm(vmin=vmin or finite.min(), vmax=vmax or max(finite.max(), finite.min() * (1 + 1e-12)))
+    else:
+        norm = mcolors.Normalize(vmin=vmin, vmax=vmax)
     cmap = mpl.colormaps["viridis"].with_extremes(bad="0.85")
     ny, nx = z.shape
     mesh = ax.pcolormesh(np.arange(nx + 1) - 0.5, np.arange(ny + 1) - 0.5, np.ma.masked_invalid(z),
                          cmap=cmap, norm=norm, shading="flat")
     ax.set_xticks(range(nx), [f"{v:.3g}" for v in da[xdim].values], rotation=45 if nx > 6 else 0)
     ax.set_yticks(range(ny), [f"{v:.3g}" for v in da[ydim].values])
-    units = {d: da[d].attrs.get("units", "") for d in (xdim, ydim)}
-    ax.set_xlabel(f"{xdim} ({units[xdim]})")
-    ax.set_ylabel(f"{ydim} ({units[ydim]})")
+    ax.set_xlabel(AXIS_LABELS.get(xdim, xdim))
+    ax.set_ylabel(AXIS_LABELS.get(ydim, ydim))
     if nx * ny <= annotate_max_cells:
         for (j, i), v in np.ndenumerate(z):
+            colour = "k" if not np.isfinite(v) else _text_colour(cmap(mesh.norm(v)))
             ax.text(i, j, "NaN" if not np.isfinite(v) else f"{v:.3g}", ha="center", va="center",
-                    fontsize=7, color="k" if not np.isfinite(v) else "w")
+                    fontsize=7, color=colour)
     ax.figure.colorbar(mesh, ax=ax, label=label)
     return mesh

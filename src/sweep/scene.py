@@ -24,7 +24,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from . import yamlio
 from .core import model
@@ -85,10 +84,11 @@ def _merge(path: str, user, default):
             user = {}
         if not isinstance(user, dict):
             raise ConfigError(path or "scene", user, "a mapping")
-        unknown = sorted(set(user) - set(default))
+        unknown = sorted(set(user) - set(default), key=str)
         if unknown:
-            where = f"{path}.{unknown[0]}" if path else unknown[0]
-            raise ConfigError(where, user[unknown[0]], f"no such key; known keys: {', '.join(sorted(default))}")
+            where = f"{path}.{unknown[0]}" if path else str(unknown[0])
+            raise ConfigError(where, user[unknown[0]], f"keys: {', '.join(sorted(default))}",
+                              problem="no such key")
         return {k: (_merge(f"{path}.{k}" if path else k, user[k], d) if k in user else copy.deepcopy(d))
                 for k, d in default.items()}
     return user   # an explicit null stays null and is rejected by the field's validator
@@ -132,21 +132,24 @@ def _max_level(g: float, h: float, a: float, c: float) -> float:
     return float(model.steady_rolling_max_level(p, 1e-4))
 
 
+SCENE_FILE = f"a YAML mapping of the sections {', '.join(DEFAULTS)} (e.g. config/scenes/kessler2002.yaml)"
+
+
 def load_scene(src) -> Scene:
-    """Parse and validate a scene (path to YAML, YAML text path-like, or dict). Raises ConfigError."""
+    """Parse and validate a scene (path to a YAML file, or dict). Raises ConfigError; for a file,
+    the error names it as given (`source`)."""
     if isinstance(src, (str, Path)):
-        path = Path(src)
-        if not path.is_file():
-            raise ConfigError("scene", str(src), "a path to an existing YAML scene file")
         try:
-            raw = yamlio.load(path.read_text())   # YAML 1.2 numbers: 1e-10 is a float
-        except yaml.YAMLError as exc:
-            raise ConfigError("scene", str(src), f"valid YAML ({exc})") from None
-    elif isinstance(src, dict):
-        raw = src
-    else:
-        raise ConfigError("scene", type(src).__name__, "a path to a YAML file or a dict")
-    cfg = _merge("", raw if raw is not None else {}, DEFAULTS)
+            return _validate(yamlio.load_file(src, SCENE_FILE))
+        except ConfigError as err:
+            raise err.with_source(str(src)) from None
+    if isinstance(src, dict):
+        return _validate(src)
+    raise ConfigError("scene", type(src).__name__, "a path to a YAML file or a dict")
+
+
+def _validate(raw) -> Scene:
+    cfg = _merge("", raw, DEFAULTS)
 
     d = cfg["disk"]
     # lower bounds keep chi, the energy scale m R^2/chi^2 and every dimensionless group normal

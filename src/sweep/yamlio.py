@@ -2,14 +2,14 @@
 
 PyYAML implements YAML 1.1, whose float pattern needs a '.' and a signed exponent, so `1e-10`,
 `1e6` and `2E+3` load as strings. YAML 1.2 (and every other tool a user is likely to compare
-with: JSON, Python, numpy) reads them as numbers. `load` reads scene files with the YAML 1.2
-float pattern added; `coerce_numbers` applies the same rule after the fact to a mapping that
-someone else loaded (Snakemake loads the sweep config), but only where a number is expected.
+with: JSON, Python, numpy) reads them as numbers. `load` and `load_file` read scene files and
+sweep config files alike with the YAML 1.2 float pattern added: one rule for numbers everywhere,
+a number is written without quotes (`1e-10`, `0.5`), and a number in quotes (`'1e-10'`) is text,
+rejected where a number is expected ("remove the quotes", sweep.errors).
 """
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, MutableMapping
 from typing import Any
 
 import yaml
@@ -31,27 +31,31 @@ def load(text: str) -> Any:
     return yaml.load(text, Loader=Loader)  # noqa: S506 (a SafeLoader subclass)
 
 
-def number_of(text: str) -> float | None:
-    """The float a YAML 1.2 reader sees in `text`, if it is an exponent float YAML 1.1 missed."""
-    return float(text) if isinstance(text, str) and EXP_FLOAT.match(text.strip()) else None
+def load_file(path, allowed: str) -> dict:
+    """The mapping in the YAML file `path` (read by `load`). A file that is missing, unreadable,
+    not YAML, empty (no content, or only comments) or not a mapping at its top level raises
+    ConfigError (field '': the file as a whole; `allowed` says what it should hold)."""
+    from pathlib import Path
 
+    from .errors import ConfigError
 
-def coerce_numbers(obj: Any, wants_number: Callable[[list], bool], path: list | None = None) -> list[list]:
-    """Replace, in place, strings like '1e-10' by floats where `wants_number(path)` is true.
-
-    `obj` is a nested mapping/list (e.g. a config Snakemake loaded with YAML 1.1 rules);
-    returns the paths that were changed. Strings elsewhere (names, enums) are left alone.
-    """
-    path = path or []
-    changed: list[list] = []
-    items = obj.items() if isinstance(obj, MutableMapping) else enumerate(obj) if isinstance(obj, list) else ()
-    for key, value in list(items):
-        sub = path + [key]
-        if isinstance(value, (MutableMapping, list)):
-            changed += coerce_numbers(value, wants_number, sub)
-        elif isinstance(value, str) and wants_number(sub):
-            x = number_of(value)
-            if x is not None:
-                obj[key] = x
-                changed.append(sub)
-    return changed
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError("", None, allowed, problem="no such file" if not p.exists() else "not a file")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError("", None, allowed, problem=f"cannot be read ({exc})") from None
+    try:
+        data = load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        what = getattr(exc, "problem", None) or type(exc).__name__
+        raise ConfigError("", None, allowed, problem=f"not valid YAML ({what}{where})") from None
+    if data is None:
+        raise ConfigError("", None, allowed, problem="the file is empty")
+    if not isinstance(data, dict):
+        raise ConfigError("", None, allowed,
+                          problem=f"its top level is a {type(data).__name__}, not a mapping of keys")
+    return data

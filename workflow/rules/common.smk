@@ -2,35 +2,29 @@
 import os
 import sys
 
-from snakemake.utils import validate
-
 from sweep import grid as sweep_grid
 from sweep import io as sweep_io
 
 
-# The sweep's results folder: results/<name>/, name from the config file given last (see
-# sweep.grid.sweep_name); config["name"] is set to it so the merged config agrees.
+# The config is read from its files by sweep.grid (the code `python3 run.py sweep` runs before
+# Snakemake starts, so both report alike): config/config.yaml, then each --configfile, merged as
+# Snakemake merges them, then --config; numbers as YAML 1.2 reads them (1e-10 is a number, a
+# number in quotes is text), every problem one line naming its file, key, value and allowed
+# range, including the rules JSON schema cannot express (mu_d <= mu_s, alpha0 != 0, finite
+# numbers, dt for the fixed step) and the physics core's own scene checks. The sweep's name,
+# hence its folder results/<name>/, is the `name:` of the config file given last, else its stem.
+_CONFIGFILES = [] if workflow.config_settings.replace_workflow_config else [DEFAULT_CONFIGFILE]
+_CONFIGFILES += [str(f) for f in workflow.overwrite_configfiles if str(f) not in _CONFIGFILES]
 try:
-    SWEEP_NAME = sweep_grid.sweep_name((list(workflow.overwrite_configfiles) or [DEFAULT_CONFIGFILE])[-1])
+    _SWEEP = sweep_grid.load_sweep([(f, f) for f in _CONFIGFILES], dict(workflow.config_settings.config) or None)
 except sweep_grid.SweepConfigError as err:
-    raise WorkflowError(str(err)) from None
-config["name"] = SWEEP_NAME
+    raise WorkflowError("invalid sweep configuration:\n" + str(err)) from None
+SWEEP_NAME, SETTINGS = _SWEEP.name, _SWEEP.settings
+# the workflow's config is the validated one, defaults filled (what the rules see)
+config.clear()
+config.update(_SWEEP.config, name=SWEEP_NAME)
 RESULTS = f"results/{SWEEP_NAME}"
 
-# Numbers written like 1e-10 (YAML 1.1, hence Snakemake's loader, reads them as strings) become
-# floats where the schema expects a number, before anything validates the config.
-sweep_grid.coerce_numbers(config, sweep_grid.load_schema())
-
-# Readable messages (key, value, allowed range) and the cross-field rules JSON schema cannot
-# express (mu_d <= mu_s, alpha0 != 0, finite numbers, dt for the fixed step) come first; then
-# Snakemake's own validation against the same schema fills the defaults into `config`.
-try:
-    sweep_grid.check_config(config, sweep_grid.load_schema())
-except sweep_grid.SweepConfigError as err:
-    raise WorkflowError(str(err)) from None
-validate(config, str(sweep_grid.SCHEMA_PATH))  # the packaged schema (sweep/schema/), absolute path
-
-SETTINGS = sweep_grid.normalize(config, sweep_grid.load_schema())
 SETTINGS_JSON = sweep_grid.canonical_json(SETTINGS)
 PLAN = sweep_grid.plan_chunks(SETTINGS)
 CHUNK_DIR = f"{RESULTS}/chunks"

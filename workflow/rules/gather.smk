@@ -8,6 +8,7 @@ rule gather:
         f"{RESULTS}/cube.nc",
     params:
         settings=SETTINGS_JSON,
+        name=SWEEP_NAME,
     log:
         f"{RESULTS}/logs/gather.log",
     threads: 1

@@ -10,4 +10,5 @@ io.gather(
     out_path=snakemake.output[0],  # noqa: F821
     repo_path=snakemake.scriptdir,  # noqa: F821
     history="snakemake rule gather",
+    name=snakemake.params.name,  # noqa: F821
 )
