@@ -6,7 +6,7 @@ are NaN where the scene gave them no value. Each has a companion `<name>_flag` (
 `flag_values`/`flag_meanings`, int8): 0 where there is a value, else the reason. The reasons are
 derived here from what a scene's summary holds (the level times, the frequencies, the outcome,
 t_end, whether the disk lay flat), by the rules of the physics core that produced the NaN
-(core/frequency.py, core/tracking.py, core/ensemble.py: halt_fit, ramp_fit); the core is not
+(core/frequency.py, core/tracking.py, core/fits.py: halt_fit, ramp_fit); the core is not
 asked. Where the summary cannot tell two of the core's reasons apart, one code names both
 (`no_whole_cycle_window`, `too_few_maxima`; docs/pipeline.md says which, and what the core would
 have to report to separate them).
@@ -61,7 +61,7 @@ REASONS: dict[int, tuple[str, str]] = {
     NO_FINITE_HALT: (
         "no_finite_halt",
         "the gaps between the last three level times do not shrink fast enough (or are not positive) for the "
-        "fit to give a finite halt time"),
+        "fit to give a finite halt time, nor did the levels below the last one before stop.t_max"),
     HALT_LOCATED_LYING_FLAT: (
         "halt_located_lying_flat",
         "the disk lay flat: its halt time is the located moment of face contact, not extrapolated, so there "
@@ -129,7 +129,7 @@ def level_flags(summary: Mapping, lv: Mapping) -> dict[str, int]:
 
 
 def fit_flags(summary: Mapping) -> dict[str, int]:
-    """The flags of the fitted numbers of a scene's `summary` (core/ensemble.py: halt_fit, ramp_fit)."""
+    """The flags of the fitted numbers of a scene's `summary` (core/fits.py: halt_fit, ramp_fit)."""
     if _nan(summary.get("t_end")):
         return {k: (VALUE if not _nan(summary.get(FLAGS[k][0][0])) else NO_RESULT)
                 for k in FLAGS if k not in PER_LEVEL}
