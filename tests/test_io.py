@@ -531,3 +531,40 @@ def test_figure_helpers_name_the_sweep_fix_fraction_scales_and_keep_numbers_legi
         plt.close(fig)
     for nb in grid.NOTEBOOKS:   # every sweep figure has the caption on its top line
         assert "sio.figure_caption(ds" in (ROOT / "workflow" / "notebooks" / f"{nb}.ipynb").read_text()
+
+
+def test_the_output_registry_generates_the_summary_its_template_the_cube_and_the_chunk_format():
+    """sweep.outputs is the one home of the outputs: every entry is in the summary a scene gives
+    and in the template of a scene without a result, under the same keys and layout; every entry
+    with a cube name is a cube variable with its units and long name; and the chunk format follows
+    the variables, so an output added, removed or changed renames every chunk."""
+    import dataclasses
+
+    import sweep
+    from conftest import make_scene
+    from sweep import outputs
+
+    got = sweep.simulate(make_scene(stop__t_max=0.5, stop__levels=[0.3, 0.2])).summary
+    empty = outputs.empty_summary(2)
+    for o in outputs.OUTPUTS:
+        if o.where == "levels":
+            assert all(o.key in lv for lv in got["levels"]) and all(o.key in lv for lv in empty["levels"]), o.key
+        elif o.where:
+            assert o.key in got[o.where] and o.key in empty[o.where], o.key
+        else:
+            assert o.key in got and o.key in empty, o.key
+    assert set(got) == set(empty) and set(got["levels"][0]) == set(empty["levels"][0])
+    cube = {v.name: v for v in io.VARIABLES}
+    for o in outputs.OUTPUTS:
+        if o.cube_name is not None:
+            v = cube[o.cube_name]
+            assert (v.units, v.long_name, v.per_level) == (o.units, o.long_name, o.per_level), o.key
+            want = got["levels"][0][o.key] if o.per_level else (got[o.where][o.key] if o.where else got[o.key])
+            have = v.get(got["levels"][0] if o.per_level else got)
+            assert have == want or (have != have and want != want), o.key
+    extra = outputs.Var("energy_lost_fraction", "float", "1", "share of the initial energy dissipated",
+                        lambda s: 1.0 - s["energy_final"] / s["energy_initial"])
+    assert outputs.chunk_format(outputs.VARIABLES + (extra,)) != outputs.CHUNK_FORMAT
+    renamed = tuple(dataclasses.replace(v, units="ms") if v.name == "t_end" else v for v in outputs.VARIABLES)
+    assert outputs.chunk_format(renamed) != outputs.CHUNK_FORMAT
+    assert outputs.chunk_format() == outputs.CHUNK_FORMAT

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from .core.jit import kernel_sources, sources_digest
+from . import outputs as _outputs
 from .errors import MISSING, ConfigError, quoted_number
 
 AXES = ("mu_d", "k1", "k2", "k3", "alpha0", "omega0")
@@ -49,9 +50,6 @@ AXIS_LONG_NAMES = {
     "omega0": "initial spin rate about -e3",
 }
 
-# Bump when the chunk file layout or the meaning of its variables changes: every chunk's
-# identity includes it, so old chunk files are then recomputed instead of being gathered.
-CHUNK_FORMAT = 3     # 2: error bars of the counts and slip_fraction; 3: the *_flag variables (sweep.reasons)
 
 # Length of the hex chunk id: 16 hex digits = 64 bits, so a collision among even 10^6 chunks
 # has probability ~ n^2 / 2^65 < 3e-8.
@@ -641,7 +639,7 @@ def core_fingerprint() -> str:
 def chunk_id_of(settings_part: Mapping, points: list[tuple[float, ...]],
                 core: str | None = None) -> tuple[str, str]:
     """(id, canonical spec JSON) of a chunk; `core` defaults to core_fingerprint()."""
-    spec = {"format": CHUNK_FORMAT, "core": core if core is not None else core_fingerprint(),
+    spec = {"format": _outputs.CHUNK_FORMAT, "core": core if core is not None else core_fingerprint(),
             "settings": settings_part, "axes": list(AXES), "points": [list(p) for p in points]}
     text = canonical_json(spec)
     return sha256_hex(text)[:CHUNK_ID_HEX], text

@@ -20,7 +20,6 @@ import os
 import subprocess
 import uuid
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +27,7 @@ import numpy as np
 
 from . import grid as _grid
 from . import outcomes, reasons
+from . import outputs as _outputs
 
 log = logging.getLogger("sweep.io")
 
@@ -38,83 +38,9 @@ COMPLEVEL = 4          # zlib level: the summary data compress ~3x by level 4; h
 CUBE_CHUNK_ELEMENTS = 2 ** 15
 
 
-@dataclass(frozen=True)
-class Var:
-    """One output variable: how to take it from a `SimulationResult.summary`, and its CF metadata."""
-    name: str
-    kind: str                      # "float" | "int" | "bool" | "outcome" | "flag" (sweep.reasons)
-    units: str
-    long_name: str
-    get: Callable[[Mapping], Any]  # summary -> scalar, or (for per_level) level dict -> scalar
-    per_level: bool = False
-    # a located time, a frequency or a whole-run total whose value the numerics can move: with
-    # outputs.error_estimate the cube gets <name>_numerical_error
-    numerical_error: bool = False
-    # a total over the whole run (a count, a time share): its rerun value only compares where the
-    # rerun ended physically (a rerun cut by its step budget counts fewer)
-    whole_run: bool = False
-
-
-def _d(key: str) -> Callable[[Mapping], Any]:
-    return lambda s: s["dissipation"][key]
-
-
-VARIABLES: tuple[Var, ...] = (
-    Var("outcome", "outcome", "1", "why the integration ended (see flag_meanings)", lambda s: s["outcome_code"]),
-    Var("t_end", "float", "s", "simulated time at the end of the integration", lambda s: s["t_end"]),
-    Var("t_halt", "float", "s", "halt time (finite-time singularity) estimated from the final ramp",
-        lambda s: s["t_halt"], numerical_error=True),
-    Var("t_halt_error", "float", "s", "uncertainty of the extrapolation to the halt: t_halt minus the last "
-        "level time reached (event-location tolerance for a disk that lies flat)", lambda s: s["t_halt_error"]),
-    Var("halt_finite", "bool", "1", "whether the halt time was found finite", lambda s: s["halt_finite"]),
-    Var("approach_exponent", "float", "1", "fitted exponent p of the final approach, inclination ~ (t_halt - t)^p",
-        lambda s: s.get("approach_exponent", math.nan)),
-    Var("ramp_exponent", "float", "1", "fitted exponent n of the precession ramp, Omega ~ (t_halt - t)^(-n), "
-        "from the precession frequencies over whole cycles", lambda s: s["ramp_exponent"]),
-    Var("ramp_exponent_error", "float", "1", "standard error of the fitted ramp exponent (least-squares slope)",
-        lambda s: s["ramp_exponent_error"]),
-    Var("t_level", "float", "s", "time at which the inclination first reaches the level",
-        lambda lv: lv["t"], per_level=True, numerical_error=True),
-    Var("precession_hz", "float", "Hz", "precession frequency at the level: mean dtheta/dt / 2 pi over 8 whole "
-        "precession cycles around the level time", lambda lv: lv["precession_hz"], per_level=True,
-        numerical_error=True),
-    Var("ringing_hz", "float", "Hz", "ringing frequency at the level: dominant frequency of the normal force over "
-        "the same whole precession cycles", lambda lv: lv["ringing_hz"], per_level=True, numerical_error=True),
-    Var("ringing_ratio", "float", "1", "ringing frequency / precession frequency at the level (normal-force "
-        "oscillations per precession cycle)", lambda lv: lv["ringing_ratio"], per_level=True),
-    Var("normal_force_hz", "float", "Hz", "paper's normal-force frequency f_hat = 2/T, T spanning the three "
-        "counted normal-force maxima before the level (1 % hysteresis)", lambda lv: lv["normal_force_hz"],
-        per_level=True, numerical_error=True),
-    # the discrete sequence can hinge on a near-tangent crossing (a slip demand or a spin that only
-    # grazes its threshold: docs/pipeline.md, 'Error bars'), so the counts and the slip share get
-    # error bars too: a nonzero count error marks a cell whose event sequence the numerics decide
-    Var("slip_fraction", "float", "1", "fraction of the simulated time spent slipping",
-        lambda s: s["slip_fraction"], numerical_error=True, whole_run=True),
-    Var("n_transitions", "int", "1", "number of roll/slip transitions", lambda s: s["n_transitions"],
-        numerical_error=True, whole_run=True),
-    Var("n_stick", "int", "1", "number of stick episodes", lambda s: s["n_stick"], numerical_error=True,
-        whole_run=True),
-    Var("n_impacts", "int", "1", "number of impacts (plastic contact re-establishments)",
-        lambda s: s["n_impacts"], numerical_error=True, whole_run=True),
-    Var("energy_initial", "float", "J", "initial mechanical energy", lambda s: s["energy_initial"]),
-    Var("energy_final", "float", "J", "final mechanical energy", lambda s: s["energy_final"]),
-    Var("dissipation_sliding", "float", "J", "energy dissipated by sliding friction", _d("sliding")),
-    Var("dissipation_k1", "float", "J", "energy dissipated by the k1 rolling-resistance moment", _d("k1")),
-    Var("dissipation_k2", "float", "J", "energy dissipated by the k2 pivoting-resistance moment", _d("k2")),
-    Var("dissipation_k3", "float", "J", "energy dissipated by the k3 rolling-resistance moment", _d("k3")),
-    Var("dissipation_impact", "float", "J", "energy dissipated in impacts", _d("impact")),
-    Var("n_steps", "int", "1", "number of accepted integration steps", lambda s: s["n_steps"]),
-    Var("n_rejected", "int", "1", "number of rejected integration steps", lambda s: s["n_rejected"]),
-    Var("n_rhs", "int", "1", "number of right-hand-side evaluations", lambda s: s["n_rhs"]),
-    Var("n_events", "int", "1", "number of located events", lambda s: s["n_events"]),
-    Var("wall_time", "float", "s", "wall-clock time of the integration", lambda s: s["wall_time"]),
-) + tuple(
-    # why a frequency or a fitted number is missing (sweep.reasons): int8 CF flags, 0 = has a value
-    Var(flag, "flag", "1", reasons.FLAGS[flag][2],
-        (lambda lv, f=flag: lv[f]) if flag in reasons.PER_LEVEL else (lambda s, f=flag: s[f]),
-        per_level=flag in reasons.PER_LEVEL)
-    for flag in reasons.FLAGS
-)
+# the cube's variables: generated from the output registry (sweep.outputs)
+Var = _outputs.Var
+VARIABLES = _outputs.VARIABLES
 VARIABLE_NAMES = tuple(v.name for v in VARIABLES)
 LEVEL_ATTRS = {"units": "rad", "long_name": "inclination level"}
 
@@ -187,20 +113,9 @@ def add_numerical_errors(summary: dict, reference: Mapping | None) -> dict:
 
 
 def error_summary(n_levels: int, outcome_code: int = outcomes.NUMERICAL_ERROR, wall_time: float = math.nan) -> dict:
-    """A summary dict for a scene that produced no result (NaN everywhere, counts missing)."""
-    nan = math.nan
-    return {
-        "outcome": outcomes.NAMES[outcome_code], "outcome_code": outcome_code,
-        "t_end": nan, "t_halt": nan, "t_halt_error": nan, "halt_finite": False, "approach_exponent": nan,
-        "ramp_exponent": nan, "ramp_exponent_error": nan,
-        "levels": [{"inclination": nan, "t": nan, "precession_hz": nan, "ringing_hz": nan, "ringing_ratio": nan,
-                    "normal_force_hz": nan}
-                   for _ in range(n_levels)],
-        "slip_fraction": nan, "n_transitions": None, "n_stick": None, "n_impacts": None,
-        "energy_initial": nan, "energy_final": nan,
-        "dissipation": {k: nan for k in ("sliding", "k1", "k2", "k3", "impact")},
-        "n_steps": None, "n_rejected": None, "n_rhs": None, "n_events": None, "wall_time": wall_time,
-    }
+    """A summary dict for a scene that produced no result (NaN everywhere, counts missing):
+    sweep.outputs.empty_summary."""
+    return _outputs.empty_summary(n_levels, outcome_code, wall_time)
 
 
 def value_of(var: Var, summary: Mapping):
@@ -328,7 +243,7 @@ def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
     from . import __version__
     attrs = {"Conventions": "CF-1.10", "title": "Euler's disk sweep chunk",
              "sweep_chunk_id": chunk.id, "sweep_chunk_spec": chunk.spec_json,
-             "sweep_chunk_format": _grid.CHUNK_FORMAT, "sweep_version": __version__}
+             "sweep_chunk_format": _outputs.CHUNK_FORMAT, "sweep_version": __version__}
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 

@@ -7,16 +7,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import outcomes
+from . import outputs
 from .core import model
-from .core.fits import D_APPROACH, D_HALT_FINITE, D_RAMP, D_RAMP_ERR, D_THALT, D_THALT_ERR, N_DERIVED, summary_fits
+from .core.fits import N_DERIVED, summary_fits
 from .core.integrate import integrate
-from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_FLAT, I_IMPACTS,
-                          I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
-                          I_TRANS, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL,
-                          S_TMAX, S_UTOL)
+from .core.layout import (I_FLAT, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX,
+                          S_UTOL)
 from .errors import ConfigError
 from .scene import Scene, load_scene
+
 
 @dataclass
 class SimulationResult:
@@ -89,69 +88,21 @@ def trajectory_energy(traj: np.ndarray, scene: Scene) -> np.ndarray:
     return E
 
 
-def _finite_or_nan(x: float) -> float:
-    return float(x) if math.isfinite(x) else math.nan
-
-
 def summary_from(sc: Scene, istats: np.ndarray, fstats: np.ndarray, lev: np.ndarray, y_end: np.ndarray,
                  wall: float, fits: np.ndarray | None = None) -> dict:
-    """The JSON-able summary (SI) of a scene from the kernel's outputs: istats, fstats, lev (levels x
-    layout.LEVEL_COLS: tau, alpha, mean dtheta/dtau, f_hat, ringing ratio, window cycles), y_end. fits: the scene's `core.fits.summary_fits` (D_*),
-    computed here unless the caller has them (the batch path computes them per scene on its device)."""
-    chi = sc.chi
-    escale = sc.energy_scale
-    levels = sc.levels
-    level_t = lev[:, 0] * chi
-    # frequencies (docs/model.md, 'Frequencies at the levels'): magnitude of the mean dtheta/dt over
-    # whole precession cycles around the level / 2 pi; Phi's dominant frequency over the same
-    # window (ringing ratio x precession); the paper's f_hat = 2/T over three counted Phi maxima
-    prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)
-    ratio = lev[:, 4]
-    ring_hz = ratio * prec_hz
-    nf_hz = lev[:, 3] / chi
-    code = int(istats[I_OUTCOME])
-    lay_flat = bool(istats[I_FLAT])
+    """The JSON-able summary (SI) of a scene from the kernel's outputs (sweep.outputs.OUTPUTS says
+    what it holds): istats, fstats, lev (levels x layout.LEVEL_COLS), y_end. fits: the scene's
+    `core.fits.summary_fits` (D_*), computed here unless the caller has them (the batch path
+    computes them per scene in its worker)."""
     if fits is None:
-        # the disk that reached the table face-down halted there, located as an event
+        chi = sc.chi
+        # the level times (s) and precession frequencies (Hz) the fits read, as the summary holds them
+        level_t = lev[:, 0] * chi
+        prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)
         fits = np.empty(N_DERIVED)
-        summary_fits(level_t, prec_hz, np.asarray(levels, dtype=float), len(levels), lay_flat,
+        summary_fits(level_t, prec_hz, np.asarray(sc.levels, dtype=float), len(sc.levels), bool(istats[I_FLAT]),
                      np.asarray(fstats, dtype=float), chi, fits)
-    t_end = float(fstats[F_TEND]) * chi
-    dis = y_end[model.Y_DSLIDE:model.Y_DK3 + 1] * escale
-    return {
-        "outcome": outcomes.NAMES[code],
-        "outcome_code": code,
-        "t_end": t_end,
-        "t_halt": _finite_or_nan(fits[D_THALT]),
-        "t_halt_error": _finite_or_nan(fits[D_THALT_ERR]),
-        "lay_flat": lay_flat,
-        "halt_finite": bool(fits[D_HALT_FINITE]),
-        "approach_exponent": _finite_or_nan(fits[D_APPROACH]),
-        "ramp_exponent": _finite_or_nan(fits[D_RAMP]),
-        "ramp_exponent_error": _finite_or_nan(fits[D_RAMP_ERR]),
-        "levels": [
-            {"inclination": float(b), "t": _finite_or_nan(level_t[i]),
-             "precession_hz": _finite_or_nan(prec_hz[i]), "ringing_hz": _finite_or_nan(ring_hz[i]),
-             "ringing_ratio": _finite_or_nan(ratio[i]), "normal_force_hz": _finite_or_nan(nf_hz[i])}
-            for i, b in enumerate(levels)
-        ],
-        "normal_force_hz_max": float(fstats[F_NFMAX]) / chi if fstats[F_NFMAX] > 0.0 else math.nan,
-        "slip_fraction": float(fstats[F_SLIDETIME] / fstats[F_TEND]) if fstats[F_TEND] > 0 else 0.0,
-        "n_transitions": int(istats[I_TRANS]),
-        "n_stick": int(istats[I_STICK]),
-        "n_impacts": int(istats[I_IMPACTS]),
-        "energy_initial": float(fstats[F_E0]) * escale,
-        "energy_final": float(fstats[F_EEND]) * escale,
-        "dissipation": {"sliding": float(dis[0]), "k1": float(dis[1]), "k2": float(dis[2]),
-                        "k3": float(dis[3]), "impact": float(fstats[F_DIMPACT]) * escale},
-        "n_steps": int(istats[I_STEPS]),
-        "n_rejected": int(istats[I_REJECTED]),
-        "n_steps_sliding": int(istats[I_SLIDE_STEPS]),
-        "n_rejected_sliding": int(istats[I_SLIDE_REJECTED]),
-        "n_rhs": int(istats[I_RHS]),
-        "n_events": int(istats[I_EVENTS]),
-        "wall_time": wall,
-    }
+    return outputs.summary(outputs.Source(sc, istats, fstats, lev, y_end, fits, wall))
 
 
 def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationResult:
