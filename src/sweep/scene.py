@@ -40,8 +40,9 @@ DEFAULTS: dict[str, Any] = {
     # (~250 located events per second, ~4e4 tries per second at rtol 1e-13) run past 100 s.
     "stop": {"levels": [1.0e-1, 1.0e-2, 1.0e-3, 1.0e-4], "t_max": 120.0, "max_steps": 5_000_000},
     # rtol 1e-10: halt times converge to ~1e-9 relative there (docs/performance.md, 'Error bars'), at a cost of a
-    # few ms per scene; slip_tol: slip speed (m/s) at which sliding ends; spin_tol: rate (rad/s) of a
-    # moment component at which it sticks when the moment can hold it; see docs/model.md.
+    # few ms per scene; slip_tol: slip speed (m/s) at which a slide meets its fate; spin_tol: rate
+    # (rad/s) of a moment component at which it sticks if it goes on to rest and the moment can hold
+    # it; neither decides what happens (docs/model.md, 'Where a slip ends', 'Sticking at spin_tol').
     "solver": {"method": "adaptive", "rtol": 1.0e-10, "atol": 1.0e-12, "dt": 1.0e-3, "slip_tol": 1.0e-9,
                "spin_tol": 1.0e-7},
     "outputs": {"normal_force_frequency": True, "kinematics": False},
