@@ -47,12 +47,17 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   an impact, omega.a_i = 0 after an un-stick, u.s = 0 at a slip onset) is armed from the surface:
   if the first step ends at or past it, a point inside where it is positive is searched for (a
   return within the step); if there is none it never left and the event happens at once;
-* alpha = 0: plastic impact of the other rim edge (loss booked to impact); line contact if no
+* alpha = 0: plastic impact of the other rim edge (loss booked to impact), which releases every
+  held component; each free sign is then that of its omega.a_i (an exact 0 gets the stick test)
+  and a rolling contact outside the cone slips; line contact if no
   rotation towards the new side is left or two impacts come within ZENO_DTAU; Phi = 0: contact
   lost; pi/2 - |alpha| = BETA_FACE: the disk lies flat, a halt (every level not yet reached gets
   that time); the contact law without a solution (rhs flag -1) ends the scene as `painleve`;
 * halt levels by energy (E = E_ss(level)); a level already passed after an impulse is recorded at
   the restart time.
+* counts: an update begins a roll<->slip transition where the contact rolls on one side of it and
+  slips on the other, and a stick phase for each component held after it and not before; a phase
+  that begins and ends within one update lasts no time and is not counted.
 No rule depends on rtol, atol or the step size.
 
 The integration uses SciPy's `OdeSolver` classes (DOP853, RK45, LSODA, Radau, ...) step by step,
@@ -444,7 +449,6 @@ class Disk:
         """A slip ends: the plastic contact impulse removes it (loss booked to sliding)."""
         y[Y_DSLIDE] += self.be.project_velocity(y, self.p, c.side, True, c.side, False, self.S)
         c.mode = ROLL
-        self.stats["n_transitions"] += 1
 
     def slip_fate(self, t, y, c):
         """What a slide at |u| = slip_tol does next (docs/model.md, 'Where a slip ends'), found by
@@ -526,7 +530,6 @@ class Disk:
         c.slave_off = False
         y[Y_U1] = 0.0
         y[Y_U2] = 0.0
-        self.stats["n_transitions"] += 1
 
     def cone_violated(self, t, y, c):
         _, aux = self.model(t, y, ROLL, c, 1.0, 0.0)
@@ -593,7 +596,6 @@ class Disk:
         need = self.needed_sigma(i, t, y, c)
         if abs(need) < 1.0 or (force and (1.0 if need > 0.0 else -1.0) == c.sig[i]):
             c.stuck[i] = True
-            self.stats["n_stick"] += 1
             if self.log is not None:
                 self.log.append((t, "stick", i, need))
         else:
@@ -674,7 +676,6 @@ class Disk:
             y[Y_U1], y[Y_U2] = q[3], q[4]
         y[Y_DK1 + i] += 0.5 * float(dv @ M @ dv)
         c.stuck[i] = True
-        self.stats["n_stick"] += 1
         if self.log is not None:
             self.log.append((t, "stick_spin", i, need))
         return True
@@ -833,6 +834,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 disk.stick_test(i, t, y, c)
     if c.mode == ROLL and disk.cone_violated(t, y, c):
         disk.start_slip(t, y, c)
+    _count_phases(y0[Y_U1] == 0.0 and y0[Y_U2] == 0.0, (False, False, False), c, stats)
     e0 = disk.energy(y, c)
     outcome = start_code
     t_end = 0.0
@@ -1189,7 +1191,26 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 event_kinds=kinds, **stats)
 
 
+def _count_phases(rolling_before, stuck_before, c, stats):
+    """What an update began: a roll<->slip transition where the contact rolled before it and slips
+    after it (or the reverse), a stick phase per component held after it and not before. A phase
+    that begins and ends within the update (a slip that ends and, outside the cone, slips again at
+    once) lasts no time and is not counted."""
+    if rolling_before != (c.mode == ROLL):
+        stats["n_transitions"] += 1
+    stats["n_stick"] += sum(1 for a, b in zip(stuck_before, c.stuck) if b and not a)
+
+
 def _apply(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
+    """The discrete update for event `kind` at (t, y), with the phases it begins counted
+    (_count_phases); returns an outcome code or -1."""
+    rolling, stuck = c.mode == ROLL, tuple(c.stuck)
+    code = _update(kind, t, y, c, disk, stats, kinds, leaving_out, now)
+    _count_phases(rolling, stuck, c, stats)
+    return code
+
+
+def _update(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
     """The discrete update for event `kind` at (t, y); returns an outcome code or -1.
     now: the event happened at the restart itself (the state never left that surface)."""
     stats["n_events"] += 1
@@ -1229,8 +1250,19 @@ def _apply(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
     elif kind == "face":
         return outcomes.HALTED
     elif kind == "side":
+        # the impact releases every held component; each free sign is then that of its omega.a_i
+        # (an exact 0 gets the stick test), and a rolling contact outside the cone slips
         code = disk.side_change(t, y, c)
         if code >= 0:
             return code
-        g_before = (math.nan, math.nan, math.nan)   # every component was moved by the impact
+        g = _axes(y)
+        for i in range(3):
+            if disk.k[i] > 0.0:
+                if g[i] != 0.0:
+                    c.sig[i] = 1.0 if g[i] > 0.0 else -1.0
+                else:
+                    disk.stick_test(i, t, y, c)
+        if c.mode == ROLL and disk.cone_violated(t, y, c):
+            disk.start_slip(t, y, c)
+        return -1
     return disk.settle(t, y, c, g_before, tuple(leaving_out))

@@ -262,7 +262,7 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
 
 @kernel
 def start_slip(t, y, p, cs, n, wk, istats):
-    """ROLL -> SLAVED at zero slip speed, in the onset direction. Counts the transition."""
+    """ROLL -> SLAVED at zero slip speed, in the onset direction."""
     _model(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0, istats)
     F1 = wk[W_AUXTMP, X_F1]
     F2 = wk[W_AUXTMP, X_F2]
@@ -270,7 +270,6 @@ def start_slip(t, y, p, cs, n, wk, istats):
     cs[CS_NU] = onset_direction(t, y, p, cs, n, F1, F2, wk, istats)
     y[Y_U1] = 0.0
     y[Y_U2] = 0.0
-    istats[I_TRANS] += 1
 
 
 @kernel
@@ -523,7 +522,6 @@ def stick_or_flip(i, t, y, p, cs, n, wk, istats):
     need = needed_sigma(i, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
     if abs(need) < 1.0:
         cs[CS_STUCK + i] = 1.0
-        istats[I_STICK] += 1
         return
     cs[CS_STUCK + i] = 0.0
     cs[CS_SIG + i] = 1.0 if need > 0.0 else -1.0
@@ -610,7 +608,6 @@ def stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
             and abs(needed_sigma(i, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)) < 1.0:
         cs[CS_STUCK + i] = 1.0
         y[Y_DK1 + i] += stop_axis_rate(y, p, cs, i, wk[W_SCRATCH:W_SCRATCH + 7])
-        istats[I_STICK] += 1
         return True
     return False
 
@@ -763,7 +760,6 @@ def end_slip(y, p, cs, wk, istats):
     side = int(cs[CS_SIDE])
     y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
     cs[CS_MODE] = ROLL
-    istats[I_TRANS] += 1
 
 
 @kernel
@@ -784,7 +780,6 @@ def moment_event(k, t, y, p, cs, n, wk, istats):
         stick_or_flip(i, t, y, p, cs, n, wk, istats)
         if cs[CS_STUCK + i] == 0.0 and cs[CS_SIG + i] == sig_failed:
             cs[CS_STUCK + i] = 1.0
-            istats[I_STICK] += 1
             return i, False
         return -1, False
     if EV_SPIN1 <= k <= EV_SPIN3:
@@ -811,7 +806,6 @@ def slip_event(k, t, y, p, cs, n, wk, istats):
         side = int(cs[CS_SIDE])
         y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
         cs[CS_MODE] = ROLL
-        istats[I_TRANS] += 1
     elif k == EV_SLIP_FAST:
         cs[CS_MODE] = SLIDE
         cs[CS_SLAVE_OFF] = 0.0
@@ -828,11 +822,40 @@ def slip_event(k, t, y, p, cs, n, wk, istats):
 def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     """Discrete update at a located event k (state y at the event, changed in place): the event's
     own update (moment_event, slip_event, side_change), then what every update owes the state
-    (settle_event).
+    (settle_event); then the phases it begins are counted (count_phases).
 
     Returns the outcome code that ends the scene, or -1 to continue. The caller re-evaluates the
     right-hand side and the event functions afterwards.
     """
+    rolling = cs[CS_MODE] == ROLL
+    stuck1, stuck2, stuck3 = cs[CS_STUCK], cs[CS_STUCK + 1], cs[CS_STUCK + 2]
+    code = update_at_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats)
+    count_phases(rolling, stuck1, stuck2, stuck3, cs, istats)
+    return code
+
+
+@kernel
+def count_phases(rolling, stuck1, stuck2, stuck3, cs, istats):
+    """Count what a discrete update began, from the contact state before it (rolling: whether the
+    contact rolled; stuck*: the moment components held) and after it (cs): a roll<->slip transition
+    where the contact rolls on one side of the update and slips on the other, a stick phase for each
+    component held after it and not before. A rolling phase, a slip or a stick that begins and ends
+    within one update lasts no time: a slide that ends and, its cone violated, slips again at once
+    has passed through u = 0, and counts as the passage it is, whether its fate was read as an end
+    or as a passage (docs/model.md, 'Where a slip ends')."""
+    if rolling != (cs[CS_MODE] == ROLL):
+        istats[I_TRANS] += 1
+    if stuck1 == 0.0 and cs[CS_STUCK] == 1.0:
+        istats[I_STICK] += 1
+    if stuck2 == 0.0 and cs[CS_STUCK + 1] == 1.0:
+        istats[I_STICK] += 1
+    if stuck3 == 0.0 and cs[CS_STUCK + 2] == 1.0:
+        istats[I_STICK] += 1
+
+
+@kernel
+def update_at_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
+    """The discrete update of apply_event, without the counting."""
     g_before = moment_axes_rates(y)
     own = -1   # the component this event puts on its surface (settle_signs)
     cls = EVENTS[k, E_CLASS]
@@ -882,9 +905,11 @@ def settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own):
 
 @kernel
 def side_change(t, y, p, cs, n, u_tol, wk, istats, fstats):
-    """alpha = 0: plastic impact of the other rim edge. Ends the scene (line contact, outcome 4)
-    when no rotation towards the new side is left, or when two impacts come within ZENO_DTAU (the
-    rocking between the edges has collapsed into a Zeno sequence of impacts)."""
+    """alpha = 0: plastic impact of the other rim edge, which releases every held moment component;
+    after it each free sign is that of its omega.a_i, an exact 0 gets the stick test
+    (consistent_signs), and a rolling contact outside the static cone starts to slip. Ends the scene
+    (line contact) when no rotation towards the new side is left, or when two impacts come within
+    ZENO_DTAU (the rocking between the edges has collapsed into a Zeno sequence of impacts)."""
     mode = cs[CS_MODE]
     side = cs[CS_SIDE]
     loss = project_velocity(y, p, int(side), mode != ROLL, int(-side), mode != ROLL, wk[W_SCRATCH:W_SCRATCH + 7])

@@ -14,14 +14,14 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
-from .contact import (apply_event, confirm_slaved, spin_reaches_rest,
+from .contact import (apply_event, count_phases, confirm_slaved, spin_reaches_rest,
                       consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .events import (C_MOMENT, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
                      EV_LEVEL, EVENTS, N_DYN_EVENTS, R_SPIN, R_SURFACE)
 from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
-from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_E, I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
+from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_E, I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_HMAX,
                      S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_CUT, T_DIMPACT_HALT,
@@ -93,7 +93,9 @@ def start(y, p, cs, n, u_tol, wk, istats):
     cs[CS_SIDE] = 1.0 if y[Y_ALPHA] > 0.0 else -1.0
     for i in range(3):
         cs[CS_SIG + i] = 1.0
-    if y[Y_U1] != 0.0 or y[Y_U2] != 0.0:
+        cs[CS_STUCK + i] = 0.0
+    rolling = y[Y_U1] == 0.0 and y[Y_U2] == 0.0
+    if not rolling:
         code = set_slip(0.0, y, p, cs, n, u_tol, wk, istats)
         if code >= 0:
             return code
@@ -102,6 +104,8 @@ def start(y, p, cs, n, u_tol, wk, istats):
     consistent_signs(0.0, y, p, cs, n, wk, istats)
     if cs[CS_MODE] == ROLL and cone_violated(0.0, y, p, cs, n, wk, istats):
         start_slip(0.0, y, p, cs, n, wk, istats)
+    # a scene that starts rolling and slips at once has its transition; components held from the start stick
+    count_phases(rolling, 0.0, 0.0, 0.0, cs, istats)
     return -1
 
 
