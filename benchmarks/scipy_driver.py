@@ -83,7 +83,7 @@ from sweep import outcomes
 from sweep.core import contact as _contact
 from sweep.core import impulse as _impulse
 from sweep.core import model
-from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, X_F1, X_F2, X_G1,
+from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, X_F1, X_F2, X_G1,
                               X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DK1, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3)
 from sweep.scene import Scene, load_scene
 from sweep.simulate import initial_state, level_energies
@@ -263,9 +263,9 @@ class Disk:
     def __init__(self, be, p, n, u_tol, stats):
         self.be, self.n, self.u_tol, self.stats = be, n, u_tol, stats
         self.p = np.array(p, dtype=float)
-        self.p[P_UFREEZE] = 0.0           # the pure model: friction along u/|u| for u != 0
+        self.p[P_UTOL] = 0.0              # the pure model: friction along u/|u| for u != 0
         self.pf = self.p.copy()
-        self.pf[P_UFREEZE] = math.inf     # friction along the given direction whatever u
+        self.pf[P_UTOL] = math.inf        # friction along the given direction whatever u
         self.k = (self.p[P_K1], self.p[P_K2], self.p[P_K3])
         self.S = np.zeros((7, 12))
         self.calls = 0
@@ -277,8 +277,9 @@ class Disk:
     def model(self, t, y, mode, c, nx, ny, p=None):
         dy = np.empty(self.n)
         aux = np.empty(N_AUX)
-        self.be.rhs(t, y, self.p if p is None else p, ROLL if mode == ROLL else SLIDE, c.side, c.sig_arr(),
-                    c.stuck_arr(), nx, ny, self.n, dy, aux)
+        self.be.rhs(t, y, self.p if p is None else p,
+                    model.Contact(ROLL if mode == ROLL else SLIDE, c.side, c.sig_arr(), c.stuck_arr(), nx, ny),
+                    self.n, dy, aux)
         self.calls += 1
         return dy, aux
 

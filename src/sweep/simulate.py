@@ -14,7 +14,7 @@ from .core.integrate import integrate
 from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_FLAT, I_IMPACTS,
                           I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK,
                           I_TRANS, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL,
-                          S_TMAX, S_UTOL)
+                          S_TMAX)
 from .errors import ConfigError
 from .scene import Scene, load_scene
 
@@ -60,7 +60,6 @@ def _settings(scene: Scene) -> np.ndarray:
     s[S_ATOL] = so["atol"]
     s[S_HMAX] = so["dt"] / scene.chi if so["method"] == "fixed" else 0.0
     s[S_TMAX] = st["t_max"] / scene.chi
-    s[S_UTOL] = so["slip_tol"] * scene.chi / cfg["disk"]["radius"]
     s[S_MAXSTEPS] = st["max_steps"]
     s[S_KIN] = 1.0 if out["kinematics"] else 0.0
     s[S_PEAKS] = 1.0 if out["normal_force_frequency"] else 0.0
