@@ -131,7 +131,7 @@ def test_the_slip_fate_is_the_direction_flows():
         R = math.exp(rng.uniform(math.log(3e-3), math.log(0.3)))
         mu_s = rng.uniform(0.1, 1.5)
         p, _ = M.make_params(float(shape), R, R * math.exp(rng.uniform(math.log(0.01), math.log(2.0))), 9.81,
-                             mu_s, mu_s * rng.uniform(0.05, 1.0), *(R * 10.0 ** rng.uniform(-6, -1.5, size=3)))
+                             mu_s, mu_s * rng.uniform(0.05, 1.0), tuple(R * 10.0 ** rng.uniform(-6, -1.5, size=3)))
         y = np.zeros(M.N_FULL)
         y[M.Y_ALPHA] = rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 1.5)
         y[M.Y_W1:M.Y_W3 + 1] = rng.normal(scale=[0.5, 0.5, 2.0])

@@ -452,18 +452,12 @@ def state_size(settings):
 
 
 @kernel
-def begin(settings, level_e, sample_tau, work, rec):
-    """The scene at tau = 0: its contact state, f and aux (wk[W_F], wk[W_AUX]), E(0), the event
-    values (wk[W_GOLD], for the first level), the samples and trajectory row at 0, the trackers; and
-    the run's constants (layout.RunConsts) from settings (layout.S_*), the levels' energies level_e and the
-    sample times sample_tau. Returns (the outcome that ends the scene at once, else -1; the starting
-    step size, before the ceiling h_max; the RunConsts)."""
-    y, p, cs, wk = work.y, work.p, work.cs, work.wk
-    trk, istats, fstats = work.trk, rec.istats, rec.fstats
-    n = state_size(settings)
-    peaks_on = settings[S_PEAKS] > 0.0
-    sys = System(p, cs, n, wk, istats)
-    lev = level_e[0] if level_e.shape[0] > 0 else math.nan
+def begin(lev, work, rec, sys):
+    """The scene at tau = 0 in the system sys (layout.System): its contact state, f and aux
+    (wk[W_F], wk[W_AUX]), E(0), the event values (wk[W_GOLD]; lev: the first level's energy), the
+    end's markers. Returns the outcome that ends the scene at once, else -1."""
+    y, p, cs, wk = work.y, sys.p, sys.cs, sys.wk
+    trk, fstats = work.trk, rec.fstats
     f = wk[W_F]
     aux = wk[W_AUX]
     fstats[F_TIMPACT] = -math.inf
@@ -486,20 +480,29 @@ def begin(settings, level_e, sample_tau, work, rec):
         outcome = failure_outcome(aux[X_OK])
     if start_code >= 0:
         outcome = start_code
+    return outcome
+
+
+@kernel
+def record_start(consts, work, rec, sys):
+    """What the scene records at tau = 0 (the samples due, the trajectory's first row, Phi for the
+    maxima, the precession lattice's origin) and its starting step size (before the ceiling h_max);
+    consts: layout.RunConsts."""
+    y, p, cs, n, wk = work.y, sys.p, sys.cs, sys.n, sys.wk
+    trk = work.trk
+    aux = wk[W_AUX]
+    sample_tau = consts.sample_tau
     ns = sample_tau.shape[0]
     while int(trk[T_NEXT_SAMPLE]) < ns and sample_tau[int(trk[T_NEXT_SAMPLE])] <= 0.0:
         record_sample(y, aux, p, cs, n, rec.samples[int(trk[T_NEXT_SAMPLE])])
         trk[T_NEXT_SAMPLE] += 1.0
     if rec.traj.shape[0] > 0:
-        record_traj(0.0, y, aux[X_PHI], cs, n, rec.traj, istats)
+        record_traj(0.0, y, aux[X_PHI], cs, n, rec.traj, sys.istats)
     trk[T_PHI_B] = aux[X_PHI]
     trk[T_RATES_OLD] = 0.0
-    if peaks_on:
+    if consts.peaks_on:
         freq_start(y[Y_THETA], aux[X_PHI], rec.fq)
-    rtol, atol = settings[S_RTOL], settings[S_ATOL]
-    consts = RunConsts(n, rtol, atol, settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf, settings[S_TMAX],
-              int(settings[S_MAXSTEPS]), peaks_on, max(abs(fstats[F_E0]), 1e-300), level_e, sample_tau)
-    return outcome, initial_step(eval_rhs, 0.0, y, f, sys, rtol, atol), consts
+    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, consts.rtol, consts.atol)
 
 
 @kernel
@@ -756,14 +759,17 @@ def run(settings, level_e, sample_tau, work, rec):
     """Integrate one scene (the initial state in work.y, its parameters in work.p) into rec
     (layout.Work, layout.Record: the buffers' shapes): step, scan the accepted step for the
     earliest event, record the kept part, restart at its end. settings (layout.S_*), level_e the
-    levels' energies (dimensionless), sample_tau the sample times (tau), ascending: begin reads them
-    into the run's constants (layout.RunConsts)."""
+    levels' energies (dimensionless), sample_tau the sample times (tau), ascending: read once here
+    into the run's constants (layout.RunConsts), with E(0) from begin."""
     p, cs, wk, trk = work.p, work.cs, work.wk, work.trk
     istats = rec.istats
-    outcome, h, consts = begin(settings, level_e, sample_tau, work, rec)
-    sys = System(p, cs, consts.n, wk, istats)
+    sys = System(p, cs, state_size(settings), wk, istats)
     lev = level_e[0] if level_e.shape[0] > 0 else math.nan
-    h = min(h, consts.h_max)
+    outcome = begin(lev, work, rec, sys)
+    h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
+    consts = RunConsts(sys.n, settings[S_RTOL], settings[S_ATOL], h_max, settings[S_TMAX], int(settings[S_MAXSTEPS]),
+                       settings[S_PEAKS] > 0.0, max(abs(rec.fstats[F_E0]), 1e-300), level_e, sample_tau)
+    h = min(record_start(consts, work, rec, sys), consts.h_max)
     t = 0.0
     after_reject = False
     # after a halt (the last level: the disk still moves) the steps go on while a level's frequencies

@@ -142,7 +142,7 @@ Work = namedtuple("Work", "y p cs wk K F trk")
 # TRAJ_COLS), peaks (cap x PEAK_COLS), y_end (N_FULL) and the frequency windows fq
 # (FQ_LEVEL0 + n_levels x FQ_COLS, core.frequency). A buffer of 0 rows switches its recorder off.
 Record = namedtuple("Record", "istats fstats levels samples traj peaks y_end fq")
-# RunConsts: the run's constants, read once from the settings (integrate.begin): n the state size (the
+# RunConsts: the run's constants, read once from the settings (integrate.run): n the state size (the
 # components integrated: model.N_CORE, N_THETA or N_FULL), rtol, atol, h_max (tau; inf: no
 # ceiling), t_max (tau), max_steps (the step budget, accepted and rejected), peaks_on (the normal
 # force's maxima and the levels' frequencies are tracked), e0 (the initial energy's magnitude, the
