@@ -1,5 +1,7 @@
 """The contact as a hybrid system: right-hand side per contact state, event functions, and the
-discrete updates at events. Every decision here reads the state and physical parameters only.
+discrete updates at events. Every decision here reads the state and physical parameters only
+(slip_tol is p[P_UTOL], spin_tol p[P_WTOL]). The kernels take the system they evaluate as one
+group, `sys` (layout.System: parameters, contact state, state size, work buffer, counters).
 
 Modes (docs/model.md, 'Modes, signs and sticking'):
   ROLL    no slip; friction is what rolling needs, inside the static cone |F| <= mu_s Phi.
@@ -17,7 +19,7 @@ falls to slip_tol (slip_fate, slow_slide; docs/model.md, 'Where a slip ends'): i
 direction dynamics carry it to u = 0, else it passes through u = 0 or spirals out; the plastic
 impulse there changes the velocity by O(slip_tol), and no decision depends on slip_tol.
 Moment components (eq. 3.3, Filippov): a free component sticks where omega.a_i reaches 0, or where
-it slows to spin_tol (p[P_WTOL]) and its motion goes on to rest (spin_reaches_rest), if the moment
+it slows to spin_tol and its motion goes on to rest (spin_reaches_rest), if the moment
 can hold it (|sigma needed| < 1); a stuck one is released where |sigma needed| reaches 1.
 """
 from __future__ import annotations

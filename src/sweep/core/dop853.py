@@ -2,11 +2,18 @@
 
 Step-size control follows Hairer, Norsett & Wanner (1993), II.4 and II.10: the error norm of
 dop853 (5th/3rd-order embedded estimates), safety 0.9, factor in [0.2, 10], exponent -1/8.
-The stepper does not know the physics: the right-hand side comes in as a kernel,
+The stepper does not know the physics: the right-hand side comes in as a kernel argument,
 `rhs(t, y, sys, dy, aux)` (dy = d y/d t and its aux at (t, y); the integrator passes
 contact.eval_rhs), with `sys` (layout.System) passed through to it; of sys the stepper reads only
 the state size n and the work buffer wk (its rows W_YTMP, W_DYTMP, W_AUXTMP, W_DELTA). Stage counts
 come from the tableau (tableau.py).
+
+The kernels that call rhs (stages, rk_step, dense_coeffs, initial_step) are inlined into their
+callers (inline="always"). numba compiles a kernel passed as a value into a compiled call as the
+address of its Python object, and a library holding such an address cannot be cached: without the
+inlining, integrate.run and every caller of these kernels compiled afresh in each process (and
+core.jit's cache locator failed on numba's warning). Inlined, the argument is only ever the name
+of the function called, and the callers cache as before.
 """
 from __future__ import annotations
 
