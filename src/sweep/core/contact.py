@@ -124,6 +124,13 @@ def _model(t, y, sys, dy, aux, n0x, n0y):
 
 
 @kernel
+def model_call(t, y, sys, dy, aux, n0x, n0y):
+    """_model as a call of its own, where a discrete update reads the right-hand side once
+    (start_slip, set_slip): only the evaluations the steps repeat inline the model."""
+    _model(t, y, sys, dy, aux, n0x, n0y)
+
+
+@kernel
 def slip_rates(nu, u, t, y, sys, dy, aux, ys):
     """(cross, dot) of the slip acceleration with the slip direction s = (cos nu, sin nu), for the
     slip vector u s; the full right-hand side is left in dy, aux."""
@@ -205,13 +212,14 @@ def eval_rhs(t, y, sys, dy, aux):
             # derivative makes the step fail, so steps shrink until EV_SLAVE_LOST is located
             for i in range(n):
                 dy[i] = math.nan
-    elif mode == SLIDE:
-        un = math.hypot(y[Y_U1], y[Y_U2])
-        nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
-        ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
-        _model(t, y, sys, dy, aux, nx, ny)
     else:
-        _model(t, y, sys, dy, aux, 1.0, 0.0)
+        # one model call for both smooth modes (one inlined copy of the model)
+        nx, ny = 1.0, 0.0
+        if mode == SLIDE:
+            un = math.hypot(y[Y_U1], y[Y_U2])
+            nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
+            ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
+        _model(t, y, sys, dy, aux, nx, ny)
 
 
 @kernel
@@ -273,7 +281,7 @@ def onset_direction(t, y, sys, F1, F2):
 def start_slip(t, y, sys):
     """ROLL -> SLAVED at zero slip speed, in the onset direction. Counts the transition."""
     cs, wk, istats = sys.cs, sys.wk, sys.istats
-    _model(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
+    model_call(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
     F1 = wk[W_AUXTMP, X_F1]
     F2 = wk[W_AUXTMP, X_F2]
     cs[CS_MODE] = SLAVED
@@ -295,7 +303,7 @@ def set_slip(t, y, sys):
         cs[CS_MODE] = SLIDE
         cs[CS_NU] = nu
         cs[CS_SLAVE_OFF] = 0.0
-        _model(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
+        model_call(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
         if un <= slave_speed(wk[W_AUXTMP], p):
             return try_slave(t, y, sys)
         return -1
