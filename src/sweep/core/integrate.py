@@ -19,7 +19,7 @@ from .contact import (apply_event, confirm_slaved, spin_reaches_rest,
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .events import (C_MOMENT, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
                      EV_LEVEL, EVENTS, N_DYN_EVENTS, R_SPIN, R_SURFACE)
-from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
+from .dop853 import N_DENSE, accepted_step_factor, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
 from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_E, I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, L_PENDING, LEVEL_COLS,
@@ -32,7 +32,7 @@ from .model import N_AUX, N_CORE, N_FULL, N_PARAMS, N_THETA, P_G, P_H, P_UTOL, e
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, location_tol, sign_slopes, slip_closest_approach, span_state
 from .tableau import N_STAGES
 from .tracking import (deep_levels, deep_pending, start_deep_levels, dense_wanted, halt_flat, record_levels, record_sample, record_samples, record_traj,
-                       track_frequency)
+                       step_dense, track_frequency)
 
 EPS = 2.220446049250313e-16
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
@@ -192,7 +192,7 @@ def dense_built(have_dense, span, work):
     """The accepted step's dense output in F[0:7] (the step span, layout.Span, from work.y to
     wk[W_YNEW]), built once per step: returns True."""
     if not have_dense:
-        dense_coeffs(eval_rhs, span.t0, span.y0, span.h, work.wk[W_YNEW], span.sys, work.K, span.F)
+        step_dense(span.t0, span.y0, span.h, work.wk[W_YNEW], span.sys, work.K, span.F)
     return True
 
 
@@ -696,7 +696,8 @@ def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
     span = Span(work.F, 0, y, seg.t, seg.h, sys)
     have_dense = seg.dense
     if not have_dense and dense_wanted(seg, e_seg, wk[W_YSEG, Y_THETA], phi_c, consts, trk, rec.fq):
-        have_dense = dense_built(False, span, work)
+        step_dense(seg.t, y, seg.h, wk[W_YNEW], sys, work.K, work.F)
+        have_dense = True
     if seg.running:
         t_halt = record_levels(span, seg.end, e_seg, consts, trk, rec)
         if t_halt >= 0.0:

@@ -56,6 +56,15 @@ def peak_bracketed(phi_c, trk):
 
 
 @kernel
+def step_dense(t, y, h, y_new, sys, K, F):
+    """dop853.dense_coeffs for the contact right-hand side (contact.eval_rhs): the dense output F[0:7]
+    of the step from y at t over h to y_new, from its stages K, in the system sys (layout.System).
+    A kernel of its own: the stepper's kernels are inlined into their callers, and this one
+    compiled copy serves every step's dense output (integrate.dense_built, previous_dense)."""
+    dense_coeffs(eval_rhs, t, y, h, y_new, sys, K, F)
+
+
+@kernel
 def previous_dense(sys, work):
     """The previous step's dense output into F[7:14], from its stages kept in K[K_PREV:] (a step
     without an event: it ended in work.y, the current step's start, with f = its last stage), in
@@ -63,7 +72,7 @@ def previous_dense(sys, work):
     K, F, trk, wk = work.K, work.F, work.trk, sys.wk
     if trk[T_PREV_DENSE] == 0.0:
         before = System(sys.p, wk[W_CSPREV, :N_CS], sys.n, wk, sys.istats)
-        dense_coeffs(eval_rhs, trk[T_TPREV], wk[W_YPREV], trk[T_HPREV], work.y, before, K[K_PREV:], F[N_DENSE:])
+        step_dense(trk[T_TPREV], wk[W_YPREV], trk[T_HPREV], work.y, before, K[K_PREV:], F[N_DENSE:])
         trk[T_PREV_DENSE] = 1.0
 
 
