@@ -115,7 +115,7 @@ def _valid_levels(cfg: dict) -> dict:
 
     d, c = cfg["disk"], cfg["contact"]
     p, _ = model.make_params(SHAPES[d["shape"]], d["radius"], d["thickness"], cfg["gravity"],
-                             c["mu_s"], c["mu_d"], c["k1"], c["k2"], c["k3"])
+                             c["mu_s"], c["mu_d"], (c["k1"], c["k2"], c["k3"]))
     bmax = max_level(p)
     lv = [b for b in LEVELS if b < bmax]
     cfg["stop"]["levels"] = lv or [0.5 * bmax]

@@ -284,14 +284,14 @@ class Rolling:
             kshape = rng.choice([1.0, 2.0])
             radius = rng.uniform(0.01, 0.1)
             p, _ = M.make_params(kshape, radius, rng.uniform(0.01, 1.0) * radius, 9.81, 5.0, 5.0,
-                                 *(rng.uniform(0.0, 0.3) * radius for _ in range(3)))
+                                 tuple(rng.uniform(0.0, 0.3) * radius for _ in range(3)))
             alpha = rng.uniform(0.02, 1.5) * rng.choice([-1.0, 1.0])
             side = 1.0 if alpha > 0 else -1.0
             y = np.zeros(M.N_FULL)
             y[M.Y_ALPHA] = alpha
             y[M.Y_W1:M.Y_W3 + 1] = rng.normal(0.0, 1.5, 3)
             sig = rng.choice([-1.0, 1.0], 3)
-            M.rhs(0.0, y, p, M.ROLL, side, sig, stuck, 0.0, 0.0, M.N_CORE, dy, aux)
+            M.rhs(0.0, y, p, M.Contact(M.ROLL, side, sig, stuck, 0.0, 0.0), M.N_CORE, dy, aux)
             if aux[M.X_OK] != 1.0:
                 skipped += 1
                 continue
@@ -474,10 +474,10 @@ def rhs_cost_ns(p, y, n: int = 1_000_000) -> dict:
     from sweep.core import contact, layout
 
     @njit(cache=False, error_model="numpy")
-    def loop(y, p, cs, nstate, n, dy, aux, wk, istats):
+    def loop(y, sys, n, dy, aux):
         acc = 0.0
         for i in range(n):
-            contact.eval_rhs(0.0, y, p, cs, nstate, dy, aux, wk, istats)
+            contact.eval_rhs(0.0, y, sys, dy, aux)
             y[1] += 1e-300 * dy[1]
             acc += dy[3]
         return acc
@@ -493,11 +493,12 @@ def rhs_cost_ns(p, y, n: int = 1_000_000) -> dict:
         aux = np.zeros(M.N_AUX)
         wk = np.zeros((layout.N_WORK, layout.N_WCOLS))
         istats = np.zeros(layout.N_ISTATS, np.int64)
-        loop(yy, p, cs, nstate, 1000, dy, aux, wk, istats)
+        sys_ = layout.System(p, cs, nstate, wk, istats)
+        loop(yy, sys_, 1000, dy, aux)
         best = math.inf
         for _ in range(7):
             c0 = time.thread_time()
-            loop(yy, p, cs, nstate, n, dy, aux, wk, istats)
+            loop(yy, sys_, n, dy, aux)
             best = min(best, time.thread_time() - c0)
         out[name] = best / n * 1e9
     return out

@@ -55,9 +55,9 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   that time); the contact law without a solution (rhs flag -1) ends the scene as `painleve`;
 * halt levels by energy (E = E_ss(level)); a level already passed after an impulse is recorded at
   the restart time.
-* counts: an update begins a roll<->slip transition where the contact rolls on one side of it and
-  slips on the other, and a stick phase for each component held after it and not before; a phase
-  that begins and ends within one update lasts no time and is not counted.
+* counts: an update makes a roll<->slip transition where the contact rolls on one side of it and
+  slips on the other (a slip that ends and slips again at once within one update counts none); a
+  stick phase is counted where a component sticks.
 No rule depends on rtol, atol or the step size.
 
 The integration uses SciPy's `OdeSolver` classes (DOP853, RK45, LSODA, Radau, ...) step by step,
@@ -88,7 +88,7 @@ from sweep import outcomes
 from sweep.core import contact as _contact
 from sweep.core import impulse as _impulse
 from sweep.core import model
-from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, X_F1, X_F2, X_G1,
+from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, X_F1, X_F2, X_G1,
                               X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DK1, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3)
 from sweep.scene import Scene, load_scene
 from sweep.simulate import initial_state, level_energies
@@ -268,9 +268,9 @@ class Disk:
     def __init__(self, be, p, n, u_tol, stats):
         self.be, self.n, self.u_tol, self.stats = be, n, u_tol, stats
         self.p = np.array(p, dtype=float)
-        self.p[P_UFREEZE] = 0.0           # the pure model: friction along u/|u| for u != 0
+        self.p[P_UTOL] = 0.0              # the pure model: friction along u/|u| for u != 0
         self.pf = self.p.copy()
-        self.pf[P_UFREEZE] = math.inf     # friction along the given direction whatever u
+        self.pf[P_UTOL] = math.inf        # friction along the given direction whatever u
         self.k = (self.p[P_K1], self.p[P_K2], self.p[P_K3])
         self.S = np.zeros((7, 12))
         self.calls = 0
@@ -282,8 +282,9 @@ class Disk:
     def model(self, t, y, mode, c, nx, ny, p=None):
         dy = np.empty(self.n)
         aux = np.empty(N_AUX)
-        self.be.rhs(t, y, self.p if p is None else p, ROLL if mode == ROLL else SLIDE, c.side, c.sig_arr(),
-                    c.stuck_arr(), nx, ny, self.n, dy, aux)
+        self.be.rhs(t, y, self.p if p is None else p,
+                    model.Contact(ROLL if mode == ROLL else SLIDE, c.side, c.sig_arr(), c.stuck_arr(), nx, ny),
+                    self.n, dy, aux)
         self.calls += 1
         return dy, aux
 
@@ -596,6 +597,7 @@ class Disk:
         need = self.needed_sigma(i, t, y, c)
         if abs(need) < 1.0 or (force and (1.0 if need > 0.0 else -1.0) == c.sig[i]):
             c.stuck[i] = True
+            self.stats["n_stick"] += 1
             if self.log is not None:
                 self.log.append((t, "stick", i, need))
         else:
@@ -676,6 +678,7 @@ class Disk:
             y[Y_U1], y[Y_U2] = q[3], q[4]
         y[Y_DK1 + i] += 0.5 * float(dv @ M @ dv)
         c.stuck[i] = True
+        self.stats["n_stick"] += 1
         if self.log is not None:
             self.log.append((t, "stick_spin", i, need))
         return True
@@ -834,7 +837,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 disk.stick_test(i, t, y, c)
     if c.mode == ROLL and disk.cone_violated(t, y, c):
         disk.start_slip(t, y, c)
-    _count_phases(y0[Y_U1] == 0.0 and y0[Y_U2] == 0.0, (False, False, False), c, stats)
+    _count_transition(y0[Y_U1] == 0.0 and y0[Y_U2] == 0.0, c, stats)
     e0 = disk.energy(y, c)
     outcome = start_code
     t_end = 0.0
@@ -1191,22 +1194,20 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 event_kinds=kinds, **stats)
 
 
-def _count_phases(rolling_before, stuck_before, c, stats):
-    """What an update began: a roll<->slip transition where the contact rolled before it and slips
-    after it (or the reverse), a stick phase per component held after it and not before. A phase
-    that begins and ends within the update (a slip that ends and, outside the cone, slips again at
-    once) lasts no time and is not counted."""
+def _count_transition(rolling_before, c, stats):
+    """A roll<->slip transition where the contact rolled before an update and slips after it (or the
+    reverse); a slip that ends and, outside the cone, slips again at once within the update never
+    rolled and counts none."""
     if rolling_before != (c.mode == ROLL):
         stats["n_transitions"] += 1
-    stats["n_stick"] += sum(1 for a, b in zip(stuck_before, c.stuck) if b and not a)
 
 
 def _apply(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
-    """The discrete update for event `kind` at (t, y), with the phases it begins counted
-    (_count_phases); returns an outcome code or -1."""
-    rolling, stuck = c.mode == ROLL, tuple(c.stuck)
+    """The discrete update for event `kind` at (t, y), with its roll<->slip transition counted
+    (_count_transition); returns an outcome code or -1."""
+    rolling = c.mode == ROLL
     code = _update(kind, t, y, c, disk, stats, kinds, leaving_out, now)
-    _count_phases(rolling, stuck, c, stats)
+    _count_transition(rolling, c, stats)
     return code
 
 

@@ -121,8 +121,6 @@ def test_no_module_imports_upwards():
                 assert fl[t] < fl[m], (m, t)
 
 
-@pytest.mark.xfail(strict=True, reason="not yet: 36 core kernels take more than 8 parameters (issue #41, "
-                   "item 1: the run's constants and the state groups passed as one value each)")
 def test_no_core_kernel_takes_more_than_eight_parameters():
     wide = [(m, f, len(ps)) for m, f, ps in kernel_functions(modules()) if len(ps) > MAX_PARAMS]
     assert not wide, wide

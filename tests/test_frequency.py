@@ -11,6 +11,7 @@ import pytest
 
 import sweep
 from sweep.core import frequency as fr
+from sweep.core import layout as L
 from sweep.core import model
 from sweep.scene import load_scene
 
@@ -39,7 +40,7 @@ def nutation_hz(beta, scene):
     def f(y):
         dy = np.zeros(model.N_FULL)
         aux = np.zeros(model.N_AUX)
-        model.rhs(0.0, y, p, model.ROLL, 1.0, np.ones(3), np.zeros(3), 0.0, 0.0, model.N_CORE, dy, aux)
+        model.rhs(0.0, y, p, model.Contact(model.ROLL, 1.0, np.ones(3), np.zeros(3), 0.0, 0.0), model.N_CORE, dy, aux)
         return dy[:4]
 
     assert np.max(np.abs(f(y0))) < 1e-13          # it is steady
@@ -186,10 +187,10 @@ def test_a_window_open_at_the_end_keeps_its_symmetric_part_unless_a_guard_cut_it
             row[fr.LW_HEAD + fr.WIN_LEN + i] = 1.0 + 0.1 * math.cos(0.8 * 2 * math.pi * i / S)
         level_out = np.full((1, 6), math.nan)
         fr.finish_levels(fq, level_out, cut)
-        got = level_out[0, fr.LO_PRECESSION]
+        got = level_out[0, L.L_PRECESSION]
         assert (math.isnan(got) and math.isnan(want)) or abs(got / want - 1) < 1e-12, (cut, got)
         assert fq[fr.FQ_LEVEL0, fr.LW_STATE] == 3.0
-        assert cut or level_out[0, fr.LO_CYCLES] == 2.0
+        assert cut or level_out[0, L.L_CYCLES] == 2.0
 
 
 def test_the_last_levels_frequencies_do_not_depend_on_a_step_count_after_the_halt():

@@ -56,12 +56,13 @@ def test_kernels_compile_without_refcounts_and_return_no_arrays(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     kernels = json.loads(r.stdout.strip().splitlines()[-1])
     # the scan saw the kernels: the hot ones were typed in this process. Those numba inlines
-    # (inline="always": model.rhs and its parts) are typed only as part of their callers, never on
-    # their own: what they return is a value inside the caller's compiled function, under its options.
+    # (inline="always": model.rhs and its parts, and the stepper's kernels that call the right-hand
+    # side they are given, dop853.rk_step and its kin) are typed only as part of their callers, never
+    # on their own: what they return is a value inside the caller's compiled function, under its options.
     # NumPy's floating-point semantics: a division by zero gives inf or NaN, which the integrator
     # rejects or reports, never a ZeroDivisionError that loses the scene
     assert {k["error_model"] for k in kernels.values()} == {"numpy"}
-    for name in ("contact.eval_rhs", "dop853.rk_step", "integrate.run", "ensemble.solve_index"):
+    for name in ("contact.eval_rhs", "integrate.try_step", "integrate.run", "ensemble.solve_index"):
         assert kernels[name]["returns"], name
     assert kernels["model.rhs"]["inline"] == "always" and not kernels["model.rhs"]["returns"]
     assert sum(1 for k in kernels.values() if k["returns"]) > 60

@@ -21,7 +21,7 @@ from sweep.scene import load_scene
 def setup():
     sc = load_scene("config/scenes/kessler2002.yaml")
     p = sc.params.copy()
-    p[M.P_UFREEZE] = 1e-9 * sc.chi / 0.03755
+    p[M.P_UTOL] = 1e-9 * sc.chi / 0.03755
     y = np.zeros(M.N_FULL)
     y[M.Y_ALPHA] = 1.0
     y[M.Y_W1] = 0.05
@@ -31,6 +31,10 @@ def setup():
     cs[L.CS_SIDE] = 1.0
     cs[L.CS_SIG:L.CS_SIG + 3] = [1.0, -1.0, 1.0]
     return p, y, cs
+
+
+def _sys(p, cs, n, wk, ist):
+    return L.System(p, cs, n, wk, ist)
 
 
 def _work():
@@ -44,11 +48,24 @@ def _group(p, cs, wk, F, trk=None, y=None):
     return L.Work(y, p, cs, wk, np.zeros((L.N_KROWS, M.N_FULL)), F, trk)
 
 
+def _consts(rtol=1e-10, atol=1e-12, t_max=100.0, max_steps=10**9, e0=1.0, n=M.N_CORE):
+    """The run's constants (layout.RunConsts) with the given values, no levels, no samples."""
+    return L.RunConsts(n, rtol, atol, math.inf, t_max, max_steps, False, e0, np.zeros(0), np.zeros(0))
+
+
+def _step(t, y, f, h, sys, K, y_new, f_new=None):
+    """dop853.rk_step with the contact right-hand side from (t, y, f) over h into y_new (its
+    derivative into f_new if given), in the system sys (layout.System)."""
+    f_new = np.zeros(M.N_FULL) if f_new is None else f_new
+    D.rk_step(C.eval_rhs, t, h, L.Point(y, f, np.zeros(M.N_AUX)), L.Point(y_new, f_new, np.zeros(M.N_AUX)), sys,
+              K)
+
+
 def _f(t, y, p, cs, n=M.N_CORE):
     dy = np.zeros(M.N_FULL)
     aux = np.zeros(M.N_AUX)
-    M.rhs(t, y, p, M.ROLL, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3],
-          1.0, 0.0, n, dy, aux)
+    contact = M.Contact(M.ROLL, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3], 1.0, 0.0)
+    M.rhs(t, y, p, contact, n, dy, aux)
     return dy[:n].copy(), aux
 
 
@@ -60,7 +77,7 @@ def test_rk_step_is_the_tableau_applied_to_the_model(setup):
     f = np.zeros(M.N_FULL)
     f[:n] = _f(0.0, y, p, cs)[0]
     y_new = np.zeros(M.N_FULL)
-    D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, np.zeros(M.N_FULL), np.zeros(M.N_AUX), wk, ist)
+    _step(0.0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new)
     # plain numpy DOP853 with the published tableau
     k = np.zeros((T.N_STAGES, n))
     for s in range(T.N_STAGES):
@@ -91,9 +108,9 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
         K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
         f = np.zeros(M.N_FULL)
         aux = np.zeros(M.N_AUX)
-        C.eval_rhs(0.0, y, p, cs, n, f, aux, wk, ist)
+        C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), f, aux)
         y_new = np.zeros(M.N_FULL)
-        D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, np.zeros(M.N_FULL), np.zeros(M.N_AUX), wk, ist)
+        _step(0.0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new)
         e_cur, e_new = C.mode_energy(y, p, cs), C.mode_energy(y_new, p, cs)
         delta = wk[L.W_DELTA, :n]
         assert np.array_equal(y_new[:n], y[:n] + delta)      # the increment the step added
@@ -104,7 +121,7 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
         inc_res = abs(change + np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]))
         assert abs(inc_res - res[-1]) < 1e-15 * e_cur, (inc_res, res[-1])
         # balance_error is that residual over its allowance, which grows with h and the dissipation
-        ratio = I.balance_error(y, aux, wk[L.W_DELTA], h, 0.0, p, cs, e_cur, 100.0, 1e-10)
+        ratio = I.balance_error(y, aux, wk[L.W_DELTA], h, 0.0, p, cs, _consts(1e-10, e0=e_cur, t_max=100.0))
         allowed = I.BALANCE_FACTOR * 1e-10 * (np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
         assert inc_res / ratio >= allowed
     assert res[0] / res[1] > 256.0 and res[2] / res[3] > 256.0, res
@@ -187,8 +204,8 @@ def test_energy_rate_is_the_gradient_of_the_energy_and_the_power_defect_is_round
         cs[L.CS_SIDE] = side
         dy = np.zeros(M.N_FULL)
         aux = np.zeros(M.N_AUX)
-        M.rhs(0.0, y, p, mode, int(side), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3],
-              1.0, 0.0, M.N_CORE, dy, aux)
+        contact = M.Contact(mode, int(side), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3], 1.0, 0.0)
+        M.rhs(0.0, y, p, contact, M.N_CORE, dy, aux)
         if aux[M.X_OK] != 1.0:
             continue
         # the power's terms: the rates of the energy's parts and the dissipated powers
@@ -223,7 +240,7 @@ def test_energy_kernels_from_the_rhs_trig_are_the_plain_ones_to_the_bit(setup):
         cs[L.CS_MODE], cs[L.CS_SIDE] = mode, side
         cs[L.CS_NU] = math.atan2(y[M.Y_U2], y[M.Y_U1])
         dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
-        C.eval_rhs(0.0, y, p, cs, M.N_CORE, dy, aux, wk, ist)
+        C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
         assert aux[M.X_SINA] == math.sin(y[M.Y_ALPHA]) and aux[M.X_COSA] == math.cos(y[M.Y_ALPHA])
         slip = mode != L.ROLL
         assert C.mode_energy_at(y, aux, p, cs) == C.mode_energy(y, p, cs)
@@ -268,8 +285,8 @@ def test_dense_output_interpolates_the_step_at_seventh_order(setup):
         f[:n] = _f(0.0, y, p, cs)[0]
         y_new = np.zeros(M.N_FULL)
         f_new = np.zeros(M.N_FULL)
-        D.rk_step(0.0, y, f, h, n, p, cs, K, y_new, f_new, np.zeros(M.N_AUX), wk, ist)
-        D.dense_coeffs(0.0, y, h, y_new, f_new, n, p, cs, K, F, wk, ist)
+        _step(0.0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new, f_new)
+        D.dense_coeffs(C.eval_rhs, 0.0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
         out = np.zeros(M.N_FULL)
         D.dense_eval(F, 0, y, 0.0, h, 0.0, n, out)
         assert np.max(np.abs(out[:n] - y[:n])) < 1e-15
@@ -277,7 +294,7 @@ def test_dense_output_interpolates_the_step_at_seventh_order(setup):
         assert np.max(np.abs(out[:n] - y_new[:n])) < 1e-14
         # midpoint against two half steps
         yh = np.zeros(M.N_FULL)
-        D.rk_step(0.0, y, f, 0.5 * h, n, p, cs, K, yh, np.zeros(M.N_FULL), np.zeros(M.N_AUX), wk, ist)
+        _step(0.0, y, f, 0.5 * h, _sys(p, cs, n, wk, ist), K, yh)
         D.dense_eval(F, 0, y, 0.0, h, 0.5 * h, n, out)
         errs.append(np.max(np.abs(out[:n] - yh[:n])))
     assert errs[0] / errs[1] > 2 ** 6.5      # local error of the interpolant ~ h^8
@@ -331,8 +348,8 @@ def _dense_step(p, y, cs, h, n=M.N_CORE, t0=0.0, y_end=None):
     f = np.zeros(M.N_FULL)
     f[:n] = _f(t0, y, p, cs)[0]
     y_new, f_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
-    D.rk_step(t0, y, f, h, n, p, cs, K, y_new, f_new, np.zeros(M.N_AUX), wk, ist)
-    D.dense_coeffs(t0, y, h, y_new, f_new, n, p, cs, K, F, wk, ist)
+    _step(t0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new, f_new)
+    D.dense_coeffs(C.eval_rhs, t0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
     if y_end is not None:
         y_end[:] = y_new
     return F, wk, ist
@@ -347,14 +364,14 @@ def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
     cs = cs.copy()
     cs[L.CS_SIG] = -1.0
     F, wk, ist = _dense_step(p, y, cs, h)
-    span, work = L.Span(0, y, 0.0, h, cs), _group(p, cs, wk, F)
-    g0 = R.event_value_at(k, 0.0, span, n, 1e-9, math.nan, work, ist)
-    g1 = R.event_value_at(k, h, span, n, 1e-9, math.nan, work, ist)
+    span = L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist))
+    g0 = R.event_value_at(k, 0.0, span, math.nan)
+    g1 = R.event_value_at(k, h, span, math.nan)
     assert g0 > 0.0 >= g1, (g0, g1)
-    ta, tb = R.locate(k, 0.0, g0, h, g1, span, n, 1e-9, math.nan, work, ist)
+    ta, tb = R.locate(k, 0.0, g0, h, g1, span, math.nan)
     assert tb - ta <= R.location_tol(tb)
-    assert R.event_value_at(k, ta, span, n, 1e-9, math.nan, work, ist) > 0.0
-    assert R.event_value_at(k, tb, span, n, 1e-9, math.nan, work, ist) <= 0.0
+    assert R.event_value_at(k, ta, span, math.nan) > 0.0
+    assert R.event_value_at(k, tb, span, math.nan) <= 0.0
 
 
 def test_locate_closes_a_force_event_bracket_superlinearly(setup):
@@ -372,16 +389,16 @@ def test_locate_closes_a_force_event_bracket_superlinearly(setup):
     p[M.P_MUS] = 0.403
     k = C.EV_CONE
     F, wk, ist = _dense_step(p, y, cs, h)
-    span, work = L.Span(0, y, 0.0, h, cs), _group(p, cs, wk, F)
-    g0 = R.event_value_at(k, 0.0, span, n, 1e-9, math.nan, work, ist)
-    g1 = R.event_value_at(k, h, span, n, 1e-9, math.nan, work, ist)
+    span = L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist))
+    g0 = R.event_value_at(k, 0.0, span, math.nan)
+    g1 = R.event_value_at(k, h, span, math.nan)
     assert g0 > 0.0 >= g1, (g0, g1)
     rhs_before = ist[L.I_RHS]
-    ta, tb = R.locate(k, 0.0, g0, h, g1, span, n, 1e-9, math.nan, work, ist)
+    ta, tb = R.locate(k, 0.0, g0, h, g1, span, math.nan)
     evaluations = ist[L.I_RHS] - rhs_before
     assert tb - ta <= R.location_tol(tb)
-    assert R.event_value_at(k, ta, span, n, 1e-9, math.nan, work, ist) > 0.0
-    assert R.event_value_at(k, tb, span, n, 1e-9, math.nan, work, ist) <= 0.0
+    assert R.event_value_at(k, ta, span, math.nan) > 0.0
+    assert R.event_value_at(k, tb, span, math.nan) <= 0.0
     bisections = math.ceil(math.log2(h / R.location_tol(tb)))
     assert evaluations < bisections / 2, (evaluations, bisections)
 
@@ -397,7 +414,7 @@ def test_brent_finds_the_maximum_of_the_normal_force(setup):
         phi.append(_f(t, wk[L.W_YBUF], p, cs)[1][M.X_PHI])
     i = int(np.argmax(phi))
     assert 0 < i < len(grid) - 1, "the test step must contain an interior maximum of Phi"
-    tmax, pmax = R.brent_max_phi(0.0, h, L.Span(0, y, 0.0, h, cs), n, _group(p, cs, wk, F), ist)
+    tmax, pmax = R.brent_max_phi(0.0, h, L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist)))
     assert abs(tmax - grid[i]) < 2 * (grid[1] - grid[0])
     assert pmax >= max(phi) - 1e-12
 
@@ -421,13 +438,14 @@ def _two_steps(p, y0, cs, t0, t_mid, t_end, n=M.N_CORE):
     return F, trk, wk, ist, ys[1]
 
 
-def _spans(p, F, trk, wk, y_mid, t_mid, t1):
+def _spans(p, F, trk, wk, ist, y_mid, t_mid, t1, n=M.N_CORE):
     """The two steps of _two_steps, [T_TPREV, t_mid] and [t_mid, t1], as track_peaks reads them:
-    (before, this, work), both in the contact state stored in wk[W_CSPREV]."""
+    (before, this), both in the contact state stored in wk[W_CSPREV]."""
     cs = wk[L.W_CSPREV, :L.N_CS].copy()
-    before = L.Span(D.N_DENSE, wk[L.W_YPREV], trk[L.T_TPREV], trk[L.T_HPREV], wk[L.W_CSPREV, :L.N_CS])
-    this = L.Span(0, y_mid, t_mid, t1 - t_mid, cs)
-    return before, this, _group(p, cs, wk, F, trk, y_mid)
+    before = L.Span(F, D.N_DENSE, wk[L.W_YPREV], trk[L.T_TPREV], trk[L.T_HPREV],
+                    _sys(p, wk[L.W_CSPREV, :L.N_CS], n, wk, ist))
+    this = L.Span(F, 0, y_mid, t_mid, t1 - t_mid, _sys(p, cs, n, wk, ist))
+    return before, this
 
 
 def test_peak_sides_picks_the_segment_that_holds_the_maximum_of_the_normal_force(setup):
@@ -445,16 +463,16 @@ def test_peak_sides_picks_the_segment_that_holds_the_maximum_of_the_normal_force
     y0 = y.copy()
     for j in range(100):
         f[:n] = _f(0.01 * j, y0, p, cs)[0]
-        D.rk_step(0.01 * j, y0, f, 0.01, n, p, cs, K, y_new, np.zeros(M.N_FULL), np.zeros(M.N_AUX), wk, ist)
+        _step(0.01 * j, y0, f, 0.01, _sys(p, cs, n, wk, ist), K, y_new)
         y0 = y_new.copy()
     t0, t1 = 1.0, 1.4
 
     def phi_max(t_mid):
         F, trk, wk, ist, y_mid = _two_steps(p, y0, cs, t0, t_mid, t1)
         grid = np.linspace(t0, t1, 4001)
-        before, this, work = _spans(p, F, trk, wk, y_mid, t_mid, t1)
-        phi = [R.phi_on_dense(t, before, n, work, ist) if t <= t_mid
-               else R.phi_on_dense(t, this, n, work, ist) for t in grid]
+        before, this = _spans(p, F, trk, wk, ist, y_mid, t_mid, t1)
+        phi = [R.phi_on_dense(t, before) if t <= t_mid
+               else R.phi_on_dense(t, this) for t in grid]
         i = int(np.argmax(phi))
         assert 0 < i < len(grid) - 1, "the two steps must hold an interior maximum of Phi"
         return grid[i], F, trk, wk, ist, y_mid
@@ -462,19 +480,19 @@ def test_peak_sides_picks_the_segment_that_holds_the_maximum_of_the_normal_force
     for t_mid in (1.05, 1.1, 1.25, 1.3):
         t_star, F, trk, wk, ist, y_mid = phi_max(t_mid)
         expected = (t_star < t_mid, t_star > t_mid)
-        before, this, work = _spans(p, F, trk, wk, y_mid, t_mid, t1)
-        assert TR.peak_sides(t_mid, t1, before, this, n, work, ist) == expected, (t_mid, t_star)
+        before, this = _spans(p, F, trk, wk, ist, y_mid, t_mid, t1)
+        assert TR.peak_sides(t1, before, this, trk) == expected, (t_mid, t_star)
         # the side it keeps is where the search of both segments finds the larger maximum
-        _, pv_left = R.brent_max_phi(t0, t_mid, before, n, work, ist)
-        _, pv_right = R.brent_max_phi(t_mid, t1, this, n, work, ist)
+        _, pv_left = R.brent_max_phi(t0, t_mid, before)
+        _, pv_right = R.brent_max_phi(t_mid, t1, this)
         assert (pv_left >= pv_right) == expected[0]
     # the common end at the maximum (located by Brent on the two steps with an end near it)
     t_star, F, trk, wk, ist, y_mid = phi_max(1.1)
-    _, this, work = _spans(p, F, trk, wk, y_mid, 1.1, t1)
-    t_exact, _ = R.brent_max_phi(1.1, t1, this, n, work, ist)
+    _, this = _spans(p, F, trk, wk, ist, y_mid, 1.1, t1)
+    t_exact, _ = R.brent_max_phi(1.1, t1, this)
     F, trk, wk, ist, y_mid = _two_steps(p, y0, cs, t0, t_exact, t1)
-    before, this, work = _spans(p, F, trk, wk, y_mid, t_exact, t1)
-    assert TR.peak_sides(t_exact, t1, before, this, n, work, ist) == (True, True)
+    before, this = _spans(p, F, trk, wk, ist, y_mid, t_exact, t1)
+    assert TR.peak_sides(t1, before, this, trk) == (True, True)
 
 
 def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
@@ -486,16 +504,16 @@ def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
     u = 1e-9
     dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
     for nu0 in np.linspace(-3.0, 3.0, 7):
-        nu = C.attracting_direction(nu0, u, 0.0, y, p, sl, n, wk, ist)
+        nu = C.attracting_direction(nu0, u, 0.0, y, _sys(p, sl, n, wk, ist))
         if math.isnan(nu):
             continue
-        c, _ = C.slip_rates(nu, u, 0.0, y, p, sl, n, dy, aux, ys, ist)
+        c, _ = C.slip_rates(nu, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
         assert abs(c) < 1e-10
         # attracting: the direction rate cross/u points back to the root from both sides
-        cm, _ = C.slip_rates(nu - 1e-3, u, 0.0, y, p, sl, n, dy, aux, ys, ist)
-        cp, _ = C.slip_rates(nu + 1e-3, u, 0.0, y, p, sl, n, dy, aux, ys, ist)
+        cm, _ = C.slip_rates(nu - 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        cp, _ = C.slip_rates(nu + 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
         assert cm > 0.0 > cp
-        nu2 = C.slaved_direction(nu + 1e-4, u, 0.0, y, p, sl, n, dy, aux, ys, ist)
+        nu2 = C.slaved_direction(nu + 1e-4, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
         assert abs(math.remainder(nu2 - nu, 2 * math.pi)) < 1e-12
 
 
@@ -525,21 +543,22 @@ def test_onset_direction_takes_a_root_with_a_solution_and_never_a_painleve_pole(
         cs = cs0.copy()
         cs[L.CS_SIDE] = 1.0 if y[M.Y_ALPHA] >= 0.0 else -1.0
         cs[L.CS_SIG:L.CS_SIG + 3] = np.sign(rng.normal(size=3))
-        C._model(0.0, y, p, cs, n, dy, aux, 1.0, 0.0, ist)
+        C._model(0.0, y, _sys(p, cs, n, wk, ist), dy, aux, 1.0, 0.0)
         if aux[M.X_OK] != 1.0 or aux[M.X_PHI] <= 0.0:
             continue
         F1, F2 = aux[M.X_F1], aux[M.X_F2]
         guess = math.atan2(-F2, -F1)
         cs[L.CS_MODE] = L.SLAVED
-        scan = np.array([C.slip_rates(x, 0.0, 0.0, y, p, cs, n, dy, aux, ys, ist) + (aux[M.X_OK],) for x in grid])
+        sys_ = _sys(p, cs, n, wk, ist)
+        scan = np.array([C.slip_rates(x, 0.0, 0.0, y, sys_, dy, aux, ys) + (aux[M.X_OK],) for x in grid])
         flips = np.nonzero((scan[:-1, 0] > 0.0) != (scan[1:, 0] > 0.0))[0]
         consistent = any(scan[j, 2] > 0.0 and scan[j + 1, 2] > 0.0 and scan[j + 1, 1] > 0.0 for j in flips)
         poles_seen += sum(1 for j in flips if scan[j, 2] != scan[j + 1, 2])
-        nu = C.onset_direction(0.0, y, p, cs, n, F1, F2, wk, ist)
+        nu = C.onset_direction(0.0, y, _sys(p, cs, n, wk, ist), F1, F2)
         if nu == guess:
             assert not consistent
             continue
-        cr, dr = C.slip_rates(nu, 0.0, 0.0, y, p, cs, n, dy, aux, ys, ist)
+        cr, dr = C.slip_rates(nu, 0.0, 0.0, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
         assert math.isfinite(cr) and abs(cr) <= 1e-9 * max(1.0, abs(dr)) and dr > 0.0   # a root, not a pole
         if consistent:
             assert aux[M.X_OK] == 1.0
@@ -563,21 +582,21 @@ def test_slaved_direction_near_a_fold_converges_at_the_round_off_floor():
                   9.988368229478843e-10])
     n, t = M.N_FULL, 283.5429130271587
     wk, ist = _work()
-    C.try_slave(t, y, p, cs, n, wk, ist)
+    C.try_slave(t, y, _sys(p, cs, n, wk, ist))
     assert cs[L.CS_MODE] == L.SLAVED
     u = math.hypot(y[M.Y_U1], y[M.Y_U2])
     dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
-    root = C.slaved_direction(cs[L.CS_NU], u, t, y, p, cs, n, dy, aux, ys, ist)
+    root = C.slaved_direction(cs[L.CS_NU], u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
     assert aux[M.X_OK] == 1.0
     for k in range(-40, 41):
         start = root + k * 4e-16
-        nu = C.slaved_direction(start, u, t, y, p, cs, n, dy, aux, ys, ist)
-        c, d = C.slip_rates(nu, u, t, y, p, cs, n, dy, aux, ys, ist)
+        nu = C.slaved_direction(start, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+        c, d = C.slip_rates(nu, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
         assert aux[M.X_OK] == 1.0, (k, nu)
         assert abs(c) <= C.DIR_NOISE * math.hypot(c, d) and abs(nu - root) < 1e-12, (k, nu, c)
     # and the slaved right-hand side there is finite (it was NaN with X_OK 1 left by the model)
     cs[L.CS_NU] = root
-    C.eval_rhs(t, y, p, cs, n, dy, aux, wk, ist)
+    C.eval_rhs(t, y, _sys(p, cs, n, wk, ist), dy, aux)
     assert aux[M.X_OK] == 1.0 and np.isfinite(dy[:n]).all() and aux[M.X_DCROSS] < 0.0
 
 
@@ -605,9 +624,9 @@ def test_settle_signs_releases_a_stuck_component_the_moment_cannot_hold(setup, k
         cs[L.CS_MODE] = L.ROLL
         cs[L.CS_STUCK] = 1.0
         wk, ist = _work()
-        C.eval_rhs(0.0, y1, pp, cs, M.N_CORE, wk[L.W_DYTMP], wk[L.W_AUXTMP], wk, ist)
+        C.eval_rhs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
         need = wk[L.W_AUXTMP, M.X_SIG1]
-        C.settle_signs(0.0, y1, pp, cs, M.N_CORE, wk, ist, held)
+        C.settle_signs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), held)
         if abs(need) <= 1.0 or held == 0:
             assert cs[L.CS_STUCK] == 1.0
         else:
@@ -630,10 +649,10 @@ def test_an_impulse_carrying_a_free_component_past_its_surface(setup, w1_after):
     cs = cs0.copy()
     cs[L.CS_MODE] = L.ROLL
     wk, ist = _work()
-    need = C.needed_sigma(0, 0.0, y1, pp, cs, M.N_CORE, wk[L.W_DYTMP], wk[L.W_AUXTMP], wk, ist)
+    need = C.needed_sigma(0, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
     assert abs(need) < 1.0
     C.release_moved(y1, pp, cs, g_before)
-    C.settle_signs(0.0, y1, pp, cs, M.N_CORE, wk, ist, -1)
+    C.settle_signs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), -1)
     if abs(w1_after) > pp[M.P_WTOL]:
         assert cs[L.CS_STUCK] == 0.0 and cs[L.CS_SIG] == -1.0
     else:
@@ -656,11 +675,11 @@ def test_settle_signs_tests_every_component_on_its_surface(setup):
     cs[L.CS_SIG + 1] = math.copysign(1.0, g[1])
     cs[L.CS_SIG + 2] = -math.copysign(1.0, g[2])
     wk, ist = _work()
-    need1 = C.needed_sigma(0, 0.0, y1, pp, cs, M.N_CORE, wk[L.W_DYTMP], wk[L.W_AUXTMP], wk, ist)
-    need3 = C.needed_sigma(2, 0.0, y1, pp, cs, M.N_CORE, wk[L.W_DYTMP], wk[L.W_AUXTMP], wk, ist)
+    need1 = C.needed_sigma(0, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
+    need3 = C.needed_sigma(2, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
     assert abs(need1) > 1.0
     cs[L.CS_SIG] = math.copysign(1.0, need1)
-    C.settle_signs(0.0, y1, pp, cs, M.N_CORE, wk, ist, -1)
+    C.settle_signs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), -1)
     assert cs[L.CS_STUCK] == 0.0 and cs[L.CS_SIG] == math.copysign(1.0, need1)
     if abs(need3) < 1.0:   # (0.78 here: the moment holds it)
         assert cs[L.CS_STUCK + 2] == 1.0
@@ -677,11 +696,11 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
     wk, ist = _work()
     f = np.zeros(M.N_FULL)
     aux = np.zeros(M.N_AUX)
-    C.eval_rhs(0.0, y, p, cs, n, f, aux, wk, ist)
+    C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), f, aux)
     g = np.zeros(L.N_WCOLS)
-    C.event_values(0.0, y, aux, p, cs, 1e-9, math.nan, g)
+    C.event_values(0.0, y, aux, p, cs, math.nan, g)
     rates = np.zeros(L.N_WCOLS)
-    R.event_rates(0.0, y, f, g, rates, n, 1e-9, math.nan, _group(p, cs, wk, np.zeros((14, M.N_FULL))), ist)
+    R.event_rates(0.0, y, f, g, rates, math.nan, _sys(p, cs, n, wk, ist))
     for k in range(3):
         exact = cs[L.CS_SIG + k] * R.sign_rate(k, y, f)
         assert rates[C.EV_SIGN1 + k] == pytest.approx(exact, rel=1e-6, abs=1e-7)
@@ -691,8 +710,8 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
         ys = y.copy()
         ys[:n] += eps * f[:n]
         dy, ax, gg = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
-        C.eval_rhs(eps, ys, p, cs, n, dy, ax, wk, ist)
-        C.event_values(0.0, ys, ax, p, cs, 1e-9, math.nan, gg)
+        C.eval_rhs(eps, ys, _sys(p, cs, n, wk, ist), dy, ax)
+        C.event_values(0.0, ys, ax, p, cs, math.nan, gg)
         return gg
 
     g_plus, g_minus = g_at(1e-5), g_at(-1e-5)
@@ -731,19 +750,19 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
         level = rng.uniform(0.1, 2.0)
         wk, ist = _work()
         dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
-        C.eval_rhs(0.0, y, p, cs, M.N_CORE, dy, aux, wk, ist)
+        C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
         g_true = np.zeros(L.N_WCOLS)
-        C.event_values(0.0, y, aux, p, cs, 1e-9, level, g_true)
+        C.event_values(0.0, y, aux, p, cs, level, g_true)
         for k in range(C.N_EVENTS):
             if C.reads_forces(k) or g_true[k] == math.inf:
                 continue
             checked.add(k)
-            assert C.state_event_value(k, 0.0, y, p, cs, 1e-9, level) == g_true[k], k
+            assert C.state_event_value(k, 0.0, y, p, cs, level) == g_true[k], k
             # on a dense output whose every coefficient is 0, the value at any t is y itself
             rhs_before = ist[L.I_RHS]
             F = np.zeros((14, M.N_FULL))
-            assert R.event_value_at(k, 0.3, L.Span(0, y, 0.0, 1.0, cs), M.N_CORE, 1e-9, level,
-                                    _group(p, cs, wk, F), ist) == g_true[k]
+            span = L.Span(F, 0, y, 0.0, 1.0, _sys(p, cs, M.N_CORE, wk, ist))
+            assert R.event_value_at(k, 0.3, span, level) == g_true[k]
             assert ist[L.I_RHS] == rhs_before
     expected = {C.EV_SIDE, C.EV_FACE, C.EV_LEVEL} | (
         {C.EV_SIGN1, C.EV_SIGN2, C.EV_SIGN3, C.EV_SPIN1, C.EV_SPIN2, C.EV_SPIN3} if mode == L.ROLL
@@ -762,7 +781,7 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
     sl = cs0.copy()
     sl[L.CS_MODE] = L.SLAVED
     u = 1e-9
-    root = C.attracting_direction(0.3, u, 0.0, y0, p, sl, n, wk, ist)
+    root = C.attracting_direction(0.3, u, 0.0, y0, _sys(p, sl, n, wk, ist))
     assert math.isfinite(root)
     # the slip vector a little off the root (its component across s is what the impulse removes)
     y = y0.copy()
@@ -772,14 +791,14 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
         cs = sl.copy()
         cs[L.CS_NU] = stored
         dy, aux, g = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
-        C.eval_rhs(0.0, y, p, cs, n, dy, aux, wk, ist)
+        C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
         assert aux[M.X_OK] == 1.0
-        C.event_values(0.0, y, aux, p, cs, 1e-12, math.nan, g)
+        C.event_values(0.0, y, aux, p, cs, math.nan, g)
         values.append(g[C.EV_SLIP_STOP])
         # the stored direction would have given another value
         assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[C.EV_SLIP_STOP]) > 1e-3 * u
-    nu = C.slaved_direction(root, math.hypot(y[M.Y_U1], y[M.Y_U2]), 0.0, y, p, sl, n, np.zeros(M.N_FULL),
-                            np.zeros(M.N_AUX), np.zeros(M.N_FULL), ist)
+    nu = C.slaved_direction(root, math.hypot(y[M.Y_U1], y[M.Y_U2]), 0.0, y, _sys(p, sl, n, wk, ist), np.zeros(M.N_FULL),
+                            np.zeros(M.N_AUX), np.zeros(M.N_FULL))
     expected = y[M.Y_U1] * math.cos(nu) + y[M.Y_U2] * math.sin(nu)
     assert values[0] == pytest.approx(expected, rel=1e-12, abs=1e-24)
     assert values[1] == pytest.approx(expected, rel=1e-12, abs=1e-24)
@@ -816,48 +835,46 @@ def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end
     from sweep import outcomes as oc
     from sweep.core.integrate import EPS, next_try
 
-    settings = np.zeros(L.N_SETTINGS)
-    settings[L.S_TMAX] = 100.0
-    settings[L.S_MAXSTEPS] = 50
+    consts = _consts(t_max=100.0, max_steps=50)
     wk, istats = _work()
     work = _group(np.zeros(M.N_PARAMS), np.zeros(L.N_CS), wk, np.zeros((2 * D.N_DENSE, M.N_FULL)))
     rec = L.Record(istats, np.zeros(L.N_FSTATS), None, None, None, None, None, None)
 
-    assert next_try(10.0, 0.5, -1, settings, work, rec) == (0.5, -1, False, False)
+    assert next_try(10.0, 0.5, -1, consts, work, rec) == (0.5, -1, False, False)
     # a try past t_max ends there exactly
-    assert next_try(99.75, 0.5, -1, settings, work, rec) == (0.25, -1, True, False)
+    assert next_try(99.75, 0.5, -1, consts, work, rec) == (0.25, -1, True, False)
     # the smallest step that moves tau is 2 eps tau: under it the scene ends, at t_max as T_MAX
     t_near = 100.0 - EPS * 100.0
-    h, outcome, at_tmax, stop = next_try(t_near, 0.5, -1, settings, work, rec)
+    h, outcome, at_tmax, stop = next_try(t_near, 0.5, -1, consts, work, rec)
     assert (outcome, at_tmax, stop) == (oc.T_MAX, True, True) and h == 100.0 - t_near
     # (t_max is where the motion ends: the frequency windows still open keep their symmetric part)
     assert work.trk[L.T_CUT] == 0.0
     # ... elsewhere as STEP_SIZE_UNDERFLOW (nothing in the model decides by the step size), a
     # numerical stop: the windows still open get no value
-    assert next_try(10.0, 1.5 * EPS * 10.0, -1, settings, work, rec)[1:] == (oc.STEP_SIZE_UNDERFLOW, False, True)
+    assert next_try(10.0, 1.5 * EPS * 10.0, -1, consts, work, rec)[1:] == (oc.STEP_SIZE_UNDERFLOW, False, True)
     assert work.trk[L.T_CUT] == 1.0
     work.trk[:] = 0.0
-    assert next_try(10.0, 2.5 * EPS * 10.0, -1, settings, work, rec)[1:] == (-1, False, False)
+    assert next_try(10.0, 2.5 * EPS * 10.0, -1, consts, work, rec)[1:] == (-1, False, False)
     # the step budget counts accepted and rejected tries; it stops the steps after the end too
     istats[L.I_STEPS], istats[L.I_REJECTED] = 30, 20
-    assert next_try(10.0, 0.5, -1, settings, work, rec)[1:] == (oc.STEP_LIMIT, False, True)
+    assert next_try(10.0, 0.5, -1, consts, work, rec)[1:] == (oc.STEP_LIMIT, False, True)
     assert work.trk[L.T_CUT] == 1.0
     work.trk[:] = 0.0
-    assert next_try(10.0, 0.5, oc.HALTED, settings, work, rec)[1:] == (oc.HALTED, False, True)
+    assert next_try(10.0, 0.5, oc.HALTED, consts, work, rec)[1:] == (oc.HALTED, False, True)
     assert work.trk[L.T_CUT] == 1.0
     istats[L.I_STEPS] = 0
     work.trk[:] = 0.0
     # after a halt (at tau 40): the steps that complete the frequency windows, no longer than the last one,
     # and none past twice the end's tau, nor past t_max
     trk = work.trk
-    assert next_try(40.0, 0.5, oc.HALTED, settings, work, rec) == (0.5, oc.HALTED, False, False)
+    assert next_try(40.0, 0.5, oc.HALTED, consts, work, rec) == (0.5, oc.HALTED, False, False)
     assert trk[L.T_H_AFTER] == 0.5 and trk[L.T_T_AFTER] == 80.0
-    assert next_try(60.0, 4.0, oc.HALTED, settings, work, rec) == (0.5, oc.HALTED, False, False)
-    assert next_try(99.9, 0.2, oc.HALTED, settings, work, rec) == (-1.0, oc.HALTED, False, True)
+    assert next_try(60.0, 4.0, oc.HALTED, consts, work, rec) == (0.5, oc.HALTED, False, False)
+    assert next_try(99.9, 0.2, oc.HALTED, consts, work, rec) == (-1.0, oc.HALTED, False, True)
     # twice the end's tau is where the motion after it ends, not a numerical stop
     assert trk[L.T_CUT] == 0.0
     # ... while the halt fit waits for a level below the last one, they go on past it, up to t_max
     trk[L.T_DEEP_E] = 1e-3
-    assert next_try(90.0, 0.2, oc.HALTED, settings, work, rec) == (0.2, oc.HALTED, False, False)
-    assert next_try(99.9, 0.2, oc.HALTED, settings, work, rec)[0] == pytest.approx(0.1)
-    assert next_try(100.0, 0.2, oc.HALTED, settings, work, rec) == (-1.0, oc.HALTED, False, True)
+    assert next_try(90.0, 0.2, oc.HALTED, consts, work, rec) == (0.2, oc.HALTED, False, False)
+    assert next_try(99.9, 0.2, oc.HALTED, consts, work, rec)[0] == pytest.approx(0.1)
+    assert next_try(100.0, 0.2, oc.HALTED, consts, work, rec) == (-1.0, oc.HALTED, False, True)

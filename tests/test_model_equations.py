@@ -64,7 +64,7 @@ def random_disk(rng, stuckset=()):
             k.append(0.0 if rng.random() < 0.25 else rng.uniform(0.0, 0.3) * R)
     mud = 0.0 if rng.random() < 0.1 else rng.uniform(0.0, 1.0)
     disk = ne.Disk(m, R, L, g, kshape, tuple(k), mud)
-    p, chi = M.make_params(kshape, R, L, g, 1.0, mud, k[0], k[1], k[2])
+    p, chi = M.make_params(kshape, R, L, g, 1.0, mud, (k[0], k[1], k[2]))
     return disk, p, chi
 
 
@@ -162,7 +162,7 @@ def rhs_errors(rolling, stuckset, seed, n_valid=N_VALID):
         sig = np.array([1.0 if gi > 0 else (-1.0 if gi < 0 else float(rng.choice([-1, 1])))
                         for gi in g])
 
-        M.rhs(0.0, y, p, mode, side, sig, stuck, n0[0], n0[1], M.N_FULL, dy, aux)
+        M.rhs(0.0, y, p, M.Contact(mode, side, sig, stuck, n0[0], n0[1]), M.N_FULL, dy, aux)
         ws, sol, der, dyr, auxr, n_dir = reference_rhs(disk, y, side, rolling, sig, stuck, n0)
 
         # ok flag: den > 0 <=> the normal force increases with gravity (N is affine in g)
@@ -195,7 +195,7 @@ def rhs_errors(rolling, stuckset, seed, n_valid=N_VALID):
 
         # N_CORE call fills the same first 10 derivatives
         dy_core[:] = np.nan
-        M.rhs(0.0, y, p, mode, side, sig, stuck, n0[0], n0[1], M.N_CORE, dy_core, aux)
+        M.rhs(0.0, y, p, M.Contact(mode, side, sig, stuck, n0[0], n0[1]), M.N_CORE, dy_core, aux)
         err["core_vs_full"] = max(err["core_vs_full"],
                                   np.max(np.abs(dy_core[:M.N_CORE] - dy[:M.N_CORE])))
 
@@ -336,7 +336,7 @@ def test_energy_balance_holds_past_the_rim_edge_with_the_side_kept(rolling):
         side = -math.copysign(1.0, alpha)      # past the edge, on the rim it came from
         y = random_state(rng, rolling, alpha)
         sig = np.array([float(rng.choice([-1.0, 1.0])) for _ in range(3)])
-        M.rhs(0.0, y, p, mode, side, sig, np.zeros(3, np.int64), 1.0, 0.0, M.N_FULL, dy, aux)
+        M.rhs(0.0, y, p, M.Contact(mode, side, sig, np.zeros(3, np.int64), 1.0, 0.0), M.N_FULL, dy, aux)
         if aux[M.X_OK] != 1.0 or p[M.P_H] < 0.01:
             continue
         n_valid += 1
@@ -474,7 +474,7 @@ def test_steady_rolling_w3sq():
         h = rng.uniform(0.0, 0.5)
         disk = ne.Disk(10 ** rng.uniform(-1, 1), R, 2 * h * R, g, kshape, (0.0, 0.0, 0.0),
                        rng.uniform(0, 1))
-        p, chi = M.make_params(kshape, R, 2 * h * R, g, 1.0, disk.mu_d, 0.0, 0.0, 0.0)
+        p, chi = M.make_params(kshape, R, 2 * h * R, g, 1.0, disk.mu_d, (0.0, 0.0, 0.0))
         beta = rng.uniform(0.02, 1.55)
         side = float(rng.choice([-1.0, 1.0]))
         alpha = side * (0.5 * math.pi - beta)

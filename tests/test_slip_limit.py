@@ -84,8 +84,9 @@ def _flow_fate(y, p, cs, u):
     def rates(nu):
         ys = y[:n].copy()
         ys[M.Y_U1], ys[M.Y_U2] = u * math.cos(nu), u * math.sin(nu)
-        M.rhs(0.0, ys, p, M.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3],
-              math.cos(nu), math.sin(nu), n, dy, aux)
+        contact = M.Contact(M.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3],
+                            math.cos(nu), math.sin(nu))
+        M.rhs(0.0, ys, p, contact, n, dy, aux)
         c, s = math.cos(nu), math.sin(nu)
         return dy[M.Y_U2] * c - dy[M.Y_U1] * s, dy[M.Y_U1] * c + dy[M.Y_U2] * s, aux[M.X_OK]
 
@@ -130,7 +131,7 @@ def test_the_slip_fate_is_the_direction_flows():
         R = math.exp(rng.uniform(math.log(3e-3), math.log(0.3)))
         mu_s = rng.uniform(0.1, 1.5)
         p, _ = M.make_params(float(shape), R, R * math.exp(rng.uniform(math.log(0.01), math.log(2.0))), 9.81,
-                             mu_s, mu_s * rng.uniform(0.05, 1.0), *(R * 10.0 ** rng.uniform(-6, -1.5, size=3)))
+                             mu_s, mu_s * rng.uniform(0.05, 1.0), tuple(R * 10.0 ** rng.uniform(-6, -1.5, size=3)))
         y = np.zeros(M.N_FULL)
         y[M.Y_ALPHA] = rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 1.5)
         y[M.Y_W1:M.Y_W3 + 1] = rng.normal(scale=[0.5, 0.5, 2.0])
@@ -146,7 +147,7 @@ def test_the_slip_fate_is_the_direction_flows():
             continue
         wk = np.zeros((L.N_WORK, L.N_WCOLS))
         istats = np.zeros(L.N_ISTATS, np.int64)
-        fate, nu_exit = C.slip_fate(0.0, y, p, cs, M.N_CORE, wk, istats)
+        fate, nu_exit = C.slip_fate(0.0, y, L.System(p, cs, M.N_CORE, wk, istats))
         got = {C.FATE_ENDS: "ends", C.FATE_PASSES: "passes", C.FATE_SPIRALS_OUT: "spirals_out"}.get(fate)
         assert got == want, (got, want, y[:M.N_CORE], p)
         if got == "passes":

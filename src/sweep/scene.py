@@ -215,7 +215,8 @@ def _validate(raw) -> Scene:
                           allowed="a modal damping ratio in (0, 1)")
 
     params, chi = model.make_params(SHAPES[d["shape"]], d["radius"], d["thickness"], cfg["gravity"],
-                                    c["mu_s"], c["mu_d"], c["k1"], c["k2"], c["k3"])
+                                    c["mu_s"], c["mu_d"], (c["k1"], c["k2"], c["k3"]))
+    params[model.P_UTOL] = so["slip_tol"] * chi / d["radius"]
     params[model.P_WTOL] = so["spin_tol"] * chi
     bmax = max_level(params)
     if st["levels"][0] > bmax:

@@ -11,8 +11,7 @@ from . import outputs
 from .core import model
 from .core.fits import N_DERIVED, summary_fits
 from .core.integrate import integrate
-from .core.layout import (I_FLAT, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX,
-                          S_UTOL)
+from .core.layout import I_FLAT, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX
 from .errors import ConfigError
 from .scene import Scene, load_scene
 
@@ -59,7 +58,6 @@ def _settings(scene: Scene) -> np.ndarray:
     s[S_ATOL] = so["atol"]
     s[S_HMAX] = so["dt"] / scene.chi if so["method"] == "fixed" else 0.0
     s[S_TMAX] = st["t_max"] / scene.chi
-    s[S_UTOL] = so["slip_tol"] * scene.chi / cfg["disk"]["radius"]
     s[S_MAXSTEPS] = st["max_steps"]
     s[S_KIN] = 1.0 if out["kinematics"] else 0.0
     s[S_PEAKS] = 1.0 if out["normal_force_frequency"] else 0.0

@@ -2,13 +2,15 @@
 
     jit.py       `@kernel`: how every kernel here is compiled (njit, cached, no reference counting, NumPy's error model)
     model.py     the Kessler-O'Reilly equations (dimensionless right-hand side, energy, steady motion)
-    layout.py    named slots of the state, contact-state, work, settings and statistics arrays, and
-                 the run's buffers grouped (Work, Record: namedtuples of arrays), a step's dense
-                 output and its kept part (Span, Segment)
+    layout.py    named slots of the state, contact-state, work, settings and statistics arrays and
+                 of the output rows, and the groups the kernels pass (namedtuples): the run's
+                 buffers (Work, Record) and constants (RunConsts), the system a right-hand side
+                 evaluates (System), a step's ends (Point), its dense output and its kept part
+                 (Span, Segment)
     contact.py   contact modes (roll, slide, slaved slip), event functions, discrete updates
     impulse.py   plastic contact impulse (side change)
     tableau.py   DOP853 coefficients
-    dop853.py    step, error norm, dense output, starting step
+    dop853.py    step, error norm, dense output, starting step, for a right-hand side passed in
     roots.py     event location and Phi maxima on the dense output
     tracking.py  halt levels, samples, normal-force maxima, trajectory
     frequency.py precession, ringing and f_hat at the levels over whole precession cycles

@@ -1,5 +1,7 @@
 """The contact as a hybrid system: right-hand side per contact state, event functions, and the
-discrete updates at events. Every decision here reads the state and physical parameters only.
+discrete updates at events. Every decision here reads the state and physical parameters only
+(slip_tol is p[P_UTOL], spin_tol p[P_WTOL]). The kernels take the system they evaluate as one
+group, `sys` (layout.System: parameters, contact state, state size, work buffer, counters).
 
 Modes (docs/model.md, 'Modes, signs and sticking'):
   ROLL    no slip; friction is what rolling needs, inside the static cone |F| <= mu_s Phi.
@@ -17,7 +19,7 @@ falls to slip_tol (slip_fate, slow_slide; docs/model.md, 'Where a slip ends'): i
 direction dynamics carry it to u = 0, else it passes through u = 0 or spirals out; the plastic
 impulse there changes the velocity by O(slip_tol), and no decision depends on slip_tol.
 Moment components (eq. 3.3, Filippov): a free component sticks where omega.a_i reaches 0, or where
-it slows to spin_tol (p[P_WTOL]) and its motion goes on to rest (spin_reaches_rest), if the moment
+it slows to spin_tol and its motion goes on to rest (spin_reaches_rest), if the moment
 can hold it (|sigma needed| < 1); a stuck one is released where |sigma needed| reaches 1.
 """
 from __future__ import annotations
@@ -32,9 +34,10 @@ from .events import (C_CONTACT_LOST, C_FACE, C_MOMENT, C_SIDE, E_CLASS, E_COMPON
 from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
-                     W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT)
-from .model import (N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UFREEZE, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
-                    Y_DSLIDE, Y_U1, Y_U2, Y_W1, energy_from_trig, moment_axes_rates, rhs, sign_rate)
+                     W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
+                     System)
+from .model import (N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
+                    Y_DSLIDE, Y_U1, Y_U2, Y_W1, Contact, energy_from_trig, moment_axes_rates, rhs, sign_rate)
 
 # Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
 # is then 1e-6 R above the table (38 nm for the paper's disk), below any real table's flatness. A disk
@@ -73,7 +76,7 @@ JAMMED = math.inf
 
 
 @kernel
-def slip_floor(t, aux, p, u_tol):
+def slip_floor(t, aux, p):
     """The slip speed (u_hat) at which a slide meets its fate (EV_SLIP_SLOW, slow_slide): slip_tol,
     or where larger the round-off floor of a slip's approach to u = 0 at tau = t: the speed that the
     friction's deceleration, at most ~mu_d Phi (1 + 1/A) (aux: the right-hand side's at the state),
@@ -81,13 +84,13 @@ def slip_floor(t, aux, p, u_tol):
     u = 0 than that turns its direction within steps below the step-size floor (2 EPS tau); its
     fate is taken there instead (slow_slide), an O(floor) change of the velocity."""
     decel = p[P_MUD] * max(aux[X_PHI], 0.0) * (1.0 + 1.0 / p[P_A])
-    return max(u_tol, SLIP_RESOLUTION * EPS * max(abs(t), 1.0) * decel)
+    return max(p[P_UTOL], SLIP_RESOLUTION * EPS * max(abs(t), 1.0) * decel)
 
 
 @kernel
-def slave_speed(aux, p, u_tol):
+def slave_speed(aux, p):
     """Slip speed (u_hat) below which the slip direction is slaved: max(slip_tol, SLAVE_EPS mu_d Phi)."""
-    return max(u_tol, SLAVE_EPS * p[P_MUD] * aux[X_PHI])
+    return max(p[P_UTOL], SLAVE_EPS * p[P_MUD] * aux[X_PHI])
 
 
 @kernel
@@ -110,40 +113,50 @@ def _mode_energy_trig(y, p, cs, s, c):
 
 
 @kernel(inline="always")
-def _model(t, y, p, cs, n, dy, aux, n0x, n0y, istats):
-    """The model's right-hand side for the contact state cs (SLAVED evaluates as sliding)."""
+def _model(t, y, sys, dy, aux, n0x, n0y):
+    """The model's right-hand side for the contact state sys.cs (SLAVED evaluates as sliding), the
+    friction along (n0x, n0y) at slip speeds <= slip_tol; counts the call."""
+    cs = sys.cs
     mode = SLIDE if cs[CS_MODE] != ROLL else ROLL
-    rhs(t, y, p, mode, int(cs[CS_SIDE]), cs[CS_SIG:CS_SIG + 3], cs[CS_STUCK:CS_STUCK + 3],
-        n0x, n0y, n, dy, aux)
-    istats[I_RHS] += 1
+    rhs(t, y, sys.p, Contact(mode, int(cs[CS_SIDE]), cs[CS_SIG:CS_SIG + 3], cs[CS_STUCK:CS_STUCK + 3], n0x, n0y),
+        sys.n, dy, aux)
+    sys.istats[I_RHS] += 1
 
 
 @kernel
-def slip_rates(nu, u, t, y, p, cs, n, dy, aux, ys, istats):
+def model_call(t, y, sys, dy, aux, n0x, n0y):
+    """_model as a call of its own, where a discrete update reads the right-hand side once
+    (start_slip, set_slip): only the evaluations the steps repeat inline the model."""
+    _model(t, y, sys, dy, aux, n0x, n0y)
+
+
+@kernel
+def slip_rates(nu, u, t, y, sys, dy, aux, ys):
     """(cross, dot) of the slip acceleration with the slip direction s = (cos nu, sin nu), for the
     slip vector u s; the full right-hand side is left in dy, aux."""
+    n = sys.n
     c = math.cos(nu)
     s = math.sin(nu)
     for i in range(n):
         ys[i] = y[i]
     ys[Y_U1] = u * c
     ys[Y_U2] = u * s
-    _model(t, ys, p, cs, n, dy, aux, c, s, istats)
+    _model(t, ys, sys, dy, aux, c, s)
     return dy[Y_U2] * c - dy[Y_U1] * s, dy[Y_U1] * c + dy[Y_U2] * s
 
 
 @kernel
-def slaved_direction(nu0, u, t, y, p, cs, n, dy, aux, ys, istats):
+def slaved_direction(nu0, u, t, y, sys, dy, aux, ys):
     """Slip direction near nu0 at which the slip acceleration is parallel to the slip (secant).
 
     Returns nu; dy, aux hold the right-hand side there. aux[X_OK] = 0 if it does not converge.
     """
     xa = nu0
-    ca, da = slip_rates(xa, u, t, y, p, cs, n, dy, aux, ys, istats)
+    ca, da = slip_rates(xa, u, t, y, sys, dy, aux, ys)
     if abs(ca) <= DIR_NOISE * math.hypot(ca, da):
         return xa
     xb = nu0 + 1e-6
-    cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
+    cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
     for _ in range(DIR_MAXIT):
         if abs(cb) <= DIR_NOISE * math.hypot(cb, db) or abs(xb - xa) < DIR_TOL:
             return xb
@@ -155,39 +168,41 @@ def slaved_direction(nu0, u, t, y, p, cs, n, dy, aux, ys, istats):
         xc = xb + max(-DIR_MAXSTEP, min(DIR_MAXSTEP, dx))
         xa, ca = xb, cb
         xb = xc
-        cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
+        cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
     if aux[X_OK] > 0.0:
         aux[X_OK] = 0.0   # (a Painleve flag, -1, from the model stays)
     return xb
 
 
 @kernel
-def friction_along(nu, t, y, p, cs, n, dy, aux, wk, istats):
+def friction_along(nu, t, y, sys, dy, aux):
     """The sliding right-hand side at the state's own slip vector with the friction along s(nu),
-    whatever |u| (the parameters' freeze speed lifted, in wk[W_PFRICTION])."""
+    whatever |u| (the parameters with slip_tol, where the model freezes the friction direction,
+    lifted to inf, in wk[W_PFRICTION])."""
+    p, wk = sys.p, sys.wk
     pf = wk[W_PFRICTION]
     for i in range(N_PARAMS):
         pf[i] = p[i]
-    pf[P_UFREEZE] = math.inf
-    _model(t, y, pf, cs, n, dy, aux, math.cos(nu), math.sin(nu), istats)
+    pf[P_UTOL] = math.inf
+    _model(t, y, System(pf, sys.cs, sys.n, wk, sys.istats), dy, aux, math.cos(nu), math.sin(nu))
 
 
 @kernel
-def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
+def eval_rhs(t, y, sys, dy, aux):
     """d y/d tau and contact quantities (aux) for the contact state cs; counts its model calls."""
+    cs, n, wk = sys.cs, sys.n, sys.wk
     mode = cs[CS_MODE]
     if mode == SLAVED:
         u = math.hypot(y[Y_U1], y[Y_U2])
-        nu = slaved_direction(cs[CS_NU], u, t, y, p, cs, n, dy, aux, wk[W_YSLIP], istats)
+        nu = slaved_direction(cs[CS_NU], u, t, y, sys, dy, aux, wk[W_YSLIP])
         # the sliding equations at the slip vector itself with the friction along s(nu): the slip
         # acceleration, the friction power (mu_d Phi s.u) and the energy stay those of one
         # Newton-Euler motion, so the energy books close however far u turns from s
         # how strongly the direction is attracted: d cross/d nu by a forward difference
         cross0 = dy[Y_U2] * math.cos(nu) - dy[Y_U1] * math.sin(nu)
         ok = aux[X_OK]
-        cross1, _ = slip_rates(nu + DCROSS_DNU, u, t, y, p, cs, n, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP],
-                               istats)
-        friction_along(nu, t, y, p, cs, n, dy, aux, wk, istats)
+        cross1, _ = slip_rates(nu + DCROSS_DNU, u, t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP])
+        friction_along(nu, t, y, sys, dy, aux)
         aux[X_DCROSS] = (cross1 - cross0) / DCROSS_DNU
         aux[X_NU] = nu
         if ok < 0.0:
@@ -197,17 +212,18 @@ def eval_rhs(t, y, p, cs, n, dy, aux, wk, istats):
             # derivative makes the step fail, so steps shrink until EV_SLAVE_LOST is located
             for i in range(n):
                 dy[i] = math.nan
-    elif mode == SLIDE:
-        un = math.hypot(y[Y_U1], y[Y_U2])
-        nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
-        ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
-        _model(t, y, p, cs, n, dy, aux, nx, ny, istats)
     else:
-        _model(t, y, p, cs, n, dy, aux, 1.0, 0.0, istats)
+        # one model call for both smooth modes (one inlined copy of the model)
+        nx, ny = 1.0, 0.0
+        if mode == SLIDE:
+            un = math.hypot(y[Y_U1], y[Y_U2])
+            nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
+            ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
+        _model(t, y, sys, dy, aux, nx, ny)
 
 
 @kernel
-def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
+def onset_direction(t, y, sys, F1, F2):
     """Slip direction at the onset of sliding (u = 0), consistent with the sliding that follows.
 
     The direction s must be one along which the slip then grows: slip acceleration parallel to s
@@ -221,6 +237,7 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
     model.tilt_balance) the accelerations pass through infinity (a bisection once landed on the
     pole itself: docs/model.md, 'Roll -> slip').
     """
+    wk = sys.wk
     dy = wk[W_DYTMP]
     aux = wk[W_AUXTMP]
     ys = wk[W_YSLIP]
@@ -231,17 +248,17 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
     bestd_none = 1e300   # ... and without one
     m = 64
     xa = guess - math.pi
-    ca, _ = slip_rates(xa, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+    ca, _ = slip_rates(xa, 0.0, t, y, sys, dy, aux, ys)
     oka = aux[X_OK]
     for j in range(1, m + 1):
         xb = guess - math.pi + 2.0 * math.pi * j / m
-        cb, _ = slip_rates(xb, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+        cb, _ = slip_rates(xb, 0.0, t, y, sys, dy, aux, ys)
         okb = aux[X_OK]
         if (ca > 0.0) != (cb > 0.0):
             lo, hi, clo, oklo, okhi = xa, xb, ca, oka, okb
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
-                cm, _ = slip_rates(mid, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+                cm, _ = slip_rates(mid, 0.0, t, y, sys, dy, aux, ys)
                 if (cm > 0.0) == (clo > 0.0):
                     lo, clo, oklo = mid, cm, aux[X_OK]
                 else:
@@ -249,7 +266,7 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
                 if hi - lo < 1e-13:
                     break
             root = 0.5 * (lo + hi)
-            _, dr = slip_rates(root, 0.0, t, y, p, cs, n, dy, aux, ys, istats)
+            _, dr = slip_rates(root, 0.0, t, y, sys, dy, aux, ys)
             dist = abs(math.atan2(math.sin(root - guess), math.cos(root - guess)))
             if dr > 0.0 and (oklo > 0.0) == (okhi > 0.0):
                 if oklo > 0.0 and dist < bestd:
@@ -261,49 +278,52 @@ def onset_direction(t, y, p, cs, n, F1, F2, wk, istats):
 
 
 @kernel
-def start_slip(t, y, p, cs, n, wk, istats):
+def start_slip(t, y, sys):
     """ROLL -> SLAVED at zero slip speed, in the onset direction."""
-    _model(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0, istats)
+    cs, wk = sys.cs, sys.wk
+    model_call(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
     F1 = wk[W_AUXTMP, X_F1]
     F2 = wk[W_AUXTMP, X_F2]
     cs[CS_MODE] = SLAVED
-    cs[CS_NU] = onset_direction(t, y, p, cs, n, F1, F2, wk, istats)
+    cs[CS_NU] = onset_direction(t, y, sys, F1, F2)
     y[Y_U1] = 0.0
     y[Y_U2] = 0.0
 
 
 @kernel
-def set_slip(t, y, p, cs, n, u_tol, wk, istats):
+def set_slip(t, y, sys):
     """Contact state for a Cartesian slip vector y[U1:U3]: SLIDE above the slaving speed (or where
     no quasi-static direction is near), else SLAVED with the quasi-static direction nearest the
     slip's own. Returns the outcome that ends the scene (try_slave), else -1."""
+    p, cs, wk = sys.p, sys.cs, sys.wk
     un = math.hypot(y[Y_U1], y[Y_U2])
     nu = math.atan2(y[Y_U2], y[Y_U1])
-    if un > u_tol:
+    if un > p[P_UTOL]:
         cs[CS_MODE] = SLIDE
         cs[CS_NU] = nu
         cs[CS_SLAVE_OFF] = 0.0
-        _model(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0, istats)
-        if un <= slave_speed(wk[W_AUXTMP], p, u_tol):
-            return try_slave(t, y, p, cs, n, wk, istats)
+        model_call(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
+        if un <= slave_speed(wk[W_AUXTMP], p):
+            return try_slave(t, y, sys)
         return -1
     cs[CS_MODE] = SLAVED
-    cs[CS_NU] = slaved_direction(nu, un, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP], istats)
+    cs[CS_NU] = slaved_direction(nu, un, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP])
     return -1
 
 
 @kernel
-def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
+def attracting_direction(nu, u, t, y, sys):
     """The quasi-static slip direction that the direction dynamics d nu/d tau = cross(nu)/u carry nu
     to: followed from nu in the direction of sign(cross) to the first sign change (64 steps on the
     circle), then bisected to 1e-13 rad. NaN if cross keeps its sign on the whole circle (the slip
     spirals into u = 0); JAMMED (inf) if what stops it is not a root of cross but the Painleve
     singularity, where the e1 balance's coefficient of Phi falls to 0 and Phi grows without bound
     (cross changes sign through a pole; beyond it the contact law has no solution)."""
+    wk = sys.wk
     dy = wk[W_DYTMP]
     aux = wk[W_AUXTMP]
     ys = wk[W_YSLIP]
-    ca, da = slip_rates(nu, u, t, y, p, cs, n, dy, aux, ys, istats)
+    ca, da = slip_rates(nu, u, t, y, sys, dy, aux, ys)
     if aux[X_OK] < 0.0:
         return JAMMED
     if ca == 0.0:
@@ -312,19 +332,19 @@ def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
     xa = nu
     for j in range(1, 65):
         xb = nu + j * step
-        cb, db = slip_rates(xb, u, t, y, p, cs, n, dy, aux, ys, istats)
+        cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
         if (cb > 0.0) != (ca > 0.0) or aux[X_OK] < 0.0:
             lo, hi = xa, xb
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
-                cm, dm = slip_rates(mid, u, t, y, p, cs, n, dy, aux, ys, istats)
+                cm, dm = slip_rates(mid, u, t, y, sys, dy, aux, ys)
                 if (cm > 0.0) == (ca > 0.0) and aux[X_OK] >= 0.0:
                     lo = mid
                 else:
                     hi = mid
                 if abs(hi - lo) < 1e-13:
                     break
-            slip_rates(hi, u, t, y, p, cs, n, dy, aux, ys, istats)
+            slip_rates(hi, u, t, y, sys, dy, aux, ys)
             if aux[X_OK] < 0.0:
                 return JAMMED
             return 0.5 * (lo + hi)
@@ -333,14 +353,15 @@ def attracting_direction(nu, u, t, y, p, cs, n, wk, istats):
 
 
 @kernel
-def try_slave(t, y, p, cs, n, wk, istats):
+def try_slave(t, y, sys):
     """SLIDE -> SLAVED onto the attracting quasi-static direction of the slip; where there is none
     (a spiralling slip), or where the slip points against it (a slip passing by u = 0), it stays in
     SLIDE, and this hand-over is off until the slip is fast again (EV_SLIP_FAST re-arms it).
     Returns the outcome that ends the scene (PAINLEVE where the direction dynamics carry the slip
     into the Painleve singularity: see attracting_direction), else -1."""
+    p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     u = math.hypot(y[Y_U1], y[Y_U2])
-    root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, p, cs, n, wk, istats)
+    root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, sys)
     if root == JAMMED:
         return oc.PAINLEVE
     if math.isnan(root):
@@ -376,7 +397,7 @@ SPIRAL_POINTS = 64
 
 
 @kernel
-def slip_fate(t, y, p, cs, n, wk, istats):
+def slip_fate(t, y, sys):
     """Where a slide goes from a slow slip, decided by the slip's direction dynamics at the state
     (docs/model.md, 'Where a slip ends'): (fate, nu), fate one of FATE_*, nu the direction in which a
     passing slip leaves u = 0 (FATE_PASSES), else NaN.
@@ -391,21 +412,22 @@ def slip_fate(t, y, p, cs, n, wk, istats):
     ln|u| changes by the integral of rad/|cross| over each turn: < 0, the slip spirals into u = 0
     in finite time (it ends); > 0, it spirals out. None of this reads slip_tol: the fate is the same
     from every slower slip of the same slide, to the slip's own O(|u|) change of the state."""
+    wk = sys.wk
     dy = wk[W_DYTMP]
     aux = wk[W_AUXTMP]
     ys = wk[W_YSLIP]
     u = math.hypot(y[Y_U1], y[Y_U2])
-    root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, p, cs, n, wk, istats)
+    root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, sys)
     if root == JAMMED:
         return FATE_JAMMED, math.nan
     if not math.isnan(root):
-        _, rad = slip_rates(root, u, t, y, p, cs, n, dy, aux, ys, istats)
+        _, rad = slip_rates(root, u, t, y, sys, dy, aux, ys)
         if rad > 0.0:
             return FATE_PASSES, root
         return FATE_ENDS, math.nan
     turn = 0.0
     for j in range(SPIRAL_POINTS):
-        cross, rad = slip_rates(2.0 * math.pi * j / SPIRAL_POINTS, u, t, y, p, cs, n, dy, aux, ys, istats)
+        cross, rad = slip_rates(2.0 * math.pi * j / SPIRAL_POINTS, u, t, y, sys, dy, aux, ys)
         turn += rad / abs(cross)
     if turn > 0.0:
         return FATE_SPIRALS_OUT, math.nan
@@ -413,7 +435,7 @@ def slip_fate(t, y, p, cs, n, wk, istats):
 
 
 @kernel
-def slow_slide(t, y, p, cs, n, wk, istats):
+def slow_slide(t, y, sys):
     """A slide whose speed has reached slip_tol (EV_SLIP_SLOW, or a discrete update that left it
     there), by its fate (slip_fate): one that ends is ended by the plastic contact impulse (end_slip);
     one that passes by u = 0 goes through it, its remaining slip removed by the same impulse, and
@@ -421,11 +443,12 @@ def slow_slide(t, y, p, cs, n, wk, istats):
     one that spirals out slides on, and this event is off until the slip is fast again. The impulse
     changes the velocity by O(slip_tol): the answer converges at first order as slip_tol -> 0, and no
     decision moves with it. Returns the outcome that ends the scene (PAINLEVE), else -1."""
-    fate, nu = slip_fate(t, y, p, cs, n, wk, istats)
+    p, cs, wk = sys.p, sys.cs, sys.wk
+    fate, nu = slip_fate(t, y, sys)
     if fate == FATE_JAMMED:
         return oc.PAINLEVE
     if fate == FATE_ENDS:
-        end_slip(y, p, cs, wk, istats)
+        end_slip(y, sys)
     elif fate == FATE_PASSES:
         side = int(cs[CS_SIDE])
         y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
@@ -440,7 +463,7 @@ def slow_slide(t, y, p, cs, n, wk, istats):
 
 
 @kernel
-def confirm_slaved(t, y, p, cs, n, wk, istats):
+def confirm_slaved(t, y, sys):
     """SLAVED after a discrete update (integrate.run calls it after every event): the slaved
     direction of the contact state the update left.
 
@@ -453,12 +476,13 @@ def confirm_slaved(t, y, p, cs, n, wk, istats):
     failed (step_size_underflow). Returns the outcome that ends the scene (PAINLEVE, see
     attracting_direction), else -1.
     """
+    cs, wk = sys.cs, sys.wk
     u = math.hypot(y[Y_U1], y[Y_U2])
-    nu = slaved_direction(cs[CS_NU], u, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP], istats)
+    nu = slaved_direction(cs[CS_NU], u, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP])
     if wk[W_AUXTMP, X_OK] != 0.0:
         cs[CS_NU] = nu
         return -1
-    root = attracting_direction(cs[CS_NU], u, t, y, p, cs, n, wk, istats)
+    root = attracting_direction(cs[CS_NU], u, t, y, sys)
     if root == JAMMED:
         return oc.PAINLEVE
     if math.isnan(root):
@@ -470,15 +494,16 @@ def confirm_slaved(t, y, p, cs, n, wk, istats):
 
 
 @kernel
-def cone_violated(t, y, p, cs, n, wk, istats):
+def cone_violated(t, y, sys):
     """Rolling: the friction needed lies outside the static cone |F| <= mu_s Phi."""
-    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+    p, wk = sys.p, sys.wk
+    eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     aux = wk[W_AUXTMP]
     return aux[X_PHI] > 0.0 and p[P_MUS] * aux[X_PHI] < math.hypot(aux[X_F1], aux[X_F2])
 
 
 @kernel
-def decision_rhs(i, t, y, p, cs, n, dy, aux, wk, istats):
+def decision_rhs(i, t, y, sys, dy, aux):
     """The right-hand side on which a discrete decision at an event reads the moments (to dy, aux),
     with component i treated as stuck (i < 0: the contact state as it is; cs is left as it was).
 
@@ -490,45 +515,48 @@ def decision_rhs(i, t, y, p, cs, n, dy, aux, wk, istats):
     confirm_slaved looks for it after the update) is where the direction relaxes to, not where it
     is; a secant that fails there left its last iterate, a direction set by the iteration, to
     decide the stick (docs/model.md, 'The moment a decision reads in a slaved slip')."""
+    cs, wk = sys.cs, sys.wk
     slaved = cs[CS_MODE] == SLAVED
     nu = cs[CS_NU]
     if slaved:
-        nu = slaved_direction(nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, p, cs, n, dy, aux, wk[W_YSLIP], istats)
+        nu = slaved_direction(nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, sys, dy, aux, wk[W_YSLIP])
         if aux[X_OK] == 0.0:
             nu = math.atan2(y[Y_U2], y[Y_U1])
     was = cs[CS_STUCK + i] if i >= 0 else 0.0
     if i >= 0:
         cs[CS_STUCK + i] = 1.0
     if slaved:
-        friction_along(nu, t, y, p, cs, n, dy, aux, wk, istats)
+        friction_along(nu, t, y, sys, dy, aux)
     else:
-        eval_rhs(t, y, p, cs, n, dy, aux, wk, istats)
+        eval_rhs(t, y, sys, dy, aux)
     if i >= 0:
         cs[CS_STUCK + i] = was
 
 
 @kernel
-def needed_sigma(i, t, y, p, cs, n, dy, aux, wk, istats):
+def needed_sigma(i, t, y, sys, dy, aux):
     """sigma_i of the moment that holds omega.a_i where it is (component i treated as stuck; its
     contact state is left as it was; decision_rhs). The right-hand side goes to dy, aux."""
-    decision_rhs(i, t, y, p, cs, n, dy, aux, wk, istats)
+    decision_rhs(i, t, y, sys, dy, aux)
     return aux[X_SIG1 + i]
 
 
 @kernel
-def stick_or_flip(i, t, y, p, cs, n, wk, istats):
+def stick_or_flip(i, t, y, sys):
     """At omega.a_i = 0: stick if the moment can hold it (|sigma needed| <= 1), else flip its sign
     to the one the motion will take."""
-    need = needed_sigma(i, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+    cs, wk, istats = sys.cs, sys.wk, sys.istats
+    need = needed_sigma(i, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     if abs(need) < 1.0:
         cs[CS_STUCK + i] = 1.0
+        istats[I_STICK] += 1
         return
     cs[CS_STUCK + i] = 0.0
     cs[CS_SIG + i] = 1.0 if need > 0.0 else -1.0
 
 
 @kernel
-def spin_reaches_rest(i, t, y, p, cs, n, wk, istats):
+def spin_reaches_rest(i, t, y, sys):
     """Free component i slowing through |omega.a_i| = spin_tol: does it go on to rest, omega.a_i = 0,
     rather than turn back above it (docs/model.md, 'Sticking at spin_tol')? Read from the state:
     g = sigma_i omega.a_i and its first three derivatives along the motion, g1 exact from the
@@ -537,6 +565,7 @@ def spin_reaches_rest(i, t, y, p, cs, n, wk, istats):
     before its first minimum, or not. Where the motion turns back, its minimum lies above 0 and the
     exact Filippov rule never sticks it; where it reaches 0, it gets the stick test there and is
     stuck at spin_tol instead, O(spin_tol) early. Uses wk[W_SCRATCH:W_SCRATCH + 6]."""
+    cs, n, wk = sys.cs, sys.n, sys.wk
     f0 = wk[W_SCRATCH]
     fp = wk[W_SCRATCH + 1]
     fm = wk[W_SCRATCH + 2]
@@ -545,25 +574,25 @@ def spin_reaches_rest(i, t, y, p, cs, n, wk, istats):
     auxs = wk[W_SCRATCH + 5]
     sig = cs[CS_SIG + i]
     d = SPIN_DIFF
-    eval_rhs(t, y, p, cs, n, f0, auxs, wk, istats)
+    eval_rhs(t, y, sys, f0, auxs)
     g = sig * moment_axes_rates(y)[i]
     g1 = sig * sign_rate(i, y, f0)
     if not g1 < 0.0:
         return False
     for j in range(n):
         ys[j] = y[j] + d * f0[j]
-    eval_rhs(t + d, ys, p, cs, n, fp, auxs, wk, istats)
+    eval_rhs(t + d, ys, sys, fp, auxs)
     for j in range(n):
         ys[j] = y[j] - d * f0[j]
-    eval_rhs(t - d, ys, p, cs, n, fm, auxs, wk, istats)
+    eval_rhs(t - d, ys, sys, fm, auxs)
     # the motion at tau +- d to O(d^3): y +- d f + d^2/2 f', f' by the central difference
     for j in range(n):
         ys[j] = y[j] + d * f0[j] + 0.25 * d * (fp[j] - fm[j])
-    eval_rhs(t + d, ys, p, cs, n, dys, auxs, wk, istats)
+    eval_rhs(t + d, ys, sys, dys, auxs)
     up = sig * sign_rate(i, ys, dys)
     for j in range(n):
         ys[j] = y[j] - d * f0[j] + 0.25 * d * (fp[j] - fm[j])
-    eval_rhs(t - d, ys, p, cs, n, dys, auxs, wk, istats)
+    eval_rhs(t - d, ys, sys, dys, auxs)
     down = sig * sign_rate(i, ys, dys)
     g2 = (up - down) / (2.0 * d)
     g3 = (up - 2.0 * g1 + down) / (d * d)
@@ -598,16 +627,18 @@ def cubic_reaches_zero(g, g1, g2, g3):
 
 
 @kernel
-def stick_at_spin_tol(i, t, y, p, cs, n, wk, istats):
+def stick_at_spin_tol(i, t, y, sys):
     """A free component has slowed to |omega.a_i| = spin_tol: if it goes on to rest
     (spin_reaches_rest) and the moment can hold it there (|sigma needed| < 1, the stick test of
     stick_or_flip), it sticks, and the rate left is stopped by an impulsive contact moment
     (impulse.stop_axis_rate, its energy booked to k_i). Else it stays free with its sign (it will
     cross 0, where the Filippov rule decides, or speed up again). Returns whether it stuck."""
-    if spin_reaches_rest(i, t, y, p, cs, n, wk, istats) \
-            and abs(needed_sigma(i, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)) < 1.0:
+    p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
+    if spin_reaches_rest(i, t, y, sys) \
+            and abs(needed_sigma(i, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])) < 1.0:
         cs[CS_STUCK + i] = 1.0
         y[Y_DK1 + i] += stop_axis_rate(y, p, cs, i, wk[W_SCRATCH:W_SCRATCH + 7])
+        istats[I_STICK] += 1
         return True
     return False
 
@@ -636,7 +667,7 @@ def release_moved(y, p, cs, g_before):
 
 
 @kernel
-def settle_signs(t, y, p, cs, n, wk, istats, own):
+def settle_signs(t, y, sys, own):
     """After a discrete update, every moment component is made consistent with the new state.
 
     A stuck component whose holding moment now exceeds the limit (|sigma needed| > 1: the update
@@ -650,9 +681,10 @@ def settle_signs(t, y, p, cs, n, wk, istats, own):
     lift-off). Every component is looked at until none changes: a test that changes nothing does
     not stop the others' (three components, so a few passes).
     """
+    p, cs, wk = sys.p, sys.cs, sys.wk
     k = (p[P_K1], p[P_K2], p[P_K3])
     for _ in range(6):
-        decision_rhs(-1, t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+        decision_rhs(-1, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
         found = -1
         for i in range(3):
             if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 1.0 and i != own \
@@ -667,7 +699,7 @@ def settle_signs(t, y, p, cs, n, wk, istats, own):
             if found < 0 and k[i] > 0.0 and cs[CS_STUCK + i] == 0.0 and i != own \
                     and cs[CS_SIG + i] * g[i] <= 0.0:
                 sig_before = cs[CS_SIG + i]
-                stick_or_flip(i, t, y, p, cs, n, wk, istats)
+                stick_or_flip(i, t, y, sys)
                 if cs[CS_STUCK + i] == 1.0 or cs[CS_SIG + i] != sig_before:
                     found = i
         if found < 0:
@@ -675,9 +707,10 @@ def settle_signs(t, y, p, cs, n, wk, istats, own):
 
 
 @kernel
-def consistent_signs(t, y, p, cs, n, wk, istats):
+def consistent_signs(t, y, sys):
     """Every free moment sign agrees with omega.a_i; an exact zero gets the stick test."""
-    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+    p, cs, wk = sys.p, sys.cs, sys.wk
+    eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     k = (p[P_K1], p[P_K2], p[P_K3])
     for i in range(3):
         if k[i] > 0.0 and cs[CS_STUCK + i] == 0.0:
@@ -687,7 +720,7 @@ def consistent_signs(t, y, p, cs, n, wk, istats):
             elif g < 0.0:
                 cs[CS_SIG + i] = -1.0
             else:
-                stick_or_flip(i, t, y, p, cs, n, wk, istats)
+                stick_or_flip(i, t, y, sys)
 
 
 @kernel
@@ -699,7 +732,7 @@ def reads_forces(k):
 
 
 @kernel
-def state_event_value(k, t, y, p, cs, u_tol, level_e):
+def state_event_value(k, t, y, p, cs, lev):
     """g_k of an active event that does not read the forces (not reads_forces(k))."""
     if k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
         i = EVENTS[k, E_COMPONENT]
@@ -710,11 +743,11 @@ def state_event_value(k, t, y, p, cs, u_tol, level_e):
         return cs[CS_SIDE] * y[Y_ALPHA]
     if k == EV_FACE:
         return (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
-    return mode_energy(y, p, cs) - level_e   # EV_LEVEL
+    return mode_energy(y, p, cs) - lev   # EV_LEVEL
 
 
 @kernel
-def event_values(t, y, aux, p, cs, u_tol, level_e, g):
+def event_values(t, y, aux, p, cs, lev, g):
     """g[k] for every event k (inf where not active). `aux` must belong to `y`."""
     for k in range(N_EVENTS):
         g[k] = math.inf
@@ -733,73 +766,77 @@ def event_values(t, y, aux, p, cs, u_tol, level_e, g):
         g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
     elif mode == SLIDE:
         if cs[CS_SLAVE_OFF] != SLOW_OFF:
-            g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p, u_tol)
+            g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p)
         if cs[CS_SLAVE_OFF] == 0.0:
-            g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(aux, p, u_tol)
+            g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(aux, p)
         else:
             # the hand-over is off (no quasi-static direction to settle on, or the slip passed it
             # by) until the slip is fast again: SLAVE_EXIT times the slaving speed, as a slaved
             # slip's exit; a slip that reverses and later decays is handed over then
-            g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
+            g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p) - math.hypot(y[Y_U1], y[Y_U2])
     else:
         # the slip along the slaved direction at this state (the RHS's): reaches 0 where the slip ends
         g[EV_SLIP_STOP] = y[Y_U1] * math.cos(aux[X_NU]) + y[Y_U2] * math.sin(aux[X_NU])
-        g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p, u_tol) - math.hypot(y[Y_U1], y[Y_U2])
+        g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p) - math.hypot(y[Y_U1], y[Y_U2])
         g[EV_SLAVE_LOST] = -aux[X_DCROSS]
     g[EV_CONTACT] = aux[X_PHI]
-    g[EV_SIDE] = state_event_value(EV_SIDE, t, y, p, cs, u_tol, level_e)
-    g[EV_FACE] = state_event_value(EV_FACE, t, y, p, cs, u_tol, level_e)
-    if not math.isnan(level_e):
-        g[EV_LEVEL] = mode_energy_at(y, aux, p, cs) - level_e   # state_event_value's, from aux
+    g[EV_SIDE] = state_event_value(EV_SIDE, t, y, p, cs, lev)
+    g[EV_FACE] = state_event_value(EV_FACE, t, y, p, cs, lev)
+    if not math.isnan(lev):
+        g[EV_LEVEL] = mode_energy_at(y, aux, p, cs) - lev   # state_event_value's, from aux
 
 
 @kernel
-def end_slip(y, p, cs, wk, istats):
+def end_slip(y, sys):
     """SLIDE -> ROLL at slip_tol: a plastic contact impulse removes the slip (its energy goes to
     sliding)."""
+    p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
     side = int(cs[CS_SIDE])
     y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
     cs[CS_MODE] = ROLL
 
 
 @kernel
-def moment_event(k, t, y, p, cs, n, wk, istats):
+def moment_event(k, t, y, sys):
     """The update of one dry-friction moment component at its event k: a sign flip or a stick
     (EV_SIGN*), a stick where neither sign holds (EV_AGAINST*), a stick at spin_tol (EV_SPIN*) or a
     release (EV_UNSTICK*). Returns (own, held): own, the component this event put on its surface
     (settle_signs leaves it; -1: none); held, True where a stop at spin_tol holds the stuck
     components, so that the rates after it are those that release_moved compares with."""
+    cs, wk, istats = sys.cs, sys.wk, sys.istats
     i = EVENTS[k, E_COMPONENT]
     if k <= EV_SIGN3:
-        stick_or_flip(i, t, y, p, cs, n, wk, istats)
+        stick_or_flip(i, t, y, sys)
         return -1, False
     if k >= EV_AGAINST1:
         # neither sign holds (the one just set fails at once, the other opposes the motion):
         # the Filippov solution stays on omega.a_i = 0
         sig_failed = cs[CS_SIG + i]
-        stick_or_flip(i, t, y, p, cs, n, wk, istats)
+        stick_or_flip(i, t, y, sys)
         if cs[CS_STUCK + i] == 0.0 and cs[CS_SIG + i] == sig_failed:
             cs[CS_STUCK + i] = 1.0
+            istats[I_STICK] += 1
             return i, False
         return -1, False
     if EV_SPIN1 <= k <= EV_SPIN3:
-        return -1, stick_at_spin_tol(i, t, y, p, cs, n, wk, istats)
-    eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
+        return -1, stick_at_spin_tol(i, t, y, sys)
+    eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     cs[CS_SIG + i] = 1.0 if wk[W_AUXTMP, X_SIG1 + i] > 0.0 else -1.0
     cs[CS_STUCK + i] = 0.0
     return i, False
 
 
 @kernel
-def slip_event(k, t, y, p, cs, n, wk, istats):
+def slip_event(k, t, y, sys):
     """The update of the contact's slip at its event k (EV_CONE .. EV_SLAVE, EV_SLAVE_LOST): the
     onset of a slip, its end by slip_tol or along the slaved direction, the hand-over to and from
     the slaved direction. Returns the outcome code that ends the scene, or -1."""
+    p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
     if k == EV_CONE:
-        start_slip(t, y, p, cs, n, wk, istats)
+        start_slip(t, y, sys)
         cs[CS_SLAVE_OFF] = 0.0
     elif k == EV_SLIP_SLOW:
-        return slow_slide(t, y, p, cs, n, wk, istats)
+        return slow_slide(t, y, sys)
     elif k == EV_SLIP_STOP:
         # the slip speed along the slaved direction is 0; what the integration left of the slip
         # (its error) is removed by the plastic impulse, so the energy books stay exact
@@ -810,7 +847,7 @@ def slip_event(k, t, y, p, cs, n, wk, istats):
         cs[CS_MODE] = SLIDE
         cs[CS_SLAVE_OFF] = 0.0
     elif k == EV_SLAVE:
-        return try_slave(t, y, p, cs, n, wk, istats)
+        return try_slave(t, y, sys)
     elif k == EV_SLAVE_LOST:
         # the quasi-static direction folds away: the slip direction follows its own dynamics
         cs[CS_MODE] = SLIDE
@@ -819,48 +856,20 @@ def slip_event(k, t, y, p, cs, n, wk, istats):
 
 
 @kernel
-def apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
+def apply_event(k, t, y, sys, fstats):
     """Discrete update at a located event k (state y at the event, changed in place): the event's
     own update (moment_event, slip_event, side_change), then what every update owes the state
-    (settle_event); then the phases it begins are counted (count_phases).
+    (settle_event). The caller counts the roll<->slip transition it makes (count_transition); stick
+    phases are counted where a component sticks.
 
     Returns the outcome code that ends the scene, or -1 to continue. The caller re-evaluates the
     right-hand side and the event functions afterwards.
     """
-    rolling = cs[CS_MODE] == ROLL
-    stuck1, stuck2, stuck3 = cs[CS_STUCK], cs[CS_STUCK + 1], cs[CS_STUCK + 2]
-    code = update_at_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats)
-    count_phases(rolling, stuck1, stuck2, stuck3, cs, istats)
-    return code
-
-
-@kernel
-def count_phases(rolling, stuck1, stuck2, stuck3, cs, istats):
-    """Count what a discrete update began, from the contact state before it (rolling: whether the
-    contact rolled; stuck*: the moment components held) and after it (cs): a roll<->slip transition
-    where the contact rolls on one side of the update and slips on the other, a stick phase for each
-    component held after it and not before. A rolling phase, a slip or a stick that begins and ends
-    within one update lasts no time: a slide that ends and, its cone violated, slips again at once
-    has passed through u = 0, and counts as the passage it is, whether its fate was read as an end
-    or as a passage (docs/model.md, 'Where a slip ends')."""
-    if rolling != (cs[CS_MODE] == ROLL):
-        istats[I_TRANS] += 1
-    if stuck1 == 0.0 and cs[CS_STUCK] == 1.0:
-        istats[I_STICK] += 1
-    if stuck2 == 0.0 and cs[CS_STUCK + 1] == 1.0:
-        istats[I_STICK] += 1
-    if stuck3 == 0.0 and cs[CS_STUCK + 2] == 1.0:
-        istats[I_STICK] += 1
-
-
-@kernel
-def update_at_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
-    """The discrete update of apply_event, without the counting."""
     g_before = moment_axes_rates(y)
     own = -1   # the component this event puts on its surface (settle_signs)
     cls = EVENTS[k, E_CLASS]
     if cls == C_MOMENT:
-        own, held = moment_event(k, t, y, p, cs, n, wk, istats)
+        own, held = moment_event(k, t, y, sys)
         if held:
             g_before = moment_axes_rates(y)   # the stop holds the stuck components: they stay stuck
     elif cls == C_CONTACT_LOST:
@@ -868,48 +877,60 @@ def update_at_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats):
     elif cls == C_FACE:
         return oc.FACE_CONTACT   # the caller records it as a halt
     elif cls == C_SIDE:
-        return side_change(t, y, p, cs, n, u_tol, wk, istats, fstats)
+        return side_change(t, y, sys, fstats)
     else:
-        code = slip_event(k, t, y, p, cs, n, wk, istats)
+        code = slip_event(k, t, y, sys)
         if code >= 0:
             return code
-    return settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own)
+    return settle_event(t, y, sys, g_before, own)
 
 
 @kernel
-def settle_event(t, y, p, cs, n, u_tol, wk, istats, g_before, own):
+def count_transition(rolling, cs, istats):
+    """A roll<->slip transition where the contact rolled before a discrete update (rolling) and
+    slips after it (cs), or the reverse. A slide that ends and, its cone violated, slips again at
+    once within one update never rolled: it has passed through u = 0, and counts as the passage it
+    is, whether its fate was read as an end or as a passage (docs/model.md, 'Where a slip ends')."""
+    if rolling != (cs[CS_MODE] == ROLL):
+        istats[I_TRANS] += 1
+
+
+@kernel
+def settle_event(t, y, sys, g_before, own):
     """What every discrete update owes the state: a slide at or below slip_tol meets its fate
     (slow_slide); the moment
     components that the update moved are released (release_moved: g_before, omega.a_i before it)
     and every sign made consistent (settle_signs, leaving component own); a rolling state left
     outside the static cone starts to slip. Returns the outcome that ends the scene, else -1."""
+    p, cs, wk = sys.p, sys.cs, sys.wk
     if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF:
-        eval_rhs(t, y, p, cs, n, wk[W_DYTMP], wk[W_AUXTMP], wk, istats)
-        if math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, wk[W_AUXTMP], p, u_tol):
+        eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+        if math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, wk[W_AUXTMP], p):
             # the slip reached its floor within the located event's bracket (a stiff slip decays
             # by orders of magnitude in 1e-11 tau): its own event can no longer happen
-            code = slow_slide(t, y, p, cs, n, wk, istats)
+            code = slow_slide(t, y, sys)
             if code >= 0:
                 return code
     release_moved(y, p, cs, g_before)
-    settle_signs(t, y, p, cs, n, wk, istats, own)
+    settle_signs(t, y, sys, own)
     # a rolling state must be admissible after every discrete update: a moment sign that flips or
     # sticks changes the friction that rolling needs, and it may jump outside the static cone
-    if cs[CS_MODE] == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
-        start_slip(t, y, p, cs, n, wk, istats)
+    if cs[CS_MODE] == ROLL and cone_violated(t, y, sys):
+        start_slip(t, y, sys)
         # the slip changes the moments the stuck components need
         # (a component the Filippov rule held is tested again: the slip changed its dynamics)
-        settle_signs(t, y, p, cs, n, wk, istats, own if own >= 0 and cs[CS_STUCK + own] == 0.0 else -1)
+        settle_signs(t, y, sys, own if own >= 0 and cs[CS_STUCK + own] == 0.0 else -1)
     return -1
 
 
 @kernel
-def side_change(t, y, p, cs, n, u_tol, wk, istats, fstats):
+def side_change(t, y, sys, fstats):
     """alpha = 0: plastic impact of the other rim edge, which releases every held moment component;
     after it each free sign is that of its omega.a_i, an exact 0 gets the stick test
     (consistent_signs), and a rolling contact outside the static cone starts to slip. Ends the scene
     (line contact) when no rotation towards the new side is left, or when two impacts come within
     ZENO_DTAU (the rocking between the edges has collapsed into a Zeno sequence of impacts)."""
+    p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
     mode = cs[CS_MODE]
     side = cs[CS_SIDE]
     loss = project_velocity(y, p, int(side), mode != ROLL, int(-side), mode != ROLL, wk[W_SCRATCH:W_SCRATCH + 7])
@@ -924,10 +945,10 @@ def side_change(t, y, p, cs, n, u_tol, wk, istats, fstats):
     if y[Y_W1] * cs[CS_SIDE] <= 0.0 or zeno:
         return oc.LINE_CONTACT   # the disk stands on its flat edge
     if mode != ROLL:
-        code = set_slip(t, y, p, cs, n, u_tol, wk, istats)
+        code = set_slip(t, y, sys)
         if code >= 0:
             return code
-    consistent_signs(t, y, p, cs, n, wk, istats)
-    if mode == ROLL and cone_violated(t, y, p, cs, n, wk, istats):
-        start_slip(t, y, p, cs, n, wk, istats)
+    consistent_signs(t, y, sys)
+    if mode == ROLL and cone_violated(t, y, sys):
+        start_slip(t, y, sys)
     return -1

@@ -2,14 +2,23 @@
 
 Step-size control follows Hairer, Norsett & Wanner (1993), II.4 and II.10: the error norm of
 dop853 (5th/3rd-order embedded estimates), safety 0.9, factor in [0.2, 10], exponent -1/8.
-The right-hand side is `contact.eval_rhs` (the model for the current contact state); stage counts
+The stepper does not know the physics: the right-hand side comes in as a kernel argument,
+`rhs(t, y, sys, dy, aux)` (dy = d y/d t and its aux at (t, y); the integrator passes
+contact.eval_rhs), with `sys` (layout.System) passed through to it; of sys the stepper reads only
+the state size n and the work buffer wk (its rows W_YTMP, W_DYTMP, W_AUXTMP, W_DELTA). Stage counts
 come from the tableau (tableau.py).
+
+The kernels that call rhs (stages, rk_step, dense_coeffs, initial_step) are inlined into their
+callers (inline="always"). numba compiles a kernel passed as a value into a compiled call as the
+address of its Python object, and a library holding such an address cannot be cached: without the
+inlining, integrate.run and every caller of these kernels compiled afresh in each process (and
+core.jit's cache locator failed on numba's warning). Inlined, the argument is only ever the name
+of the function called, and the callers cache as before.
 """
 from __future__ import annotations
 
 import math
 
-from .contact import eval_rhs
 from .jit import kernel
 from .layout import W_AUXTMP, W_DELTA, W_DYTMP, W_YTMP
 from .model import N_CORE, Y_ALPHA, Y_U1, Y_U2
@@ -23,13 +32,14 @@ ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8)
 N_DENSE = 7                 # rows of dense-output coefficients
 
 
-@kernel
-def stages(first, last, t, y, h, n, p, cs, K, wk, istats):
+@kernel(inline="always")
+def stages(rhs, first, last, t, y, h, sys, K):
     """Evaluate RK stages first..last-1 into K (stage s uses K[0:s] and row s of the tableau).
 
     The sums run stage by stage over whole rows of K (contiguous, vectorisable) and skip the
     tableau's zeros; per component they add the same terms in the same order as a plain dot product.
     """
+    n, wk = sys.n, sys.wk
     ytmp = wk[W_YTMP]
     for s in range(first, last):
         for i in range(n):
@@ -41,27 +51,30 @@ def stages(first, last, t, y, h, n, p, cs, K, wk, istats):
                 ytmp[i] += a * K[j, i]
         for i in range(n):
             ytmp[i] = y[i] + h * ytmp[i]
-        eval_rhs(t + RK_C[s] * h, ytmp, p, cs, n, K[s], wk[W_AUXTMP], wk, istats)
+        rhs(t + RK_C[s] * h, ytmp, sys, K[s], wk[W_AUXTMP])
 
 
-@kernel
-def rk_step(t, y, f, h, n, p, cs, K, y_new, f_new, aux_new, wk, istats):
-    """One DOP853 step from (t, y, f): y_new, and f_new = K[12] = f(t + h, y_new); the increment
-    y_new - y before rounding in wk[W_DELTA]."""
+@kernel(inline="always")
+def rk_step(rhs, t, h, start, end, sys, K):
+    """One DOP853 step of size h from start (layout.Point: y, f at t): end.y, and end.f = K[12] =
+    f(t + h, end.y) with its aux end.aux; the increment end.y - start.y before rounding in
+    sys.wk[W_DELTA]."""
+    n = sys.n
+    y, f, y_new, f_new = start.y, start.f, end.y, end.f
     for i in range(n):
         K[0, i] = f[i]
-    stages(1, N_STAGES, t, y, h, n, p, cs, K, wk, istats)
+    stages(rhs, 1, N_STAGES, t, y, h, sys, K)
     for i in range(n):
         y_new[i] = 0.0
     for j in B_COLS:
         b = RK_B[j]
         for i in range(n):
             y_new[i] += b * K[j, i]
-    delta = wk[W_DELTA]
+    delta = sys.wk[W_DELTA]
     for i in range(n):
         delta[i] = h * y_new[i]
         y_new[i] = y[i] + delta[i]
-    eval_rhs(t + h, y_new, p, cs, n, f_new, aux_new, wk, istats)
+    rhs(t + h, y_new, sys, f_new, end.aux)
     for i in range(n):
         K[N_STAGES, i] = f_new[i]
 
@@ -119,15 +132,17 @@ def accepted_step_factor(err, after_reject):
     return min(fac, 1.0) if after_reject else fac
 
 
-@kernel
-def dense_coeffs(t, y, h, y_new, f_new, n, p, cs, K, F, wk, istats):
-    """Coefficients F[0:7] of the continuous extension (3 extra RHS calls: stages 13..15)."""
-    stages(N_STAGES + 1, N_STAGES_EXTENDED, t, y, h, n, p, cs, K, wk, istats)
+@kernel(inline="always")
+def dense_coeffs(rhs, t, y, h, y_new, sys, K, F):
+    """Coefficients F[0:7] of the continuous extension of the step from y at t over h to y_new, from
+    its stages K[0:13] (K[12] = f(t + h, y_new)); 3 extra RHS calls: stages 13..15."""
+    n = sys.n
+    stages(rhs, N_STAGES + 1, N_STAGES_EXTENDED, t, y, h, sys, K)
     for i in range(n):
         dyv = y_new[i] - y[i]
         F[0, i] = dyv
         F[1, i] = h * K[0, i] - dyv
-        F[2, i] = 2.0 * dyv - h * (f_new[i] + K[0, i])
+        F[2, i] = 2.0 * dyv - h * (K[N_STAGES, i] + K[0, i])
     for r in range(4):
         row = F[3 + r]
         for i in range(n):
@@ -162,9 +177,10 @@ def dense_component(F, row0, y_old, t_old, h, t, i):
     return y_old[i] + x * v
 
 
-@kernel
-def initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats):
+@kernel(inline="always")
+def initial_step(rhs, t, y, f, sys, rtol, atol):
     """Starting step size (Hairer & Wanner II.4, 'starting step size'), on the dynamic state."""
+    n, wk = sys.n, sys.wk
     nc = min(n, N_CORE)
     d0 = 0.0
     d1 = 0.0
@@ -179,7 +195,7 @@ def initial_step(t, y, f, n, p, cs, rtol, atol, wk, istats):
     dytmp = wk[W_DYTMP]
     for i in range(n):
         ytmp[i] = y[i] + h0 * f[i]
-    eval_rhs(t + h0, ytmp, p, cs, n, dytmp, wk[W_AUXTMP], wk, istats)
+    rhs(t + h0, ytmp, sys, dytmp, wk[W_AUXTMP])
     d2 = 0.0
     for i in range(nc):
         sc = atol + rtol * abs(y[i])

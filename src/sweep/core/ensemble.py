@@ -22,14 +22,13 @@ from collections import namedtuple
 
 import numpy as np
 
-from .frequency import FQ_COLS, FQ_LEVEL0
+from .frequency import FQ_LEVEL0
 from .fits import N_DERIVED, summary_fits
-from .integrate import run
+from .integrate import record_arrays, run, work_arrays
 from .jit import kernel
-from .layout import (I_FLAT, I_OVERFLOW, LEVEL_COLS, N_CS, N_KROWS, N_FSTATS, N_ISTATS, N_SETTINGS, N_TRACK,
-                     N_WCOLS, N_WORK, PEAK_COLS, SAMPLE_COLS, T_PEAK_RING, TRAJ_COLS, Record, Work)
+from .layout import (I_FLAT, I_OVERFLOW, L_PENDING, L_PRECESSION, L_TAU, LEVEL_COLS, N_CS, N_FSTATS, N_ISTATS,
+                     N_SETTINGS, N_TRACK, T_PEAK_RING, Record)
 from .model import N_FULL, N_PARAMS
-from .dop853 import N_DENSE
 
 # rows of the per-scene scratch: level times (s), precession frequencies (Hz)
 R_LEVEL_T, R_PREC_HZ = 0, 1
@@ -92,7 +91,7 @@ def solve_scene(inp, chi, work, rec, fits):
     for L in range(nl):
         for c in range(LEVEL_COLS):
             lev[L, c] = math.nan
-        lev[L, LEVEL_COLS] = 0.0
+        lev[L, L_PENDING] = 0.0
     # the scene's own sizes: nl levels, no samples, no trajectory
     run(inp.settings, inp.level_e, fits.scratch[0, :0], work,
         Record(rec.istats, rec.fstats, lev[:nl], rec.samples[:0], rec.traj[:0], rec.peaks, rec.y_end,
@@ -100,8 +99,8 @@ def solve_scene(inp, chi, work, rec, fits):
     # the fits on the level times (s) and precession frequencies (Hz), as sweep.simulate forms them
     scratch = fits.scratch
     for L in range(nl):
-        scratch[R_LEVEL_T, L] = lev[L, 0] * chi
-        scratch[R_PREC_HZ, L] = abs(lev[L, 2]) / chi / TWO_PI
+        scratch[R_LEVEL_T, L] = lev[L, L_TAU] * chi
+        scratch[R_PREC_HZ, L] = abs(lev[L, L_PRECESSION]) / chi / TWO_PI
     summary_fits(scratch[R_LEVEL_T], scratch[R_PREC_HZ], inp.levels, nl, rec.istats[I_FLAT] != 0,
                  rec.fstats, chi, fits.derived)
 
@@ -111,12 +110,9 @@ def work_buffers():
     """One worker's buffers, (SceneInputs, Work, Record, Fits), allocated once per thread."""
     inp = SceneInputs(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_SETTINGS), np.zeros(MAX_LEVELS),
                       np.zeros(MAX_LEVELS))
-    work = Work(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
-                np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK))
-    rec = Record(np.zeros(N_ISTATS, np.int64), np.zeros(N_FSTATS), np.zeros((MAX_LEVELS, LEVEL_COLS + 1)),
-                 np.zeros((1, SAMPLE_COLS)), np.zeros((1, TRAJ_COLS)), np.zeros((PEAK_RING, PEAK_COLS)),
-                 np.zeros(N_FULL), np.zeros((FQ_LEVEL0 + MAX_LEVELS, FQ_COLS)))
-    return inp, work, rec, Fits(np.zeros((N_SCRATCH, MAX_LEVELS)), np.zeros(N_DERIVED))
+    # no samples, no trajectory: solve_scene runs on none of their rows
+    return inp, work_arrays(), record_arrays(MAX_LEVELS, 0, 0, PEAK_RING), Fits(np.zeros((N_SCRATCH, MAX_LEVELS)),
+                                                                               np.zeros(N_DERIVED))
 
 
 @kernel

@@ -29,7 +29,8 @@ it rose H above the lowest Phi since the previous counted maximum, and it is con
 Buffer `fq` (float64, (FQ_LEVEL0 + n_levels) x FQ_COLS): row 0 scalars (Q_*), rows 1, 2 the ring
 buffers (up, down: times then Phi), row FQ_LEVEL0 + L the window of level L (LW_* head, then the
 times and the Phi values at window positions 0 .. WIN_LEN - 1, position HALF_CYCLES S being J).
-level_out columns written here: 2 mean dtheta/dtau, 4 ringing ratio, 5 cycles in the window.
+level_out columns written here (layout.L_*): L_PRECESSION the mean dtheta/dtau, L_RINGING the
+ringing ratio, L_CYCLES the cycles in the window.
 """
 from __future__ import annotations
 
@@ -38,7 +39,7 @@ import math
 from .contact import eval_rhs
 from .dop853 import dense_component, dense_eval
 from .jit import kernel
-from .layout import T_PENDING, W_AUXBUF, W_DYBUF, W_YBUF, W_YSEG, Span
+from .layout import L_CYCLES, L_PRECESSION, L_RINGING, T_PENDING, W_AUXBUF, W_DYBUF, W_YBUF, W_YSEG
 from .model import X_PHI, Y_THETA
 
 SAMPLES_PER_CYCLE = 16          # S: lattice points per precession cycle (Nyquist: 8 Phi cycles per precession cycle)
@@ -73,10 +74,6 @@ LW_MB = 3          # whole cycles available before the level
 LW_NF = 4          # lattice points collected after the level
 LW_HEAD = 8
 FQ_COLS = LW_HEAD + 2 * WIN_LEN
-# level_out columns
-LO_PRECESSION = 2
-LO_RINGING = 4
-LO_CYCLES = 5
 
 
 @kernel
@@ -151,36 +148,38 @@ def lattice_due(theta_end, fq):
 
 
 @kernel
-def _next_crossing(r, t_lo, seg_end, theta_end, span, F, fq):
+def _next_crossing(r, t_lo, seg_end, theta_end, span, fq):
     """Time of the next new lattice point in direction r on [t_lo, seg_end] of span's dense output
-    (layout.Span, coefficients in F), or inf."""
+    (layout.Span, this step's: row 0), or inf."""
     target, sgn = _next_target(r, fq)
     if sgn * (theta_end - target) < 0.0:
         return math.inf
-    return theta_crossing(F, span.y0, span.t0, span.h, t_lo, seg_end, target, sgn)
+    return theta_crossing(span.F, span.y0, span.t0, span.h, t_lo, seg_end, target, sgn)
 
 
 @kernel
-def lattice_step(t, h, seg_end, n, work, rec):
-    """The new lattice points on the segment [t, seg_end] of the step [t, t + h] from work.y (its
-    end state in wk[W_YSEG]) in time order: Phi there (dense output, this segment's contact
-    state), the rings, and the level windows they open, fill or complete."""
-    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
-    fq, level_out, istats = rec.fq, rec.levels, rec.istats
-    span = Span(0, y, t, h, cs)
+def lattice_step(span, seg_end, trk, rec):
+    """The new lattice points on the segment [t, seg_end] of the step span (layout.Span: this
+    step's dense output, from t = span.t0; its end state in wk[W_YSEG]) in time order: Phi there
+    (dense output, the span's contact state), the rings, and the level windows they open, fill or
+    complete (trk: layout.T_*)."""
+    sys = span.sys
+    wk = sys.wk
+    t = span.t0
+    fq, level_out = rec.fq, rec.levels
     theta_end = wk[W_YSEG, Y_THETA]
-    tu = _next_crossing(0, t, seg_end, theta_end, span, F, fq)
-    td = _next_crossing(1, t, seg_end, theta_end, span, F, fq)
+    tu = _next_crossing(0, t, seg_end, theta_end, span, fq)
+    td = _next_crossing(1, t, seg_end, theta_end, span, fq)
     while tu < math.inf or td < math.inf:
         r = 0 if tu <= td else 1
         tc = tu if r == 0 else td
-        dense_eval(F, 0, y, t, h, tc, n, wk[W_YBUF])
-        eval_rhs(tc, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+        dense_eval(span.F, 0, span.y0, t, span.h, tc, sys.n, wk[W_YBUF])
+        eval_rhs(tc, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])
         push_lattice(r, tc, wk[W_AUXBUF, X_PHI], fq, level_out, trk)
         if r == 0:
-            tu = _next_crossing(0, tc, seg_end, theta_end, span, F, fq)
+            tu = _next_crossing(0, tc, seg_end, theta_end, span, fq)
         else:
-            td = _next_crossing(1, tc, seg_end, theta_end, span, F, fq)
+            td = _next_crossing(1, tc, seg_end, theta_end, span, fq)
 
 
 @kernel
@@ -234,10 +233,10 @@ def window_values(L, m, fq, level_out):
     i1 = mid + m * SAMPLES_PER_CYCLE
     sgn = 1.0 - 2.0 * fq[row, LW_DIR]
     dt = fq[row, LW_HEAD + i1] - fq[row, LW_HEAD + i0]
-    level_out[L, LO_PRECESSION] = sgn * 2.0 * math.pi * 2.0 * m / dt if dt > 0.0 else math.nan
-    level_out[L, LO_RINGING] = ringing_ratio(fq[row], LW_HEAD + WIN_LEN + i0, LW_HEAD + WIN_LEN + i1,
+    level_out[L, L_PRECESSION] = sgn * 2.0 * math.pi * 2.0 * m / dt if dt > 0.0 else math.nan
+    level_out[L, L_RINGING] = ringing_ratio(fq[row], LW_HEAD + WIN_LEN + i0, LW_HEAD + WIN_LEN + i1,
                                              SAMPLES_PER_CYCLE)
-    level_out[L, LO_CYCLES] = 2.0 * m
+    level_out[L, L_CYCLES] = 2.0 * m
     fq[row, LW_STATE] = 3.0
 
 

@@ -14,24 +14,25 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
-from .contact import (apply_event, count_phases, confirm_slaved, spin_reaches_rest,
+from .contact import (apply_event, count_transition, confirm_slaved, spin_reaches_rest,
                       consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .events import (C_MOMENT, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
                      EV_LEVEL, EVENTS, N_DYN_EVENTS, R_SPIN, R_SURFACE)
-from .dop853 import N_DENSE, accepted_step_factor, dense_coeffs, dense_eval, error_norm, initial_step, rk_step, step_factor
+from .dop853 import N_DENSE, accepted_step_factor, dense_eval, error_norm, initial_step, rk_step, step_factor
 from .jit import kernel
 from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_E, I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
-                     I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, LEVEL_COLS,
+                     I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, L_PENDING, LEVEL_COLS,
                      N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_HMAX,
-                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, S_UTOL, SAMPLE_COLS, SLAVED, T_CUT, T_DIMPACT_HALT,
+                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, SAMPLE_COLS, SLAVED, T_CUT, T_DIMPACT_HALT,
                      T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
-                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Record, Segment, Span, Work)
-from .model import N_AUX, N_CORE, N_FULL, N_THETA, P_G, P_H, P_UFREEZE, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
+                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Point, Record, RunConsts,
+                     Segment, Span, System, Work)
+from .model import N_AUX, N_CORE, N_FULL, N_PARAMS, N_THETA, P_G, P_H, P_UTOL, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
 from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, location_tol, sign_slopes, slip_closest_approach, span_state
 from .tableau import N_STAGES
 from .tracking import (deep_levels, deep_pending, start_deep_levels, dense_wanted, halt_flat, record_levels, record_sample, record_samples, record_traj,
-                       track_frequency)
+                       step_dense, track_frequency)
 
 EPS = 2.220446049250313e-16
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
@@ -87,38 +88,40 @@ def failure_outcome(ok):
 
 
 @kernel
-def start(y, p, cs, n, u_tol, wk, istats):
-    """Initial discrete state: moment signs, slip mode, and slip onset if rolling cannot hold.
-    Returns the outcome that ends the scene at once (set_slip), else -1."""
+def start(y, sys):
+    """Initial discrete state of the system sys (layout.System) at y: moment signs, slip mode, and
+    slip onset if rolling cannot hold. Returns the outcome that ends the scene at once (set_slip),
+    else -1."""
+    cs = sys.cs
     cs[CS_SIDE] = 1.0 if y[Y_ALPHA] > 0.0 else -1.0
     for i in range(3):
         cs[CS_SIG + i] = 1.0
         cs[CS_STUCK + i] = 0.0
     rolling = y[Y_U1] == 0.0 and y[Y_U2] == 0.0
     if not rolling:
-        code = set_slip(0.0, y, p, cs, n, u_tol, wk, istats)
+        code = set_slip(0.0, y, sys)
         if code >= 0:
             return code
     else:
         cs[CS_MODE] = ROLL
-    consistent_signs(0.0, y, p, cs, n, wk, istats)
-    if cs[CS_MODE] == ROLL and cone_violated(0.0, y, p, cs, n, wk, istats):
-        start_slip(0.0, y, p, cs, n, wk, istats)
-    # a scene that starts rolling and slips at once has its transition; components held from the start stick
-    count_phases(rolling, 0.0, 0.0, 0.0, cs, istats)
+    consistent_signs(0.0, y, sys)
+    if cs[CS_MODE] == ROLL and cone_violated(0.0, y, sys):
+        start_slip(0.0, y, sys)
+    # a scene that starts rolling and slips at once has its transition
+    count_transition(rolling, cs, sys.istats)
     return -1
 
 
 @kernel
-def lift_off(k, t, h, g0, d0, g1, d1, n, u_tol, lev, work, istats):
-    """On a step [t, t + h] from work.y (dense output built) that starts on event k's surface
-    (g0 <= 0, just after a discrete update put the state there) and ends with g1 <= 0: a time where
-    g_k > 0 and its value, to bracket a return to the surface within the step; (-1, 0) if there is
-    none. d0, d1: exact end derivatives of g_k per unit of the step. Starts at the peak of the
-    cubic Hermite interpolant of g_k; where g_k leaves the surface upwards (d0 > 0) it halves
-    towards t, where g_k ~ g0 + d0 x > 0. u_tol, lev: the events' slip_tol and level energy.
+def lift_off(k, span, g0, d0, g1, d1, lev):
+    """On the step span (layout.Span: [t, t + h] from its y0, dense output built) that starts on
+    event k's surface (g0 <= 0, just after a discrete update put the state there) and ends with
+    g1 <= 0: a time where g_k > 0 and its value, to bracket a return to the surface within the step;
+    (-1, 0) if there is none. d0, d1: exact end derivatives of g_k per unit of the step. Starts at
+    the peak of the cubic Hermite interpolant of g_k; where g_k leaves the surface upwards (d0 > 0)
+    it halves towards t, where g_k ~ g0 + d0 x > 0. lev: the next level's energy.
     """
-    span = Span(0, work.y, t, h, work.cs)
+    t, h = span.t0, span.h
     x = hermite_peak(g0, d0, g1, d1)
     tries = 60 if d0 > 0.0 else 1
     if x <= 0.0:
@@ -126,7 +129,7 @@ def lift_off(k, t, h, g0, d0, g1, d1, n, u_tol, lev, work, istats):
             return -1.0, 0.0
         x = 0.5
     for _ in range(tries):
-        gm = event_value_at(k, t + x * h, span, n, u_tol, lev, work, istats)
+        gm = event_value_at(k, t + x * h, span, lev)
         if gm > 0.0:
             return t + x * h, gm
         x *= 0.5
@@ -134,17 +137,18 @@ def lift_off(k, t, h, g0, d0, g1, d1, n, u_tol, lev, work, istats):
 
 
 @kernel
-def first_event(t, h, n, u_tol, lev, work, istats):
-    """Earliest event on the accepted step [t, t + h] from work.y (its end state, derivatives and
-    event values in wk: W_YNEW, W_F, W_FNEW, W_GOLD, W_GNEW): (k, restart time, dense output made?).
+def first_event(span, lev, work):
+    """Earliest event on the accepted step span (layout.Span: [t, t + h] from work.y; its end state,
+    derivatives and event values in wk: W_YNEW, W_F, W_FNEW, W_GOLD, W_GNEW; lev: the next level's
+    energy): (k, restart time, dense output made?).
 
     An event function that is positive at both ends can still cross zero twice inside the step
     (dip_bracket); one that starts on its surface can leave it and come back (surface_bracket,
     spin_bracket). The rates at the step end are kept for the next step's start
     (trk[T_RATES_OLD]), so a step costs one RHS evaluation for them.
     """
+    t, h = span.t0, span.h
     wk, trk = work.wk, work.trk
-    span = Span(0, work.y, t, h, work.cs)
     g_old = wk[W_GOLD]
     g_new = wk[W_GNEW]
     have_dense = False
@@ -165,22 +169,22 @@ def first_event(t, h, n, u_tol, lev, work, istats):
             # the step starts on the surface (alpha = 0 after a side change; a moment component
             # released at an un-stick, omega.a_i = 0 up to its drift while held) and ends on or
             # past it: it left and came back within the step (a rocking bounce), or it never left
-            have_dense = dense_built(have_dense, t, h, n, work, istats)
-            ta, ga, tb, gb, k_event = surface_bracket(k, t, h, n, u_tol, lev, work, istats)
+            have_dense = dense_built(have_dense, span, work)
+            ta, ga, tb, gb, k_event = surface_bracket(k, span, lev, work)
         elif EVENTS[k, E_RESTART] == R_SPIN and g_old[k] <= 0.0 and g_new[k] <= 0.0:
-            ta, ga, have_dense = spin_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense)
+            ta, ga, have_dense = spin_bracket(k, span, lev, work, have_dense)
             tb, gb = t + h, g_new[k]
         elif g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf and g_new[k] != math.inf:
-            tm, gm, have_dense = dip_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense)
+            tm, gm, have_dense = dip_bracket(k, span, lev, work, have_dense)
             if tm >= 0.0:
                 ta, ga, tb, gb = t, g_old[k], tm, gm
                 if reads_forces(k):
                     dip_end = tm
         if ta >= 0.0 and ta < first_t:
-            have_dense = dense_built(have_dense, t, h, n, work, istats)
-            ra, rb = locate(k, ta, ga, tb, gb, span, n, u_tol, lev, work, istats)
+            have_dense = dense_built(have_dense, span, work)
+            ra, rb = locate(k, ta, ga, tb, gb, span, lev)
             if (rb < first_t or first_k < 0) and (EVENTS[k, E_HOLDS] == 0
-                                                  or spin_holds(EVENTS[k, E_COMPONENT], rb, span, n, work, istats)):
+                                                  or spin_holds(EVENTS[k, E_COMPONENT], rb, span)):
                 first_k = k_event
                 first_t = rb
                 trk[T_DIP_END] = dip_end
@@ -188,21 +192,21 @@ def first_event(t, h, n, u_tol, lev, work, istats):
 
 
 @kernel
-def dense_built(have_dense, t, h, n, work, istats):
-    """The accepted step's dense output in F[0:7] (the step [t, t + h] from work.y), built once per
-    step: returns True."""
+def dense_built(have_dense, span, work):
+    """The accepted step's dense output in F[0:7] (the step span, layout.Span, from work.y to
+    wk[W_YNEW]), built once per step: returns True."""
     if not have_dense:
-        wk = work.wk
-        dense_coeffs(t, work.y, h, wk[W_YNEW], wk[W_FNEW], n, work.p, work.cs, work.K, work.F, wk, istats)
+        step_dense(span.t0, span.y0, span.h, work.wk[W_YNEW], span.sys, work.K, span.F)
     return True
 
 
 @kernel
-def surface_bracket(k, t, h, n, u_tol, lev, work, istats):
-    """Event k (the side, or a moment sign) on a step [t, t + h] from work.y that starts on its
-    surface and ends on or past it (dense output built): a bracket (ta, ga, tb, gb) of its return
-    to the surface, and the event to apply there (k, or EV_AGAINST1 + i for a component moving
-    against its sign)."""
+def surface_bracket(k, span, lev, work):
+    """Event k (the side, or a moment sign) on the step span (layout.Span: [t, t + h] from work.y)
+    that starts on its surface and ends on or past it (dense output built): a bracket (ta, ga, tb,
+    gb) of its return to the surface, and the event to apply there (k, or EV_AGAINST1 + i for a
+    component moving against its sign)."""
+    t, h = span.t0, span.h
     y, cs, wk = work.y, work.cs, work.wk
     g0 = wk[W_GOLD, k]
     g1 = wk[W_GNEW, k]
@@ -214,7 +218,7 @@ def surface_bracket(k, t, h, n, u_tol, lev, work, istats):
         d1 = cs[CS_SIDE] * y_new[Y_W1] * h
     else:
         d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], y_new, wk[W_FNEW], h)
-    ta, ga = lift_off(k, t, h, g0, d0, g1, d1, n, u_tol, lev, work, istats)
+    ta, ga = lift_off(k, span, g0, d0, g1, d1, lev)
     tb, gb = t + h, g1
     k_event = k
     moment = EVENTS[k, E_CLASS] == C_MOMENT
@@ -237,30 +241,33 @@ def surface_bracket(k, t, h, n, u_tol, lev, work, istats):
 
 
 @kernel
-def spin_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
-    """A free component slower than spin_tol at both ends of the step [t, t + h] from work.y (e.g.
-    just released at an un-stick) can speed past spin_tol and slow to it again within the step: the
-    peak of the Hermite interpolant of g_k (exact end slopes), confirmed on the dense output.
-    Returns (the peak's time, g_k there, have_dense); the time is -1 where g_k stays below spin_tol."""
+def spin_bracket(k, span, lev, work, have_dense):
+    """A free component slower than spin_tol at both ends of the step span (layout.Span: [t, t + h]
+    from work.y; e.g. just released at an un-stick) can speed past spin_tol and slow to it again
+    within the step: the peak of the Hermite interpolant of g_k (exact end slopes), confirmed on
+    the dense output. Returns (the peak's time, g_k there, have_dense); the time is -1 where g_k
+    stays below spin_tol."""
+    t, h = span.t0, span.h
     y, cs, wk = work.y, work.cs, work.wk
     i = EVENTS[k, E_COMPONENT]
     d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], wk[W_YNEW], wk[W_FNEW], h)
     peak = hermite_peak(wk[W_GOLD, k], d0, wk[W_GNEW, k], d1)
     if peak > 0.0:
-        have_dense = dense_built(have_dense, t, h, n, work, istats)
-        gm = event_value_at(k, t + peak * h, Span(0, y, t, h, cs), n, u_tol, lev, work, istats)
+        have_dense = dense_built(have_dense, span, work)
+        gm = event_value_at(k, t + peak * h, span, lev)
         if gm > 0.0:
             return t + peak * h, gm, have_dense
     return -1.0, 0.0, have_dense
 
 
 @kernel
-def dip_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
-    """Event k positive at both ends of the step [t, t + h] from work.y can still reach 0 and come
-    back within it: a bounce off alpha = 0, a brief slip demand, a needed moment that touches its
-    limit, a dip of the normal force. The cubic Hermite interpolant of g_k flags the dip; the dense
-    output confirms it. Returns (the time of the dip's minimum where g_k <= 0 there, g_k there,
-    have_dense); the time is -1 where there is no such dip."""
+def dip_bracket(k, span, lev, work, have_dense):
+    """Event k positive at both ends of the step span (layout.Span: [t, t + h] from work.y) can
+    still reach 0 and come back within it: a bounce off alpha = 0, a brief slip demand, a needed
+    moment that touches its limit, a dip of the normal force. The cubic Hermite interpolant of g_k
+    flags the dip; the dense output confirms it. Returns (the time of the dip's minimum where g_k
+    <= 0 there, g_k there, have_dense); the time is -1 where there is no such dip."""
+    t, h = span.t0, span.h
     y, cs, wk, trk = work.y, work.cs, work.wk, work.trk
     g0 = wk[W_GOLD, k]
     g1 = wk[W_GNEW, k]
@@ -282,38 +289,37 @@ def dip_bracket(k, t, h, n, u_tol, lev, work, istats, have_dense):
         dip = slip_closest_approach(y, f, y_new, f_new, h)
     else:
         if trk[T_RATES_OLD] == 0.0:
-            event_rates(t, y, f, wk[W_GOLD], wk[W_RATEOLD], n, u_tol, lev, work, istats)
+            event_rates(t, y, f, wk[W_GOLD], wk[W_RATEOLD], lev, span.sys)
             trk[T_RATES_OLD] = 1.0
         if trk[T_RATES_NEW] == 0.0:
-            event_rates(t + h, y_new, f_new, wk[W_GNEW], wk[W_RATENEW], n, u_tol, lev, work, istats)
+            event_rates(t + h, y_new, f_new, wk[W_GNEW], wk[W_RATENEW], lev, span.sys)
             trk[T_RATES_NEW] = 1.0
         dip = hermite_dip(g0, wk[W_RATEOLD, k] * h, g1, wk[W_RATENEW, k] * h)
     if not dip > 0.0:
         return -1.0, 0.0, have_dense
-    have_dense = dense_built(have_dense, t, h, n, work, istats)
+    have_dense = dense_built(have_dense, span, work)
     tm = t + dip * h
-    span = Span(0, y, t, h, cs)
-    gm = event_value_at(k, tm, span, n, u_tol, lev, work, istats)
+    gm = event_value_at(k, tm, span, lev)
     if 0.0 < gm < DIP_REFINE * min(g0, g1):
         # the cubic's minimum is only near the dense output's: a shallow dip (a grazing double
         # crossing) is decided by the minimum of g_k itself
-        tm, gm = brent_min(k, t, t + h, 0.0, span, n, u_tol, lev, work, istats)
+        tm, gm = brent_min(k, t, t + h, 0.0, span, lev)
     if gm <= 0.0:
         return tm, gm, have_dense
     return -1.0, 0.0, have_dense
 
 
 @kernel
-def spin_holds(i, t_event, span, n, work, istats):
+def spin_holds(i, t_event, span):
     """Would free component i stick at its spin event at t_event on span's dense output (it goes on
     to rest and |sigma needed| < 1 there, the tests contact.stick_at_spin_tol makes)? Where it would not, the event
     changes nothing, and the step goes on instead of restarting there (the same trajectory, fewer
     restarts)."""
-    wk = work.wk
-    span_state(t_event, span, n, work)
-    return spin_reaches_rest(i, t_event, wk[W_YBUF], work.p, span.cs, n, wk, istats) \
-        and abs(needed_sigma(i, t_event, wk[W_YBUF], work.p, span.cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk,
-                             istats)) < 1.0
+    sys = span.sys
+    wk = sys.wk
+    span_state(t_event, span)
+    return spin_reaches_rest(i, t_event, wk[W_YBUF], sys) \
+        and abs(needed_sigma(i, t_event, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])) < 1.0
 
 
 @kernel
@@ -325,21 +331,21 @@ def power_defect(y, dy, aux, p, cs):
 
 
 @kernel
-def balance_error(y, aux, d, h, defect, p, cs, e0, tau_span, rtol):
+def balance_error(y, aux, d, h, defect, p, cs, consts):
     """The energy-balance residual |Delta(E + dissipated)| of a step's increment d (before rounding:
     wk[W_DELTA]) from y (aux: the right-hand side's there) over h, over what it may be (see
-    BALANCE_FACTOR); accepted if <= 1. defect: power_defect at the step's ends (the larger),
-    e0 = E(0) > 0, tau_span = t_max (tau)."""
+    BALANCE_FACTOR); accepted if <= 1. defect: power_defect at the step's ends (the larger); of the
+    run's constants (layout.RunConsts) e0 = |E(0)| > 0, t_max (tau) and rtol."""
     change, scale = energy_increment_trig(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, aux[X_SINA], aux[X_COSA])
     dissipated = d[Y_DSLIDE] + d[Y_DK1] + d[Y_DK2] + d[Y_DK3]
-    allowed = (BALANCE_FACTOR * rtol * (max(dissipated, 0.0) + e0 * h / tau_span)
+    allowed = (BALANCE_FACTOR * consts.rtol * (max(dissipated, 0.0) + consts.e0 * h / consts.t_max)
                + BALANCE_ROUNDOFF * (scale + abs(d[Y_DSLIDE]) + abs(d[Y_DK1]) + abs(d[Y_DK2]) + abs(d[Y_DK3]))
                + DEFECT_FACTOR * abs(h) * defect)
     return abs(change + dissipated) / allowed
 
 
 @kernel
-def state_balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
+def state_balance_error(y, y_new, e_cur, e_new, h, p, consts):
     """balance_error of the kept part of a step cut at an event, from the states at its ends (the
     dense output's increment carries the round-off of its coefficients, not of the change).
 
@@ -357,30 +363,31 @@ def state_balance_error(y, y_new, e_cur, e_new, h, p, e0, tau_span, rtol):
     w1 = y[Y_W1]
     roundoff = (abs(e_cur) + abs(d_cur) + p[P_G] * (c * (1.0 + habs) + a * (abs(math.sin(a)) + habs * c))
                 + a * w1 * w1 * (1.0 + habs))
-    allowed = (BALANCE_FACTOR * rtol * (max(d_new - d_cur, 0.0) + e0 * h / tau_span)
+    allowed = (BALANCE_FACTOR * consts.rtol * (max(d_new - d_cur, 0.0) + consts.e0 * h / consts.t_max)
                + STATE_BALANCE_ROUNDOFF * roundoff)
     return abs(residual) / allowed
 
 
 @kernel
-def try_step(t, h, n, rtol, atol, e0, tau_span, work, istats):
+def try_step(t, h, consts, work, sys):
     """One DOP853 step of size h from work.y, f = wk[W_F] (wk[W_AUX]: the right-hand side's aux
-    there) into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW]; returns its error norm (inf for a step with a
-    non-finite stage or end state, or one that raises the energy by more than ENERGY_GUARD rtol e0),
-    at least its energy-balance error (balance_error, e0 the initial energy, tau_span the scene's
-    t_max), and counts it.
+    there) into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW], in the system sys (layout.System); returns
+    its error norm (inf for a step with a non-finite stage or end state, or one that raises the
+    energy by more than ENERGY_GUARD rtol e0), at least its energy-balance error (balance_error;
+    consts: layout.RunConsts), and counts it.
 
     Every stage is checked, also those whose tableau weight in y_new or the error estimate is zero
     (stages 1-4, and f_new): a right-hand side that failed there (a slaved direction that lost its
     root returns NaN) makes the step fail, so steps shrink until the event that ends the mode is
     located; accepted, its NaN f_new would poison every later step."""
     y, p, cs, wk, K = work.y, work.p, work.cs, work.wk, work.K
+    rtol, atol, n = consts.rtol, consts.atol, consts.n
     f = wk[W_F]
     y_new = wk[W_YNEW]
     aux = wk[W_AUX]
     aux_new = wk[W_AUXNEW]
     e_cur = mode_energy_at(y, aux, p, cs)
-    rk_step(t, y, f, h, n, p, cs, K, y_new, wk[W_FNEW], aux_new, wk, istats)
+    rk_step(eval_rhs, t, h, Point(y, f, aux), Point(y_new, wk[W_FNEW], aux_new), sys, K)
     err = 0.0
     for i in range(n):
         if not math.isfinite(y_new[i]):
@@ -389,23 +396,22 @@ def try_step(t, h, n, rtol, atol, e0, tau_span, work, istats):
             if not math.isfinite(K[j, i]):
                 err = math.inf
     e_new = mode_energy_at(y_new, aux_new, p, cs)
-    if err == 0.0 and e_new > e_cur + ENERGY_GUARD * rtol * e0:
+    if err == 0.0 and e_new > e_cur + ENERGY_GUARD * rtol * consts.e0:
         err = math.inf
     if err == 0.0:
         defect = max(power_defect(y, f, aux, p, cs), power_defect(y_new, wk[W_FNEW], aux_new, p, cs))
         err = max(error_norm(K, h, y, y_new, n, rtol, atol, slip_atol(y, y_new, p, rtol, atol)),
-                  balance_error(y, aux, wk[W_DELTA], h, defect, p, cs, e0, tau_span, rtol))
-    tally_step(cs, istats, err <= 1.0, 1)
+                  balance_error(y, aux, wk[W_DELTA], h, defect, p, cs, consts))
+    tally_step(cs, sys.istats, err <= 1.0, 1)
     return err
 
 
 @kernel
 def slip_atol(y, y_new, p, rtol, atol):
-    """Absolute tolerance of the slip components on a step: atol, but rtol SLIP_NEAR u_tol where the
-    slip is within SLIP_NEAR x slip_tol (p[P_UFREEZE]) of 0 at either end (see SLIP_NEAR), and not
+    """Absolute tolerance of the slip components on a step: atol, but rtol SLIP_NEAR slip_tol where
+    the slip is within SLIP_NEAR x slip_tol (p[P_UTOL]) of 0 at either end (see SLIP_NEAR), and not
     below the round-off of the velocities the slip is the difference of (SLIP_ROUNDOFF |omega|)."""
-    u_tol = p[P_UFREEZE]
-    near = SLIP_NEAR * u_tol
+    near = SLIP_NEAR * p[P_UTOL]
     if math.hypot(y[Y_U1], y[Y_U2]) < near or math.hypot(y_new[Y_U1], y_new[Y_U2]) < near:
         w = max(abs(y[Y_W1]), abs(y[Y_W2]), abs(y[Y_W3]), 1.0)
         return min(atol, max(rtol * near, SLIP_ROUNDOFF * w))
@@ -425,14 +431,15 @@ def tally_step(cs, istats, accepted, count):
 
 
 @kernel
-def mark_end(t_end, y_at_end, n, p, cs, fstats, trk, y_end, istats):
-    """The scene ended (halted, or reached t_max) at t_end in state y_at_end: its end state,
-    energy, impact losses and event counts (trk[T_END_*]). The steps after a halt only complete the
-    levels' frequency windows and change none of them."""
+def mark_end(t_end, y_at_end, sys, trk, rec):
+    """The scene ended (halted, or reached t_max) at t_end in state y_at_end (of the system sys,
+    layout.System): its end state, energy, impact losses and event counts (trk[T_END_*]). The steps
+    after a halt only complete the levels' frequency windows and change none of them."""
+    istats, fstats, y_end = sys.istats, rec.fstats, rec.y_end
     fstats[F_TEND] = t_end
-    for i in range(n):
+    for i in range(sys.n):
         y_end[i] = y_at_end[i]
-    fstats[F_EEND] = mode_energy(y_end, p, cs)
+    fstats[F_EEND] = mode_energy(y_end, sys.p, sys.cs)
     trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
     trk[T_END_TRANS] = istats[I_TRANS]
     trk[T_END_STICK] = istats[I_STICK]
@@ -449,18 +456,14 @@ def state_size(settings):
 
 
 @kernel
-def begin(settings, lev, sample_tau, work, rec):
-    """The scene at tau = 0: its contact state, f and aux (wk[W_F], wk[W_AUX]), E(0), the event
-    values (wk[W_GOLD]; lev: the first level's energy), the samples and trajectory row at 0, the
-    trackers. Returns (the outcome that ends the scene at once, else -1; the starting step size,
-    before the ceiling h_max)."""
-    y, p, cs, wk = work.y, work.p, work.cs, work.wk
-    trk, istats, fstats = work.trk, rec.istats, rec.fstats
-    n = state_size(settings)
-    u_tol = settings[S_UTOL]
+def begin(lev, work, rec, sys):
+    """The scene at tau = 0 in the system sys (layout.System): its contact state, f and aux
+    (wk[W_F], wk[W_AUX]), E(0), the event values (wk[W_GOLD]; lev: the first level's energy), the
+    end's markers. Returns the outcome that ends the scene at once, else -1."""
+    y, p, cs, wk = work.y, sys.p, sys.cs, sys.wk
+    trk, fstats = work.trk, rec.fstats
     f = wk[W_F]
     aux = wk[W_AUX]
-    p[P_UFREEZE] = u_tol
     fstats[F_TIMPACT] = -math.inf
     fstats[F_THALT] = math.nan
     fstats[F_THALT_ERR] = math.nan
@@ -470,10 +473,10 @@ def begin(settings, lev, sample_tau, work, rec):
     trk[T_END_STICK] = -1.0
     trk[T_END_IMPACTS] = -1.0
     trk[T_H_AFTER] = 0.0
-    start_code = start(y, p, cs, n, u_tol, wk, istats)
-    eval_rhs(0.0, y, p, cs, n, f, aux, wk, istats)
+    start_code = start(y, sys)
+    eval_rhs(0.0, y, sys, f, aux)
     fstats[F_E0] = mode_energy(y, p, cs)
-    event_values(0.0, y, aux, p, cs, u_tol, lev, wk[W_GOLD])
+    event_values(0.0, y, aux, p, cs, lev, wk[W_GOLD])
     outcome = -1
     if aux[X_PHI] <= 0.0:
         outcome = oc.CONTACT_LOST
@@ -481,31 +484,47 @@ def begin(settings, lev, sample_tau, work, rec):
         outcome = failure_outcome(aux[X_OK])
     if start_code >= 0:
         outcome = start_code
+    return outcome
+
+
+@kernel
+def record_start(consts, work, rec, sys):
+    """What the scene records at tau = 0 (the samples due, the trajectory's first row, Phi for the
+    maxima, the precession lattice's origin) and its starting step size (before the ceiling h_max);
+    consts: layout.RunConsts."""
+    y, p, cs, n, wk = work.y, sys.p, sys.cs, sys.n, sys.wk
+    trk = work.trk
+    aux = wk[W_AUX]
+    sample_tau = consts.sample_tau
     ns = sample_tau.shape[0]
     while int(trk[T_NEXT_SAMPLE]) < ns and sample_tau[int(trk[T_NEXT_SAMPLE])] <= 0.0:
         record_sample(y, aux, p, cs, n, rec.samples[int(trk[T_NEXT_SAMPLE])])
         trk[T_NEXT_SAMPLE] += 1.0
     if rec.traj.shape[0] > 0:
-        record_traj(0.0, y, aux[X_PHI], cs, n, rec.traj, istats)
+        record_traj(0.0, y, aux[X_PHI], cs, n, rec.traj, sys.istats)
     trk[T_PHI_B] = aux[X_PHI]
     trk[T_RATES_OLD] = 0.0
-    if settings[S_PEAKS] > 0.0:
+    if consts.peaks_on:
         freq_start(y[Y_THETA], aux[X_PHI], rec.fq)
-    return outcome, initial_step(0.0, y, f, n, p, cs, settings[S_RTOL], settings[S_ATOL], wk, istats)
+    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, consts.rtol, consts.atol)
 
 
 @kernel
 def step_after_end(t, h, t_max, trk):
     """The step size after a halt, where the steps only complete the levels' frequency windows
     (precession cycles and Phi maxima after the levels) or reach the levels the halt fit waits for:
-    not past the last step before the end, nor past twice the end's tau while only windows wait (a
+    while only windows wait, not past the last step before the end nor past twice the end's tau (a
     steady motion, e.g. rolling at a tilt held by a stuck moment, has no maxima, and its steps would
-    grow tenfold each until t overflowed), nor past t_max. Returns -1 where they stop."""
+    grow tenfold each until t overflowed); while the halt fit waits, as the step control has it (the
+    motion speeds up towards the halt, and capped steps spent the step budget first); never past
+    t_max. Returns -1 where they stop."""
     if trk[T_H_AFTER] == 0.0:
         trk[T_H_AFTER] = h
         trk[T_T_AFTER] = 2.0 * t
     if t_max - t <= 2.0 * EPS * max(abs(t), 1.0) or (t >= trk[T_T_AFTER] and not deep_pending(trk)):
         return -1.0
+    if deep_pending(trk):
+        return min(h, t_max - t)
     return min(h, trk[T_H_AFTER], t_max - t)
 
 
@@ -517,41 +536,46 @@ def retract_step(cs, istats):
 
 
 @kernel
-def segment_end(t, h, seg_end, event, check, n, e0, t_max, rtol, work):
-    """The state where the kept part [t, seg_end] of the accepted step [t, t + h] from work.y ends
-    (wk[W_YSEG]): the step end, or the dense output at an event. Returns its energy (mode_energy)
-    and, for an event's segment where `check`, the energy balance error of the kept part (held like
-    a step's: > 1 retries the step shorter), else 0."""
-    y, p, cs, wk, F = work.y, work.p, work.cs, work.wk, work.F
+def segment_end(span, seg_end, event, check, consts):
+    """The state where the kept part [t, seg_end] of the accepted step span (layout.Span: [t, t + h]
+    from its y0) ends (wk[W_YSEG]): the step end, or the dense output at an event. Returns its
+    energy (mode_energy) and, for an event's segment where `check`, the energy balance error of the
+    kept part (held like a step's: > 1 retries the step shorter; consts: layout.RunConsts), else 0."""
+    y, t, sys = span.y0, span.t0, span.sys
+    p, cs, wk = sys.p, sys.cs, sys.wk
     y_seg = wk[W_YSEG]
     if not event:
-        for i in range(n):
+        for i in range(sys.n):
             y_seg[i] = wk[W_YNEW, i]
         return mode_energy_at(y_seg, wk[W_AUXNEW], p, cs), 0.0
-    dense_eval(F, 0, y, t, h, seg_end, n, y_seg)
+    dense_eval(span.F, 0, y, t, span.h, seg_end, sys.n, y_seg)
     e_seg = mode_energy(y_seg, p, cs)
     if not check:
         return e_seg, 0.0
     # the kept part ends on the dense output (7th order)
-    return e_seg, state_balance_error(y, y_seg, mode_energy_at(y, wk[W_AUX], p, cs), e_seg, seg_end - t, p, e0,
-                                      t_max, rtol)
+    return e_seg, state_balance_error(y, y_seg, mode_energy_at(y, wk[W_AUX], p, cs), e_seg, seg_end - t, p, consts)
 
 
 @kernel
-def segment_phi(seg_end, event, n, p, cs, wk, istats):
-    """Phi at the segment end (the step end's from its last stage; an event's from the dense state)."""
+def segment_phi(seg_end, event, sys):
+    """Phi at the segment end (the step end's from its last stage; an event's from the dense state),
+    in the system sys (layout.System)."""
+    wk = sys.wk
     if event:
-        eval_rhs(seg_end, wk[W_YSEG], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+        eval_rhs(seg_end, wk[W_YSEG], sys, wk[W_DYBUF], wk[W_AUXBUF])
         return wk[W_AUXBUF, X_PHI]
     return wk[W_AUXNEW, X_PHI]
 
 
 @kernel
-def advance(t, seg_end, event, running, ended, y, n, cs, trk, wk, fstats):
-    """Move the start to the segment end: its state, and where no event restarts there the step
-    end's f, aux and event rates; the time spent sliding (to the scene's end)."""
-    if cs[CS_MODE] != ROLL and running:
-        fstats[F_SLIDETIME] += (seg_end if not ended else fstats[F_TEND]) - t
+def advance(seg, ended, n, work, fstats):
+    """Move the start to the end of the kept part seg (layout.Segment): its state (n components),
+    and where no event restarts there the step end's f, aux and event rates; the time spent sliding
+    (to the scene's end: ended)."""
+    y, cs, wk, trk = work.y, work.cs, work.wk, work.trk
+    event = seg.k >= 0
+    if cs[CS_MODE] != ROLL and seg.running:
+        fstats[F_SLIDETIME] += (seg.end if not ended else fstats[F_TEND]) - seg.t
     for i in range(n):
         y[i] = wk[W_YSEG, i]
     if not event:
@@ -567,29 +591,33 @@ def advance(t, seg_end, event, running, ended, y, n, cs, trk, wk, fstats):
 
 
 @kernel
-def restart_after_event(k, t, y, p, cs, n, u_tol, lev, wk, istats, fstats):
-    """The discrete update of event k at t (contact.apply_event); then the new contact state's
-    slaved direction, right-hand side (wk[W_F], wk[W_AUX]) and event values (wk[W_GOLD]).
-    Returns the outcome that ends the scene here (FACE_CONTACT: the disk lies flat), else -1."""
+def restart_after_event(k, t, y, lev, sys, fstats):
+    """The discrete update of event k at t (contact.apply_event) of the system sys (layout.System);
+    then the new contact state's slaved direction, right-hand side (wk[W_F], wk[W_AUX]) and event
+    values (wk[W_GOLD]; lev: the next level's energy); the roll<->slip transition the update made is
+    counted. Returns the outcome that ends the scene here (FACE_CONTACT: the disk lies flat), else -1."""
+    p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
     istats[I_EVENTS] += 1
-    code = apply_event(k, t, y, p, cs, n, u_tol, wk, istats, fstats)
+    rolling = cs[CS_MODE] == ROLL
+    code = apply_event(k, t, y, sys, fstats)
+    count_transition(rolling, cs, istats)
     if code >= 0:
         return code
     if cs[CS_MODE] == SLAVED:
         # the slaved direction of the contact state the update left, continued across the event
         # (steps that end in events would otherwise leave it behind the moving root)
-        code = confirm_slaved(t, y, p, cs, n, wk, istats)
+        code = confirm_slaved(t, y, sys)
         if code >= 0:
             return code
     aux = wk[W_AUX]
-    eval_rhs(t, y, p, cs, n, wk[W_F], aux, wk, istats)
+    eval_rhs(t, y, sys, wk[W_F], aux)
     if aux[X_OK] != 1.0:
         return failure_outcome(aux[X_OK])
     if aux[X_PHI] <= 0.0:
         # the update (an impact) leaves the disk with no compressive normal force: it leaves the
         # table here (its own event, Phi falling through 0, cannot happen)
         return oc.CONTACT_LOST
-    event_values(t, y, aux, p, cs, u_tol, lev, wk[W_GOLD])
+    event_values(t, y, aux, p, cs, lev, wk[W_GOLD])
     return -1
 
 
@@ -608,7 +636,7 @@ def carry_step_end(lev, level_pending, work):
 
 
 @kernel
-def finish(outcome, t, h, n, peaks_on, work, rec):
+def finish(outcome, t, h, consts, work, rec):
     """The scene's outputs once the loop stops: outcome, the event counts, end state and energy at
     its end (kept by mark_end, else the last state), the levels' frequencies."""
     y, p, cs, trk = work.y, work.p, work.cs, work.trk
@@ -620,7 +648,7 @@ def finish(outcome, t, h, n, peaks_on, work, rec):
         istats[I_TRANS] = int(trk[T_END_TRANS])
         istats[I_STICK] = int(trk[T_END_STICK])
         istats[I_IMPACTS] = int(trk[T_END_IMPACTS])
-    if peaks_on:
+    if consts.peaks_on:
         # a window cut by a numerical stop has no value; one cut by the motion's end has its largest
         # symmetric part
         cut = trk[T_CUT] != 0.0 or outcome == oc.NUMERICAL_ERROR
@@ -629,7 +657,7 @@ def finish(outcome, t, h, n, peaks_on, work, rec):
         fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the end
     else:
         fstats[F_TEND] = t
-        for i in range(n):
+        for i in range(consts.n):
             y_end[i] = y[i]
         fstats[F_EEND] = mode_energy(y_end, p, cs)
     istats[I_OUTCOME] = outcome
@@ -637,21 +665,22 @@ def finish(outcome, t, h, n, peaks_on, work, rec):
 
 
 @kernel
-def next_try(t, h, outcome, settings, work, rec):
+def next_try(t, h, outcome, consts, work, rec):
     """The size of the next try from t (h: the step control's), or where the loop stops: after the
     scene's end the Phi maxima's steps (step_after_end), the step budget, t_max, the smallest step
-    that still moves tau. Returns (h, outcome, whether the step ends at t_max, whether to stop)."""
+    that still moves tau (consts: layout.RunConsts). Returns (h, outcome, whether the step ends at t_max,
+    whether to stop)."""
     running = outcome < 0
     if not running:
-        h = step_after_end(t, h, settings[S_TMAX], work.trk)
+        h = step_after_end(t, h, consts.t_max, work.trk)
         if h < 0.0:
             return h, outcome, False, True
-    if rec.istats[I_STEPS] + rec.istats[I_REJECTED] >= int(settings[S_MAXSTEPS]):
+    if rec.istats[I_STEPS] + rec.istats[I_REJECTED] >= consts.max_steps:
         work.trk[T_CUT] = 1.0
         return h, oc.STEP_LIMIT if running else outcome, False, True
-    at_tmax = running and t + h >= settings[S_TMAX]
+    at_tmax = running and t + h >= consts.t_max
     if at_tmax:
-        h = settings[S_TMAX] - t
+        h = consts.t_max - t
     # the model is autonomous (no stage reads tau), so a step only has to move tau: the floor is
     # 2 eps tau; 16 eps tau stopped a slip spiralling into slip_tol at tau ~ 5100, which needs
     # steps of ~1e-11 (tests/test_convergence.py)
@@ -665,59 +694,58 @@ def next_try(t, h, outcome, settings, work, rec):
 
 
 @kernel
-def record_segment(seg, e_seg, outcome, lev, settings, level_e, sample_tau, work, rec):
+def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
     """What the kept part of the step (seg: layout.Segment; its end state wk[W_YSEG], energy
     e_seg) holds: the levels it crosses (HALTED at the last, with its end state), the samples, the
-    Phi maxima. Returns (the outcome, the energy of the next level to cross)."""
-    y, p, cs, wk, trk = work.y, work.p, work.cs, work.wk, work.trk
-    istats, fstats = rec.istats, rec.fstats
-    n = state_size(settings)
-    peaks_on = settings[S_PEAKS] > 0.0
+    Phi maxima (consts: layout.RunConsts; sys: the step's layout.System). Returns (the outcome, the energy of
+    the next level to cross)."""
+    y, wk, trk = work.y, work.wk, work.trk
+    level_e = consts.level_e
     event = seg.k >= 0
-    phi_c = segment_phi(seg.end, event, n, p, cs, wk, istats) if peaks_on else 0.0
+    phi_c = segment_phi(seg.end, event, sys) if consts.peaks_on else 0.0
+    span = Span(work.F, 0, y, seg.t, seg.h, sys)
     have_dense = seg.dense
-    if not have_dense and dense_wanted(seg.running, seg.end, e_seg, wk[W_YSEG, Y_THETA], level_e, sample_tau, trk,
-                                       rec.fq, phi_c, peaks_on):
-        dense_coeffs(seg.t, y, seg.h, wk[W_YNEW], wk[W_FNEW], n, p, cs, work.K, work.F, wk, istats)
+    if not have_dense and dense_wanted(seg, e_seg, wk[W_YSEG, Y_THETA], phi_c, consts, trk, rec.fq):
+        step_dense(seg.t, y, seg.h, wk[W_YNEW], sys, work.K, work.F)
         have_dense = True
     if seg.running:
-        t_halt = record_levels(seg.t, seg.h, seg.end, e_seg, level_e, peaks_on, settings[S_UTOL], n, work, rec)
+        t_halt = record_levels(span, seg.end, e_seg, consts, trk, rec)
         if t_halt >= 0.0:
             outcome = oc.HALTED
-            dense_eval(work.F, 0, y, seg.t, seg.h, t_halt, n, wk[W_YBUF])
-            mark_end(t_halt, wk[W_YBUF], n, p, cs, fstats, trk, rec.y_end, istats)
-            start_deep_levels(level_e, rec.levels, p, trk, fstats)
+            dense_eval(work.F, 0, y, seg.t, seg.h, t_halt, consts.n, wk[W_YBUF])
+            mark_end(t_halt, wk[W_YBUF], sys, trk, rec)
+            start_deep_levels(level_e, rec.levels, work.p, trk, rec.fstats)
         elif int(trk[T_NEXT_LEVEL]) < level_e.shape[0]:
             lev = level_e[int(trk[T_NEXT_LEVEL])]
     elif deep_pending(trk):
-        deep_levels(seg.t, seg.h, seg.end, e_seg, settings[S_UTOL], n, work, rec)
-    record_samples(seg.t, seg.h, seg.end, fstats[F_TEND] if outcome >= 0 else math.inf, sample_tau, n, work, rec)
-    if peaks_on:
-        track_frequency(seg.t, seg.h, seg.end, phi_c, have_dense, seg.running, n, work, rec)
+        deep_levels(span, seg.end, e_seg, trk, rec.fstats)
+    record_samples(span, seg.end, rec.fstats[F_TEND] if outcome >= 0 else math.inf, consts.sample_tau, trk, rec.samples)
+    if consts.peaks_on:
+        track_frequency(span, seg.end, phi_c, have_dense, seg.running, work, rec)
     return outcome, lev
 
 
 @kernel
-def end_segment(seg, outcome, lev, settings, level_e, work, rec):
+def end_segment(seg, outcome, lev, consts, work, rec, sys):
     """Restart at the end of the kept part (seg: layout.Segment): an event's discrete update
     (restart_after_event: an outcome there ends the scene; a disk lying flat has halted), or the
-    step end's values carried on (at t_max the scene ends). Returns (the outcome, whether the loop
-    stops)."""
-    y, p, cs, wk, trk = work.y, work.p, work.cs, work.wk, work.trk
+    step end's values carried on (at t_max the scene ends). consts: layout.RunConsts; sys: the step's
+    layout.System. Returns (the outcome, whether the loop stops)."""
+    y, cs, wk, trk = work.y, work.cs, work.wk, work.trk
     istats, fstats = rec.istats, rec.fstats
-    n = state_size(settings)
+    level_e = consts.level_e
     event = seg.k >= 0
-    advance(seg.t, seg.end, event, seg.running, outcome >= 0, y, n, cs, trk, wk, fstats)
+    advance(seg, outcome >= 0, consts.n, work, fstats)
     t = seg.end
     if rec.traj.shape[0] > 0 and outcome < 0:
-        record_traj(t, y, math.nan if event else wk[W_AUXNEW, X_PHI], cs, n, rec.traj, istats)
+        record_traj(t, y, math.nan if event else wk[W_AUXNEW, X_PHI], cs, consts.n, rec.traj, istats)
     if not event:
         carry_step_end(lev, int(trk[T_NEXT_LEVEL]) < level_e.shape[0], work)
         if seg.at_tmax and outcome < 0:
             outcome = oc.T_MAX
-            mark_end(t, y, n, p, cs, fstats, trk, rec.y_end, istats)
+            mark_end(t, y, sys, trk, rec)
         return outcome, False
-    code = restart_after_event(seg.k, t, y, p, cs, n, settings[S_UTOL], lev, wk, istats, fstats)
+    code = restart_after_event(seg.k, t, y, lev, sys, fstats)
     if code < 0:
         return outcome, False
     if seg.running and code == oc.FACE_CONTACT:
@@ -725,7 +753,7 @@ def end_segment(seg, outcome, lev, settings, level_e, work, rec):
         halt_flat(t, rec.levels, trk, level_e)
         istats[I_FLAT] = 1
         outcome = oc.HALTED
-        mark_end(t, y, n, p, cs, fstats, trk, rec.y_end, istats)
+        mark_end(t, y, sys, trk, rec)
     elif seg.running:
         outcome = code
         fstats[F_TEND] = t
@@ -742,16 +770,17 @@ def run(settings, level_e, sample_tau, work, rec):
     """Integrate one scene (the initial state in work.y, its parameters in work.p) into rec
     (layout.Work, layout.Record: the buffers' shapes): step, scan the accepted step for the
     earliest event, record the kept part, restart at its end. settings (layout.S_*), level_e the
-    levels' energies (dimensionless), sample_tau the sample times (tau), ascending."""
+    levels' energies (dimensionless), sample_tau the sample times (tau), ascending: read once here
+    into the run's constants (layout.RunConsts), with E(0) from begin."""
     p, cs, wk, trk = work.p, work.cs, work.wk, work.trk
     istats = rec.istats
-    rtol, atol, t_max, u_tol = settings[S_RTOL], settings[S_ATOL], settings[S_TMAX], settings[S_UTOL]
-    h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
-    n = state_size(settings)
+    sys = System(p, cs, state_size(settings), wk, istats)
     lev = level_e[0] if level_e.shape[0] > 0 else math.nan
-    outcome, h = begin(settings, lev, sample_tau, work, rec)
-    h = min(h, h_max)
-    e0 = max(abs(rec.fstats[F_E0]), 1e-300)
+    outcome = begin(lev, work, rec, sys)
+    h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
+    consts = RunConsts(sys.n, settings[S_RTOL], settings[S_ATOL], h_max, settings[S_TMAX], int(settings[S_MAXSTEPS]),
+                       settings[S_PEAKS] > 0.0, max(abs(rec.fstats[F_E0]), 1e-300), level_e, sample_tau)
+    h = min(record_start(consts, work, rec, sys), consts.h_max)
     t = 0.0
     after_reject = False
     # after a halt (the last level: the disk still moves) the steps go on while a level's frequencies
@@ -760,22 +789,23 @@ def run(settings, level_e, sample_tau, work, rec):
     # motion the scene simulates: nothing is integrated past it.
     while outcome < 0 or (outcome == oc.HALTED and (trk[T_PENDING] > 0.0 or deep_pending(trk))):
         running = outcome < 0
-        h, outcome, at_tmax, stop = next_try(t, h, outcome, settings, work, rec)
+        h, outcome, at_tmax, stop = next_try(t, h, outcome, consts, work, rec)
         if stop:
             break
-        err = try_step(t, h, n, rtol, atol, e0, t_max, work, istats)
+        err = try_step(t, h, consts, work, sys)
         if not err <= 1.0:
             h *= step_factor(err)
             after_reject = True
             continue
-        h_next = min(h * accepted_step_factor(err, after_reject), h_max)
+        h_next = min(h * accepted_step_factor(err, after_reject), consts.h_max)
         after_reject = False
         if wk[W_AUXNEW, X_OK] != 1.0 and running:
             outcome = failure_outcome(wk[W_AUXNEW, X_OK])
             break
         # the earliest event on the step: the kept part ends there
-        event_values(t + h, wk[W_YNEW], wk[W_AUXNEW], p, cs, u_tol, lev, wk[W_GNEW])
-        first_k, seg_end, have_dense = first_event(t, h, n, u_tol, lev, work, istats)
+        event_values(t + h, wk[W_YNEW], wk[W_AUXNEW], p, cs, lev, wk[W_GNEW])
+        span = Span(work.F, 0, work.y, t, h, sys)
+        first_k, seg_end, have_dense = first_event(span, lev, work)
         event = first_k >= 0
         if event and running and t < trk[T_DIP_END] < t + h:
             # an event of the forces that only the dense output shows (both step ends on the safe
@@ -789,46 +819,55 @@ def run(settings, level_e, sample_tau, work, rec):
         if not event:
             # a step cut to end at t_max ends there exactly: t + (t_max - t) can round 1 ulp short,
             # and a sample asked for at t_max would then be lost
-            seg_end = t_max if at_tmax else t + h
-        e_seg, seg_err = segment_end(t, h, seg_end, event, running, n, e0, t_max, rtol, work)
+            seg_end = consts.t_max if at_tmax else t + h
+        e_seg, seg_err = segment_end(span, seg_end, event, running, consts)
         if seg_err > 1.0:
             retract_step(cs, istats)
             h *= step_factor(seg_err)
             after_reject = True
             continue
         seg = Segment(t, h, seg_end, first_k, have_dense, running, at_tmax)
-        outcome, lev = record_segment(seg, e_seg, outcome, lev, settings, level_e, sample_tau, work, rec)
-        outcome, stop = end_segment(seg, outcome, lev, settings, level_e, work, rec)
+        outcome, lev = record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys)
+        outcome, stop = end_segment(seg, outcome, lev, consts, work, rec, sys)
         t = seg_end
         if stop:
             break
         h = h_next
-    finish(outcome, t, h, n, settings[S_PEAKS] > 0.0, work, rec)
+    finish(outcome, t, h, consts, work, rec)
+
+
+def work_arrays():
+    """The buffers a run works in (layout.Work), zeroed: the one place their shapes are written."""
+    return Work(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
+                np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK))
+
+
+def record_arrays(n_levels, n_samples, traj_rows, peak_rows):
+    """The buffers a run writes (layout.Record) for n_levels levels and n_samples samples, with room
+    for traj_rows trajectory rows and peak_rows maxima of Phi: the levels and samples NaN until
+    written (a level's L_PENDING 0), the rest zeroed. The one place their shapes are written."""
+    levels = np.full((n_levels, LEVEL_COLS + 1), np.nan)
+    levels[:, L_PENDING] = 0.0
+    return Record(np.zeros(N_ISTATS, np.int64), np.zeros(N_FSTATS), levels, np.full((n_samples, SAMPLE_COLS), np.nan),
+                  np.zeros((traj_rows, TRAJ_COLS)), np.zeros((peak_rows, PEAK_COLS)), np.zeros(N_FULL),
+                  np.zeros((FQ_LEVEL0 + n_levels, FQ_COLS)))
 
 
 def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
     """Run one scene (CPU). Allocates the buffers; if the trajectory or peak buffer overflowed, it
     grows it 4x and reruns (the run is deterministic). peak_cap covers ~1.6e4 nutation periods, far
     more than a scene to its halt has, so the rerun is for pathological scenes only. Returns a KernelOutput of arrays:
-    istats, fstats (layout.I_*, F_*), levels (n_levels x layout.LEVEL_COLS: tau, alpha, mean
-    dtheta/dtau over whole precession cycles, f_hat, ringing ratio, cycles in the window), samples
-    (layout.SAMPLE_COLS), trajectory (layout.TRAJ_COLS), peaks (tau, Phi, theta: the counted
-    maxima), y_end (N_FULL)."""
+    istats, fstats (layout.I_*, F_*), levels (n_levels x layout.LEVEL_COLS: the columns layout.L_*),
+    samples (layout.SA_*), trajectory (layout.TR_*), peaks (layout.PK_*: the counted maxima),
+    y_end (N_FULL)."""
     while True:
-        istats = np.zeros(N_ISTATS, np.int64)
-        fstats = np.zeros(N_FSTATS)
-        levels = np.full((level_e.shape[0], LEVEL_COLS + 1), np.nan)
-        levels[:, LEVEL_COLS] = 0.0
-        samples = np.full((sample_tau.shape[0], SAMPLE_COLS), np.nan)
-        traj = np.empty((traj_cap, TRAJ_COLS))
-        peaks = np.empty((peak_cap if settings[S_PEAKS] > 0.0 else 0, PEAK_COLS))
-        y = np.zeros(N_FULL)
-        y[:y0.shape[0]] = y0
-        y_end = np.zeros(N_FULL)
-        fq = np.zeros((FQ_LEVEL0 + level_e.shape[0], FQ_COLS))
-        work = Work(y, p.copy(), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)), np.zeros((N_KROWS, N_FULL)),
-                    np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK))
-        run(settings, level_e, sample_tau, work, Record(istats, fstats, levels, samples, traj, peaks, y_end, fq))
+        work = work_arrays()
+        work.y[:y0.shape[0]] = y0
+        work.p[:] = p
+        rec = record_arrays(level_e.shape[0], sample_tau.shape[0], traj_cap,
+                            peak_cap if settings[S_PEAKS] > 0.0 else 0)
+        run(settings, level_e, sample_tau, work, rec)
+        istats = rec.istats
         over = istats[I_OVERFLOW]
         if over == 0:
             break
@@ -836,5 +875,5 @@ def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
             traj_cap = 4 * max(traj_cap, 256)
         if over & 2:
             peak_cap *= 4
-    return KernelOutput(istats, fstats, levels[:, :LEVEL_COLS], samples, traj[:istats[I_TRAJ]],
-                        peaks[:istats[I_PEAKS]], y_end)
+    return KernelOutput(istats, rec.fstats, rec.levels[:, :LEVEL_COLS], rec.samples, rec.traj[:istats[I_TRAJ]],
+                        rec.peaks[:istats[I_PEAKS]], rec.y_end)

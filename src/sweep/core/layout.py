@@ -66,9 +66,11 @@ W_DELTA = 31      # the step's (or kept segment's) increment y_new - y before ro
 N_WORK = 32
 N_WCOLS = max(N_FULL, N_AUX, N_EVENTS)   # columns of the work buffer: a state, an aux or every event's value
 
-# --- settings vector ----------------------------------------------------------------------------
-S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_UTOL, S_MAXSTEPS, S_KIN, S_PEAKS = 0, 1, 2, 3, 4, 5, 6, 7
-N_SETTINGS = 8
+# --- settings vector: the run's inputs (float64; a scene's row of a batch), read once into RunConsts ---
+# rtol, atol; h_max (tau; 0: no ceiling); t_max (tau); the step budget; 1.0: integrate the
+# kinematics; 1.0: track the normal force's maxima and the levels' frequencies
+S_RTOL, S_ATOL, S_HMAX, S_TMAX, S_MAXSTEPS, S_KIN, S_PEAKS = 0, 1, 2, 3, 4, 5, 6
+N_SETTINGS = 7
 
 # --- integer statistics -------------------------------------------------------------------------
 I_OUTCOME, I_STEPS, I_REJECTED, I_RHS, I_EVENTS, I_TRANS, I_STICK, I_IMPACTS, I_LEVELS, I_TRAJ, I_PEAKS = range(11)
@@ -109,12 +111,23 @@ N_TRACK = 31
 K_PREV = N_STAGES_EXTENDED      # first row of the previous step's stages
 N_KROWS = 2 * N_STAGES_EXTENDED
 
-# --- output buffers -----------------------------------------------------------------------------
-TRAJ_COLS = 2 + N_FULL + 1     # tau, y[0:N_FULL], Phi, mode
-SAMPLE_COLS = N_FULL + 3       # y[0:N_FULL], energy, Phi, mode
-LEVEL_COLS = 6                 # tau, alpha, mean dtheta/dtau, f_hat, ringing ratio, window cycles
-L_PENDING = LEVEL_COLS         # column of the level buffer: 1 while the level's f_hat waits for a maximum
-PEAK_COLS = 3                  # tau, Phi, theta
+# --- output buffers: their columns -------------------------------------------------------------
+# a level's row: tau where it is crossed, alpha there, the mean dtheta/dtau over whole precession
+# cycles, f_hat (2/T over three counted Phi maxima), the ringing ratio (Phi's cycles per precession
+# cycle), the whole cycles in the window (core.frequency); in the kernel's buffer L_PENDING is 1
+# while the level's f_hat waits for a maximum
+L_TAU, L_ALPHA, L_PRECESSION, L_FHAT, L_RINGING, L_CYCLES = range(6)
+LEVEL_COLS = 6
+L_PENDING = LEVEL_COLS
+# a sample's row: the state y[0:N_FULL], its energy, Phi, the mode (cs[CS_MODE])
+SA_Y, SA_ENERGY, SA_PHI, SA_MODE = 0, N_FULL, N_FULL + 1, N_FULL + 2
+SAMPLE_COLS = N_FULL + 3
+# a trajectory row (one per accepted step): tau, the state y[0:N_FULL], Phi, the mode
+TR_TAU, TR_Y, TR_PHI, TR_MODE = 0, 1, 1 + N_FULL, 2 + N_FULL
+TRAJ_COLS = 3 + N_FULL
+# a counted maximum of the normal force: tau, Phi, theta
+PK_TAU, PK_PHI, PK_THETA = 0, 1, 2
+PEAK_COLS = 3
 
 # --- the buffers of one run, grouped ------------------------------------------------------------
 # numba passes a namedtuple of arrays as its arrays (no copy, no cost); a kernel takes the group
@@ -129,10 +142,25 @@ Work = namedtuple("Work", "y p cs wk K F trk")
 # TRAJ_COLS), peaks (cap x PEAK_COLS), y_end (N_FULL) and the frequency windows fq
 # (FQ_LEVEL0 + n_levels x FQ_COLS, core.frequency). A buffer of 0 rows switches its recorder off.
 Record = namedtuple("Record", "istats fstats levels samples traj peaks y_end fq")
-# Span: the dense output that a search on it reads (roots.py): rows row0..row0 + 6 of work.F (0:
-# this step's, N_DENSE: the previous step's) hold the coefficients of the step from the state y0
-# (N_FULL) at tau t0 over h, which ran in the contact state cs (N_CS).
-Span = namedtuple("Span", "row0 y0 t0 h cs")
+# RunConsts: the run's constants, read once from the settings (integrate.run): n the state size (the
+# components integrated: model.N_CORE, N_THETA or N_FULL), rtol, atol, h_max (tau; inf: no
+# ceiling), t_max (tau), max_steps (the step budget, accepted and rejected), peaks_on (the normal
+# force's maxima and the levels' frequencies are tracked), e0 (the initial energy's magnitude, the
+# scale of the step's energy checks), level_e (the levels' energies, decreasing) and sample_tau
+# (the sample times, tau, ascending).
+RunConsts = namedtuple("RunConsts", "n rtol atol h_max t_max max_steps peaks_on e0 level_e sample_tau")
+# System: what the right-hand side of a contact state reads and where it counts: the parameters p
+# (N_PARAMS), the contact state cs (N_CS), the state size n, the work buffer wk (its rows the
+# evaluations use as scratch) and istats (I_RHS, and the events' counts). The stepper (dop853) passes
+# it through to the right-hand side it is given and reads only n and wk.
+System = namedtuple("System", "p cs n wk istats")
+# Point: a state y, its derivative f and the right-hand side's aux there (N_AUX): a step's start
+# and end (integrate.try_step, dop853.rk_step).
+Point = namedtuple("Point", "y f aux")
+# Span: the dense output that a search on it reads (roots.py): rows row0..row0 + 6 of F (work.F;
+# 0: this step's, N_DENSE: the previous step's) hold the coefficients of the step from the state
+# y0 (N_FULL) at tau t0 over h, which ran in the system sys (System: its cs the step's contact state).
+Span = namedtuple("Span", "F row0 y0 t0 h sys")
 # Segment: the kept part of an accepted step, [t, end] of the step [t, t + h] (end < t + h where
 # event k, >= 0, ends it; k = -1 where none does), whether the step's dense output is built
 # (dense), whether the scene was running when the step began (running: not yet ended, else the

@@ -16,6 +16,7 @@ is checked in tests/test_model_equations.py against a world-frame Newton-Euler f
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 
@@ -31,9 +32,11 @@ N_FULL = 14   # with all kinematics
 
 # --- parameter vector layout ---------------------------------------------------------------
 P_G, P_H, P_A, P_C, P_K1, P_K2, P_K3, P_MUS, P_MUD = 0, 1, 2, 3, 4, 5, 6, 7, 8
-# Slip speed at or below which the friction direction is the stored slip direction (n0x, n0y)
-# rather than u/|u|: 0 in the pure model; the integrator sets it to slip_tol (docs/model.md).
-P_UFREEZE = 9
+# slip_tol (u_hat = chi u/R): the slip speed at which a slow slide meets its fate and below which a
+# slip is slaved (core.contact), and at or below which the model's friction direction is the given
+# one (Contact.n0x, n0y) rather than u/|u|; 0 in the pure model, solver.slip_tol chi/R in a scene
+# (docs/model.md).
+P_UTOL = 9
 # Rate |omega.a_i| (dimensionless, solver.spin_tol chi) at or below which a free moment component
 # that slows down sticks, when the moment can hold it (docs/model.md); 0: only at omega.a_i = 0.
 P_WTOL = 10
@@ -50,14 +53,21 @@ N_AUX = 14
 
 ROLL, SLIDE = 0, 1
 
+# The discrete configuration the right-hand side (rhs) is evaluated in: mode (ROLL or SLIDE), side
+# (+1/-1: sign(alpha), the rim edge in contact), sig (3 signs of omega.a_i used in M_f, eq. 3.3),
+# stuck (3 flags: 1 where omega.a_i is held at 0), and (n0x, n0y) the unit slip direction that the
+# friction opposes at slip speeds <= p[P_UTOL]. numba passes it as its fields.
+Contact = namedtuple("Contact", "mode side sig stuck n0x n0y")
+
 
 def make_params(k2_shape: float, radius: float, thickness: float, gravity: float,
-                mu_s: float, mu_d: float, k1: float, k2: float, k3: float) -> tuple[np.ndarray, float]:
+                mu_s: float, mu_d: float, k) -> tuple[np.ndarray, float]:
     """Dimensionless parameter vector and the time scale chi (s) from SI values.
 
     k2_shape: k^2 of eq. (2.4): 1 for the solid cylinder, 2 for the thin shell.
-    radius, thickness (m); gravity (m/s^2); k1..k3 (m, moment = k_i |N|).
+    radius, thickness (m); gravity (m/s^2); k = (k1, k2, k3) (m, moment = k_i |N|).
     """
+    k1, k2, k3 = k
     h = 0.5 * thickness / radius
     chi = math.sqrt((k2_shape + 4.0) / 4.0 * radius / gravity)
     p = np.empty(N_PARAMS)
@@ -70,7 +80,7 @@ def make_params(k2_shape: float, radius: float, thickness: float, gravity: float
     p[P_K3] = k3 / radius
     p[P_MUS] = mu_s
     p[P_MUD] = mu_d
-    p[P_UFREEZE] = 0.0
+    p[P_UTOL] = 0.0
     p[P_WTOL] = 0.0
     return p, chi
 
@@ -268,13 +278,13 @@ def geometry(y, p, side):
 @kernel(inline="always")
 def slip_direction(y, p, mode, n0x, n0y):
     """(u1, u2, n1, n2): the slip on a1, a2 and the unit direction n that friction opposes
-    (F = -mud Phi n, eq. 4.7); (n0x, n0y) at slip speeds <= p[P_UFREEZE]; all zero when rolling."""
+    (F = -mud Phi n, eq. 4.7); (n0x, n0y) at slip speeds <= p[P_UTOL]; all zero when rolling."""
     if mode != SLIDE:
         return 0.0, 0.0, 0.0, 0.0
     u1 = y[Y_U1]
     u2 = y[Y_U2]
     un = math.hypot(u1, u2)
-    if un > p[P_UFREEZE]:
+    if un > p[P_UTOL]:
         return u1, u2, u1 / un, u2 / un
     return u1, u2, n0x, n0y
 
@@ -396,21 +406,22 @@ def kinematics_rates(y, geo, u1, u2, nstate, dy):
 
 
 @kernel(inline="always")
-def rhs(tau, y, p, mode, side, sig, stuck, n0x, n0y, nstate, dy, aux):
+def rhs(tau, y, p, contact, nstate, dy, aux):
     """Time derivatives d y/d tau of the state, and contact quantities in `aux`.
 
-    mode: ROLL (eq. 5.3, corrected) or SLIDE (eq. 4.7). side = sign(alpha) = +-1 selects H.
-    sig[i]: sign of omega.a_i used in M_f (eq. 3.3) for a component that is not stuck.
-    stuck[i] = 1: omega.a_i is held at 0 by the dry-friction moment (Filippov sliding); its
-    effective sign sigma_i in [-1, 1] is solved from d/dtau(omega.a_i) = 0.
-    (n0x, n0y): slip direction used while the slip speed is <= p[P_UFREEZE] (0: only at u = 0).
+    contact (Contact): mode ROLL (eq. 5.3, corrected) or SLIDE (eq. 4.7); side = sign(alpha) = +-1
+    selects H; sig[i]: sign of omega.a_i used in M_f (eq. 3.3) for a component that is not stuck;
+    stuck[i] = 1: omega.a_i is held at 0 by the dry-friction moment (Filippov sliding), its
+    effective sign sigma_i in [-1, 1] solved from d/dtau(omega.a_i) = 0; (n0x, n0y): slip direction
+    used while the slip speed is <= p[P_UTOL] (0: only at u = 0).
     nstate: number of state components to fill (N_CORE, N_THETA, or N_FULL with kinematics).
     aux: Phi, F1, F2 (friction on a1, a2), effective sigma_1..3, omega.a_1..3, ok-flag (1; -1 where the
     e1 balance's coefficient of Phi is not positive: a Painleve inconsistency), sin and cos of alpha.
     """
-    geo = geometry(y, p, side)
+    mode, sig, stuck = contact.mode, contact.sig, contact.stuck
+    geo = geometry(y, p, contact.side)
     s, c = geo[1], geo[2]
-    u1, u2, n1, n2 = slip_direction(y, p, mode, n0x, n0y)
+    u1, u2, n1, n2 = slip_direction(y, p, mode, contact.n0x, contact.n0y)
     dw1, phi, sig1, ok = tilt_balance(y, p, mode, geo, n2, sig, stuck)
     dw2, dw3, sig2, sig3 = spin_balance(y, p, mode, geo, phi, n1, sig, stuck)
     F1, F2, du1, du2 = contact_rates(y, p, mode, geo, phi, (n1, n2), (dw1, dw2, dw3))

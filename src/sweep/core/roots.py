@@ -129,16 +129,17 @@ def hermite_peak(g0, d0, g1, d1):
 
 
 @kernel
-def event_rates(t, y, f, g_here, rates, n, u_tol, level_e, work, istats):
+def event_rates(t, y, f, g_here, rates, lev, sys):
     """d g_k/d tau along the solution at (t, y) for every event k (g_here: the values there,
-    derivative f) into rates, by a forward difference of step RATE_STEP along f: one RHS evaluation
-    for all, in work.cs. 0 where g_k is inactive (inf)."""
-    p, cs, wk = work.p, work.cs, work.wk
+    derivative f; lev: the next level's energy) into rates, by a forward difference of step
+    RATE_STEP along f: one RHS evaluation for all, in the system sys (layout.System). 0 where g_k is
+    inactive (inf)."""
+    p, cs, wk = sys.p, sys.cs, sys.wk
     ys = wk[W_YBUF]
-    for i in range(n):
+    for i in range(sys.n):
         ys[i] = y[i] + RATE_STEP * f[i]
-    eval_rhs(t + RATE_STEP, ys, p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
-    event_values(t + RATE_STEP, ys, wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
+    eval_rhs(t + RATE_STEP, ys, sys, wk[W_DYBUF], wk[W_AUXBUF])
+    event_values(t + RATE_STEP, ys, wk[W_AUXBUF], p, cs, lev, wk[W_GBUF])
     for k in range(N_EVENTS):
         gk = wk[W_GBUF, k]
         if g_here[k] == math.inf or gk == math.inf:
@@ -148,21 +149,24 @@ def event_rates(t, y, f, g_here, rates, n, u_tol, level_e, work, istats):
 
 
 @kernel
-def span_state(t, span, n, work):
-    """The state at time t on the dense output of a step (span: layout.Span), into work.wk[W_YBUF]."""
-    dense_eval(work.F, span.row0, span.y0, span.t0, span.h, t, n, work.wk[W_YBUF])
+def span_state(t, span):
+    """The state at time t on the dense output of a step (span: layout.Span), into its wk[W_YBUF]."""
+    sys = span.sys
+    dense_eval(span.F, span.row0, span.y0, span.t0, span.h, t, sys.n, sys.wk[W_YBUF])
 
 
 @kernel
-def event_value_at(k, t, span, n, u_tol, level_e, work, istats):
-    """g_k at time t on the dense output of a step (span: layout.Span); one RHS evaluation, in the
-    span's contact state, for an event that reads the forces, none for one of the state alone."""
-    p, cs, wk = work.p, span.cs, work.wk
-    span_state(t, span, n, work)
+def event_value_at(k, t, span, lev):
+    """g_k at time t on the dense output of a step (span: layout.Span; lev: the next level's
+    energy); one RHS evaluation, in the span's system, for an event that reads the forces, none for
+    one of the state alone."""
+    sys = span.sys
+    p, cs, wk = sys.p, sys.cs, sys.wk
+    span_state(t, span)
     if not reads_forces(k):
-        return state_event_value(k, t, wk[W_YBUF], p, cs, u_tol, level_e)
-    eval_rhs(t, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
-    event_values(t, wk[W_YBUF], wk[W_AUXBUF], p, cs, u_tol, level_e, wk[W_GBUF])
+        return state_event_value(k, t, wk[W_YBUF], p, cs, lev)
+    eval_rhs(t, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])
+    event_values(t, wk[W_YBUF], wk[W_AUXBUF], p, cs, lev, wk[W_GBUF])
     return wk[W_GBUF, k]
 
 
@@ -174,10 +178,11 @@ def location_tol(tau):
 
 
 @kernel
-def locate(k, ta, ga, tb, gb, span, n, u_tol, level_e, work, istats):
+def locate(k, ta, ga, tb, gb, span, lev):
     """Brent's method (inverse quadratic and secant steps inside a shrinking bracket, bisection
     where they would be slow) for g_k on [ta, tb] with g(ta) > 0 >= g(tb), on the dense output of
-    span (layout.Span). Returns the (ta, tb) bracket, no wider than location_tol, g > 0 at ta.
+    span (layout.Span; lev: the next level's energy). Returns the (ta, tb) bracket, no wider than
+    location_tol, g > 0 at ta.
 
     b is the best point so far and c the bracket's other end (g of the other sign); a step is at
     least half the tolerance, so a bracket that converges from one side closes. A NaN value (a
@@ -227,7 +232,7 @@ def locate(k, ta, ga, tb, gb, span, n, u_tol, level_e, work, istats):
             e = d
         a, fa = b, fb
         b = b + d if abs(d) > half else b + math.copysign(half, xm)
-        fb = event_value_at(k, b, span, n, u_tol, level_e, work, istats)
+        fb = event_value_at(k, b, span, lev)
         if math.isnan(fb):
             fb = -1.0
     if b < c:
@@ -236,18 +241,18 @@ def locate(k, ta, ga, tb, gb, span, n, u_tol, level_e, work, istats):
 
 
 @kernel
-def _objective(k, t, span, n, u_tol, level_e, work, istats):
+def _objective(k, t, span, lev):
     """What brent_min minimises: -Phi for k < 0, else event k's value, on span's dense output."""
     if k >= 0:
-        return event_value_at(k, t, span, n, u_tol, level_e, work, istats)
-    wk = work.wk
-    span_state(t, span, n, work)
-    eval_rhs(t, wk[W_YBUF], work.p, span.cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+        return event_value_at(k, t, span, lev)
+    wk = span.sys.wk
+    span_state(t, span)
+    eval_rhs(t, wk[W_YBUF], span.sys, wk[W_DYBUF], wk[W_AUXBUF])
     return -wk[W_AUXBUF, X_PHI]
 
 
 @kernel
-def brent_min(k, ta, tb, stop_at, span, n, u_tol, level_e, work, istats):
+def brent_min(k, ta, tb, stop_at, span, lev):
     """Time and value of the minimum of _objective(k) on [ta, tb] (span's dense output) by Brent's parabolic/golden-section
     search; it returns at once at a value <= stop_at (a dip below an event surface is found).
 
@@ -258,7 +263,7 @@ def brent_min(k, ta, tb, stop_at, span, n, u_tol, level_e, work, istats):
     a = ta
     b = tb
     x = w = v = a + cgold * (b - a)
-    fx = fw = fv = _objective(k, x, span, n, u_tol, level_e, work, istats)
+    fx = fw = fv = _objective(k, x, span, lev)
     d = 0.0
     e = 0.0
     for _ in range(100):
@@ -288,7 +293,7 @@ def brent_min(k, ta, tb, stop_at, span, n, u_tol, level_e, work, istats):
             e = (a - x) if x >= xm else (b - x)
             d = cgold * e
         u = x + d if abs(d) >= tol1 else x + (tol1 if d >= 0 else -tol1)
-        fu = _objective(k, u, span, n, u_tol, level_e, work, istats)
+        fu = _objective(k, u, span, lev)
         if fu <= fx:
             if u >= x:
                 a = x
@@ -311,13 +316,13 @@ def brent_min(k, ta, tb, stop_at, span, n, u_tol, level_e, work, istats):
 
 
 @kernel
-def phi_on_dense(tau, span, n, work, istats):
+def phi_on_dense(tau, span):
     """Phi at tau on the dense output of span (layout.Span)."""
-    return -_objective(-1, tau, span, n, 0.0, math.nan, work, istats)
+    return -_objective(-1, tau, span, math.nan)
 
 
 @kernel
-def brent_max_phi(ta, tb, span, n, work, istats):
+def brent_max_phi(ta, tb, span):
     """Time of the maximum of Phi on [ta, tb] (span's dense output) and Phi there (brent_min of -Phi)."""
-    x, f = brent_min(-1, ta, tb, -math.inf, span, n, 0.0, math.nan, work, istats)
+    x, f = brent_min(-1, ta, tb, -math.inf, span, math.nan)
     return x, -f

@@ -1,8 +1,9 @@
 """Recorders that read an accepted step's dense output: halt levels, samples, Phi maxima, trajectory.
 
 They never change the trajectory. `trk` (float64, layout.T_*) carries their state between steps;
-level_out columns: tau, alpha, mean dtheta/dtau over whole precession cycles, f_hat (paper's 2/T
-over three counted Phi maxima), ringing ratio, cycles in the window (frequency.py), pending f_hat.
+the rows they write have the columns layout.L_* (levels), SA_* (samples), TR_* (trajectory) and
+PK_* (maxima of Phi). The step they read comes as a layout.Span (its dense output, from work.y, and
+the system it ran in).
 """
 from __future__ import annotations
 
@@ -14,9 +15,10 @@ from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_ste
 from .fits import halt_from_three
 from .jit import kernel
 from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_B, T_DEEP_E, T_FIT_B, T_FIT_T, CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_CS, T_NEXT_LEVEL, T_PREV_DENSE,
-                     T_NEXT_SAMPLE, T_PENDING, L_PENDING, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV,
-                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND, Span)
-from .model import N_FULL, X_PHI, Y_ALPHA, Y_THETA, steady_rolling_energy
+                     T_NEXT_SAMPLE, T_PENDING, L_ALPHA, L_FHAT, L_PENDING, L_TAU, PK_PHI, PK_TAU, PK_THETA, SA_ENERGY, SA_MODE,
+                     SA_PHI, SA_Y, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV, TR_MODE, TR_PHI, TR_TAU, TR_Y,
+                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND, Span, System)
+from .model import X_PHI, Y_ALPHA, Y_THETA, steady_rolling_energy
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
 
@@ -30,20 +32,21 @@ PEAK_SIDE_TOL = 1e-12
 
 
 @kernel
-def dense_wanted(running, seg_end, e_seg, theta_seg, level_e, sample_tau, trk, fq, phi_c, peaks_on):
-    """Whether a recorder reads this segment's dense output (the tests they make): a level crossed
-    (while running, or one the halt fit waits for after the halt), a sample due, a new point of the
-    precession lattice, a bracketed Phi maximum. e_seg, theta_seg: the energy (mode_energy) and
-    theta at the segment end."""
+def dense_wanted(seg, e_seg, theta_seg, phi_c, consts, trk, fq):
+    """Whether a recorder reads the dense output of the kept part seg (layout.Segment) of a step (the
+    tests they make): a level crossed (while running, or one the halt fit waits for after the halt),
+    a sample due, a new point of the precession lattice, a bracketed Phi maximum. e_seg, theta_seg,
+    phi_c: the energy (mode_energy), theta and Phi at the segment end; consts: layout.RunConsts."""
+    level_e, sample_tau = consts.level_e, consts.sample_tau
     L = int(trk[T_NEXT_LEVEL])
-    if running and L < level_e.shape[0] and e_seg - level_e[L] <= 0.0:
+    if seg.running and L < level_e.shape[0] and e_seg - level_e[L] <= 0.0:
         return True
-    if not running and deep_pending(trk) and e_seg - trk[T_DEEP_E] <= 0.0:
+    if not seg.running and deep_pending(trk) and e_seg - trk[T_DEEP_E] <= 0.0:
         return True
     j = int(trk[T_NEXT_SAMPLE])
-    if j < sample_tau.shape[0] and sample_tau[j] <= seg_end:
+    if j < sample_tau.shape[0] and sample_tau[j] <= seg.end:
         return True
-    return peaks_on and (lattice_due(theta_seg, fq) or peak_bracketed(phi_c, trk))
+    return consts.peaks_on and (lattice_due(theta_seg, fq) or peak_bracketed(phi_c, trk))
 
 
 @kernel
@@ -53,48 +56,59 @@ def peak_bracketed(phi_c, trk):
 
 
 @kernel
-def previous_dense(y, n, p, K, F, trk, wk, istats):
+def step_dense(t, y, h, y_new, sys, K, F):
+    """dop853.dense_coeffs for the contact right-hand side (contact.eval_rhs): the dense output F[0:7]
+    of the step from y at t over h to y_new, from its stages K, in the system sys (layout.System).
+    A kernel of its own: the stepper's kernels are inlined into their callers, and this one
+    compiled copy serves every step's dense output (integrate.dense_built, previous_dense)."""
+    dense_coeffs(eval_rhs, t, y, h, y_new, sys, K, F)
+
+
+@kernel
+def previous_dense(sys, work):
     """The previous step's dense output into F[7:14], from its stages kept in K[K_PREV:] (a step
-    without an event: it ended in y, the current step's start, with f = its last stage)."""
+    without an event: it ended in work.y, the current step's start, with f = its last stage), in
+    the contact state it ran in (wk[W_CSPREV]); sys: the current step's layout.System."""
+    K, F, trk, wk = work.K, work.F, work.trk, sys.wk
     if trk[T_PREV_DENSE] == 0.0:
-        dense_coeffs(trk[T_TPREV], wk[W_YPREV], trk[T_HPREV], y, K[K_PREV + N_STAGES], n, p, wk[W_CSPREV, :N_CS],
-                     K[K_PREV:], F[N_DENSE:], wk, istats)
+        before = System(sys.p, wk[W_CSPREV, :N_CS], sys.n, wk, sys.istats)
+        step_dense(trk[T_TPREV], wk[W_YPREV], trk[T_HPREV], work.y, before, K[K_PREV:], F[N_DENSE:])
         trk[T_PREV_DENSE] = 1.0
 
 
 @kernel
-def record_levels(t, h, seg_end, e_seg, level_e, peaks_on, u_tol, n, work, rec):
-    """Record the halt levels crossed on [t, seg_end] of the step [t, t + h] from work.y (energy is
-    monotone: one root each); e_seg is the energy (mode_energy) at seg_end, level_e the levels'
-    energies; peaks_on: the levels' frequencies are tracked.
+def record_levels(span, seg_end, e_seg, consts, trk, rec):
+    """Record the halt levels (consts.level_e: their energies) crossed on [t, seg_end] of the step span
+    (layout.Span, from t = span.t0; energy is monotone: one root each); e_seg is the energy
+    (mode_energy) at seg_end; with consts.peaks_on the levels' frequencies are tracked.
 
     Returns the tau of the last level if it was reached in this segment (the scene halts), else -1.
     """
-    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
-    level_out, istats = rec.levels, rec.istats
+    y, t, h, sys = span.y0, span.t0, span.h, span.sys
+    level_e, level_out = consts.level_e, rec.levels
     nl = level_e.shape[0]
     while int(trk[T_NEXT_LEVEL]) < nl:
         L = int(trk[T_NEXT_LEVEL])
         gl = e_seg - level_e[L]
         if not gl <= 0.0:
             return -1.0
-        gl0 = mode_energy(y, p, cs) - level_e[L]
+        gl0 = mode_energy(y, sys.p, sys.cs) - level_e[L]
         if gl0 <= 0.0:
             ta = t
             tb = t
         else:
-            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, gl, Span(0, y, t, h, cs), n, u_tol, level_e[L], work, istats)
+            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, gl, span, level_e[L])
         tl = 0.5 * (ta + tb)
-        ybuf = wk[W_YBUF]
-        dense_eval(F, 0, y, t, h, tl, n, ybuf)
-        level_out[L, 0] = tl
-        level_out[L, 1] = ybuf[Y_ALPHA]
-        if peaks_on:
+        ybuf = sys.wk[W_YBUF]
+        dense_eval(span.F, 0, y, t, h, tl, sys.n, ybuf)
+        level_out[L, L_TAU] = tl
+        level_out[L, L_ALPHA] = ybuf[Y_ALPHA]
+        if consts.peaks_on:
             level_out[L, L_PENDING] = 1.0
             trk[T_PENDING] += 1.0
             open_level(L, tl, rec.fq, trk)
         trk[T_NEXT_LEVEL] = L + 1
-        istats[I_LEVELS] = L + 1
+        rec.istats[I_LEVELS] = L + 1
         if L + 1 == nl:
             return tl
     return -1.0
@@ -106,94 +120,94 @@ def halt_flat(t, level_out, trk, level_e):
     dissipates what is left); levels recorded without frequencies."""
     nl = level_e.shape[0]
     for L in range(int(trk[T_NEXT_LEVEL]), nl):
-        level_out[L, 0] = t
+        level_out[L, L_TAU] = t
     trk[T_NEXT_LEVEL] = nl
 
 
 @kernel
 def record_sample(y, aux, p, cs, n, row):
-    """One sample row: state, energy, Phi, mode."""
+    """One sample row (layout.SA_*): state, energy, Phi, mode."""
     for i in range(n):
-        row[i] = y[i]
-    row[N_FULL] = mode_energy(y, p, cs)
-    row[N_FULL + 1] = aux[X_PHI]
-    row[N_FULL + 2] = cs[CS_MODE]
+        row[SA_Y + i] = y[i]
+    row[SA_ENERGY] = mode_energy(y, p, cs)
+    row[SA_PHI] = aux[X_PHI]
+    row[SA_MODE] = cs[CS_MODE]
 
 
 @kernel
-def record_samples(t, h, seg_end, t_stop, sample_tau, n, work, rec):
-    """Samples with tau in (t, seg_end] (and <= t_stop) from the dense output of the step [t, t + h]
-    from work.y."""
-    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
-    samples, istats = rec.samples, rec.istats
+def record_samples(span, seg_end, t_stop, sample_tau, trk, samples):
+    """Samples with tau in (t, seg_end] (and <= t_stop) from the dense output of the step span
+    (layout.Span, from t = span.t0)."""
+    sys = span.sys
+    p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     ns = sample_tau.shape[0]
     while int(trk[T_NEXT_SAMPLE]) < ns:
         j = int(trk[T_NEXT_SAMPLE])
         ts = sample_tau[j]
         if ts > seg_end or ts > t_stop:
             return
-        dense_eval(F, 0, y, t, h, ts, n, wk[W_YBUF])
-        eval_rhs(ts, wk[W_YBUF], p, cs, n, wk[W_DYBUF], wk[W_AUXBUF], wk, istats)
+        dense_eval(span.F, 0, span.y0, span.t0, span.h, ts, n, wk[W_YBUF])
+        eval_rhs(ts, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])
         record_sample(wk[W_YBUF], wk[W_AUXBUF], p, cs, n, samples[j])
         trk[T_NEXT_SAMPLE] = j + 1
 
 
 @kernel
 def record_traj(t, y, phi, cs, n, traj, istats):
-    """Append one trajectory row (flags an overflow instead of growing the buffer)."""
+    """Append one trajectory row (layout.TR_*; flags an overflow instead of growing the buffer)."""
     i = istats[I_TRAJ]
     if i >= traj.shape[0]:
         istats[I_OVERFLOW] |= 1
         return
-    traj[i, 0] = t
+    traj[i, TR_TAU] = t
     for j in range(n):
-        traj[i, 1 + j] = y[j]
-    traj[i, 1 + N_FULL] = phi
-    traj[i, 2 + N_FULL] = cs[CS_MODE]
+        traj[i, TR_Y + j] = y[j]
+    traj[i, TR_PHI] = phi
+    traj[i, TR_MODE] = cs[CS_MODE]
     istats[I_TRAJ] = i + 1
 
 
 @kernel
-def track_frequency(t, h, seg_end, phi_c, have_dense, running, n, work, rec):
-    """The frequency recorders on the segment [t, seg_end] of the step [t, t + h] from work.y (its
-    end state in wk[W_YSEG], Phi there phi_c): the precession lattice, the Phi maxima (the previous
-    step's dense output where a maximum is bracketed), and the window of the last two segments kept
-    for the next bracket."""
-    y, p, wk, K, F, trk = work.y, work.p, work.wk, work.K, work.F, work.trk
-    lattice_step(t, h, seg_end, n, work, rec)
-    if peak_bracketed(phi_c, trk):
-        previous_dense(y, n, p, K, F, trk, wk, rec.istats)
-    track_peaks(t, h, seg_end, phi_c, running, n, work, rec)
-    shift_peak_window(t, h, seg_end, phi_c, have_dense, n, work)
+def track_frequency(span, seg_end, phi_c, have_dense, running, work, rec):
+    """The frequency recorders on the segment [t, seg_end] of the step span (layout.Span, from
+    t = span.t0; its end state in wk[W_YSEG], Phi there phi_c): the precession lattice, the Phi
+    maxima (the previous step's dense output where a maximum is bracketed), and the window of the
+    last two segments kept for the next bracket."""
+    lattice_step(span, seg_end, work.trk, rec)
+    if peak_bracketed(phi_c, work.trk):
+        previous_dense(span.sys, work)
+    track_peaks(span, seg_end, phi_c, running, work, rec)
+    shift_peak_window(span, seg_end, phi_c, have_dense, work)
 
 
 @kernel
-def track_peaks(t, h, seg_end, phi_c, running, n, work, rec):
+def track_peaks(this, seg_end, phi_c, running, work, rec):
     """Phi at the last three segment ends a < b >= c brackets a maximum: locate it (Brent) on the
-    two steps' dense outputs (this one's from work.y over [t, t + h]); if it stands out of its
-    bracket it passes the hysteresis filter (frequency.peak_candidate); Phi at this segment end
-    (phi_c) may confirm the candidate, which is then counted and resolves pending levels' f_hat."""
-    y, cs, wk, F, trk = work.y, work.cs, work.wk, work.F, work.trk
-    level_out, peaks, istats, fstats, fq = rec.levels, rec.peaks, rec.istats, rec.fstats, rec.fq
+    two steps' dense outputs (this one's: the layout.Span this, from t = this.t0); if it stands out
+    of its bracket it passes the hysteresis filter (frequency.peak_candidate); Phi at this segment
+    end (phi_c) may confirm the candidate, which is then counted and resolves pending levels' f_hat."""
+    sys, t = this.sys, this.t0
+    wk, F, trk = sys.wk, work.F, work.trk
+    peaks, istats, fq = rec.peaks, rec.istats, rec.fq
     npk = int(trk[T_NPK])
     pa = trk[T_PHI_A]
     if peak_bracketed(phi_c, trk):
-        before = Span(N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], wk[W_CSPREV, :N_CS])
-        this = Span(0, y, t, h, cs)
-        left, right = peak_sides(t, seg_end, before, this, n, work, istats)
+        before = Span(F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV],
+                      System(sys.p, wk[W_CSPREV, :N_CS], sys.n, wk, istats))
+        left, right = peak_sides(seg_end, before, this, trk)
         tp1, pv1 = trk[T_TB], -math.inf
         tp2, pv2 = t, -math.inf
         if left:
-            tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], before, n, work, istats)
+            tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], before)
         if right:
-            tp2, pv2 = brent_max_phi(t, seg_end, this, n, work, istats)
+            tp2, pv2 = brent_max_phi(t, seg_end, this)
         ybuf = wk[W_YBUF]
         if pv1 >= pv2:
             tpk, pvk = tp1, pv1
-            dense_eval(F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], tpk, n, ybuf)
+            dense_eval(F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], tpk, sys.n, ybuf)
         else:
             tpk, pvk = tp2, pv2
-            dense_eval(F, 0, y, t, h, tpk, n, ybuf)
+            dense_eval(F, 0, this.y0, t, this.h, tpk, sys.n, ybuf)
         thk = ybuf[Y_THETA]
         # round-off wiggles (e.g. of a creeping slip) have no prominence; real nutation peaks rise
         # ~0.1 Phi above the bracket ends
@@ -204,30 +218,29 @@ def track_peaks(t, h, seg_end, phi_c, running, n, work, rec):
         if npk >= peaks.shape[0] and trk[T_PEAK_RING] == 0.0:
             istats[I_OVERFLOW] |= 2
         else:
-            _add_peak(fq[0, Q_CAND_T], fq[0, Q_CAND_PHI], fq[0, Q_CAND_TH], npk, level_out, peaks, trk, fstats,
-                      running, istats)
+            _add_peak(fq[0, Q_CAND_T], fq[0, Q_CAND_PHI], fq[0, Q_CAND_TH], npk, running, trk, rec)
             npk += 1
     trk[T_NPK] = npk
     istats[I_PEAKS] = npk
 
 
 @kernel
-def peak_sides(t, seg_end, before, this, n, work, istats):
+def peak_sides(seg_end, before, this, trk):
     """Which of the two segments bracketing a maximum of Phi (the previous one, [T_TA, T_TB], and
-    [t, seg_end], with T_TB = t) to search: (left, right). Phi at T_TB is known; read a gap past it
-    on each side. Where it rises on one side and falls on the other, the maximum lies on the rising
-    side (for a smooth Phi, one within half the gap of T_TB falls on both sides), and a search of
-    the falling side would only creep to T_TB (Brent's golden steps, ~40 RHS calls) to lose the
-    comparison. Otherwise, or where a difference is within PEAK_SIDE_TOL, both are searched.
+    [t, seg_end], with T_TB = t = this.t0) to search: (left, right). Phi at T_TB is known; read a
+    gap past it on each side. Where it rises on one side and falls on the other, the maximum lies on
+    the rising side (for a smooth Phi, one within half the gap of T_TB falls on both sides), and a
+    search of the falling side would only creep to T_TB (Brent's golden steps, ~40 RHS calls) to
+    lose the comparison. Otherwise, or where a difference is within PEAK_SIDE_TOL, both are searched.
     before, this: the two steps' dense outputs (layout.Span)."""
-    trk = work.trk
+    t = this.t0
     gap = PEAK_SIDE_GAP * min(trk[T_TB] - trk[T_TA], seg_end - t)
     if not gap > 0.0:
         return True, True
     phi_b = trk[T_PHI_B]
     tol = PEAK_SIDE_TOL * abs(phi_b)
-    d_left = phi_on_dense(trk[T_TB] - gap, before, n, work, istats) - phi_b
-    d_right = phi_on_dense(t + gap, this, n, work, istats) - phi_b
+    d_left = phi_on_dense(trk[T_TB] - gap, before) - phi_b
+    d_right = phi_on_dense(t + gap, this) - phi_b
     if d_left > tol and d_right < -tol:
         return True, False
     if d_right > tol and d_left < -tol:
@@ -236,35 +249,40 @@ def peak_sides(t, seg_end, before, this, n, work, istats):
 
 
 @kernel
-def _add_peak(tpk, pvk, thk, npk, level_out, peaks, trk, fstats, running, istats):
+def _add_peak(tpk, pvk, thk, npk, running, trk, rec):
+    """Count maximum npk of Phi (tau tpk, value pvk, theta thk) into rec.peaks (layout.PK_*), the
+    largest f_hat seen (rec.fstats[F_NFMAX]; running: the scene has not ended) and the f_hat of the
+    levels waiting for it (rec.levels)."""
+    level_out, peaks, fstats = rec.levels, rec.peaks, rec.fstats
     cap = peaks.shape[0]   # row of peak j: j, or j % cap where the buffer is a ring (trk[T_PEAK_RING])
-    peaks[npk % cap, 0] = tpk
-    peaks[npk % cap, 1] = pvk
-    peaks[npk % cap, 2] = thk
+    peaks[npk % cap, PK_TAU] = tpk
+    peaks[npk % cap, PK_PHI] = pvk
+    peaks[npk % cap, PK_THETA] = thk
     if npk >= 2 and (running or tpk <= fstats[F_TEND]):
-        fstats[F_NFMAX] = max(fstats[F_NFMAX], 2.0 / (tpk - peaks[(npk - 2) % cap, 0]))
+        fstats[F_NFMAX] = max(fstats[F_NFMAX], 2.0 / (tpk - peaks[(npk - 2) % cap, PK_TAU]))
     # resolve levels that now have a counted maximum after them: f_hat = 2 / (t_k - t_{k-2}) over
     # the last three counted maxima at or before the level
     for L in range(level_out.shape[0]):
-        if level_out[L, L_PENDING] == 1.0 and tpk > level_out[L, 0]:
+        if level_out[L, L_PENDING] == 1.0 and tpk > level_out[L, L_TAU]:
             j = npk - 1
-            while j >= 0 and j > npk - cap and peaks[j % cap, 0] > level_out[L, 0]:
+            while j >= 0 and j > npk - cap and peaks[j % cap, PK_TAU] > level_out[L, L_TAU]:
                 j -= 1
             if j >= 2:
                 if j - 2 <= npk - cap:
-                    istats[I_OVERFLOW] |= 2   # a ring too short for this look-back (never on the CPU path)
+                    rec.istats[I_OVERFLOW] |= 2   # a ring too short for this look-back (never on the CPU path)
                 else:
-                    level_out[L, 3] = 2.0 / (peaks[j % cap, 0] - peaks[(j - 2) % cap, 0])
+                    level_out[L, L_FHAT] = 2.0 / (peaks[j % cap, PK_TAU] - peaks[(j - 2) % cap, PK_TAU])
             level_out[L, L_PENDING] = 0.0
             trk[T_PENDING] -= 1.0
 
 
 @kernel
-def shift_peak_window(t, h, seg_end, phi_c, have_dense, n, work):
+def shift_peak_window(span, seg_end, phi_c, have_dense, work):
     """Keep this segment's Phi (phi_c at seg_end), contact state and dense output (or, where it was
-    not built, the stages it is built from: previous_dense) of the step [t, t + h] from work.y for
-    the next bracket."""
-    y, cs, wk, K, F, trk = work.y, work.cs, work.wk, work.K, work.F, work.trk
+    not built, the stages it is built from: previous_dense) of the step span (layout.Span, from
+    work.y) for the next bracket."""
+    y, cs, K, F, trk = work.y, work.cs, work.K, work.F, work.trk
+    n, wk = span.sys.n, span.sys.wk
     trk[T_PHI_A] = trk[T_PHI_B]
     trk[T_TA] = trk[T_TB]
     trk[T_PHI_B] = phi_c
@@ -283,8 +301,8 @@ def shift_peak_window(t, h, seg_end, phi_c, have_dense, n, work):
         wk[W_YPREV, i] = y[i]
     for i in range(N_CS):
         wk[W_CSPREV, i] = cs[i]
-    trk[T_TPREV] = t
-    trk[T_HPREV] = h
+    trk[T_TPREV] = span.t0
+    trk[T_HPREV] = span.h
     trk[T_PREV_OK] = 1.0
 
 
@@ -348,7 +366,7 @@ def next_deep_level(trk, p):
 
 @kernel
 def start_deep_levels(level_e, levels, p, trk, fstats):
-    """At the halt (the last configured level crossed, levels[:, 0] their tau): the halt fit on the
+    """At the halt (the last configured level crossed, levels[:, L_TAU] their tau): the halt fit on the
     last three levels; where it has no finite root (the level times do not yet show the final
     approach, or there are fewer than three levels), the steps after the halt go on to the levels
     below, a decade each (deep_levels), until the fit on the last three has one or the disk lies
@@ -358,35 +376,34 @@ def start_deep_levels(level_e, levels, p, trk, fstats):
         trk[T_FIT_T + j] = math.nan
         trk[T_FIT_B + j] = math.nan
     for L in range(max(nl - 3, 0), nl):
-        push_fit_level(trk, levels[L, 0], level_inclination(level_e[L], p))
+        push_fit_level(trk, levels[L, L_TAU], level_inclination(level_e[L], p))
     th, _ = fit_last_three(trk)
     if math.isnan(th):
         next_deep_level(trk, p)
 
 
 @kernel
-def deep_levels(t, h, seg_end, e_seg, u_tol, n, work, rec):
+def deep_levels(span, seg_end, e_seg, trk, fstats):
     """After the halt, the levels below the last one that the halt fit waits for, crossed on [t,
-    seg_end] of the step [t, t + h] from work.y (dense output built; e_seg: the energy at
-    seg_end), located as the configured levels are; where the fit on the last three has a finite
+    seg_end] of the step span (layout.Span, from t = span.t0; dense output built; e_seg: the energy
+    at seg_end), located as the configured levels are; where the fit on the last three has a finite
     root, the halt time, its error (the remainder t_halt - t_last) and the approach exponent go to
-    rec.fstats (F_THALT, F_THALT_ERR, F_APPROACH), and the search ends."""
-    y, p, cs, wk, F, trk = work.y, work.p, work.cs, work.wk, work.F, work.trk
+    fstats (F_THALT, F_THALT_ERR, F_APPROACH), and the search ends."""
+    y, t, p, cs = span.y0, span.t0, span.sys.p, span.sys.cs
     while deep_pending(trk) and e_seg - trk[T_DEEP_E] <= 0.0:
         le = trk[T_DEEP_E]
         gl0 = mode_energy(y, p, cs) - le
         if gl0 <= 0.0:
             tl = t
         else:
-            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, e_seg - le, Span(0, y, t, h, cs), n, u_tol, le, work,
-                            rec.istats)
+            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, e_seg - le, span, le)
             tl = 0.5 * (ta + tb)
         push_fit_level(trk, tl, trk[T_DEEP_B])
         th, pw = fit_last_three(trk)
         if math.isnan(th):
             next_deep_level(trk, p)
         else:
-            rec.fstats[F_THALT] = th
-            rec.fstats[F_THALT_ERR] = th - tl
-            rec.fstats[F_APPROACH] = pw
+            fstats[F_THALT] = th
+            fstats[F_THALT_ERR] = th - tl
+            fstats[F_APPROACH] = pw
             trk[T_DEEP_E] = 0.0
