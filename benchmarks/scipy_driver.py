@@ -733,6 +733,19 @@ class Disk:
                 return -1
         return -1
 
+    def consistent_signs(self, t, y, c):
+        """After the start or an impact: each free sign is that of its omega.a_i, an exact 0 gets
+        the stick test; a rolling contact outside the static cone starts to slip."""
+        g = _axes(y)
+        for i in range(3):
+            if self.k[i] > 0.0:
+                if g[i] != 0.0:
+                    c.sig[i] = 1.0 if g[i] > 0.0 else -1.0
+                else:
+                    self.stick_test(i, t, y, c)
+        if c.mode == ROLL and self.cone_violated(t, y, c):
+            self.start_slip(t, y, c)
+
     def side_change(self, t, y, c):
         """alpha = 0: plastic impact of the other rim edge. Returns an outcome code or -1."""
         slipping = c.mode != ROLL
@@ -828,15 +841,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
     start_code = -1
     if y[Y_U1] != 0.0 or y[Y_U2] != 0.0:
         start_code = disk.set_slip(t, y, c)
-    g = _axes(y)
-    for i in range(3):
-        if k_on[i]:
-            if g[i] != 0.0:
-                c.sig[i] = 1.0 if g[i] > 0.0 else -1.0
-            else:
-                disk.stick_test(i, t, y, c)
-    if c.mode == ROLL and disk.cone_violated(t, y, c):
-        disk.start_slip(t, y, c)
+    disk.consistent_signs(t, y, c)
     _count_transition(y0[Y_U1] == 0.0 and y0[Y_U2] == 0.0, c, stats)
     e0 = disk.energy(y, c)
     outcome = start_code
@@ -1256,14 +1261,6 @@ def _update(kind, t, y, c, disk, stats, kinds, leaving_out, now=False):
         code = disk.side_change(t, y, c)
         if code >= 0:
             return code
-        g = _axes(y)
-        for i in range(3):
-            if disk.k[i] > 0.0:
-                if g[i] != 0.0:
-                    c.sig[i] = 1.0 if g[i] > 0.0 else -1.0
-                else:
-                    disk.stick_test(i, t, y, c)
-        if c.mode == ROLL and disk.cone_violated(t, y, c):
-            disk.start_slip(t, y, c)
+        disk.consistent_signs(t, y, c)
         return -1
     return disk.settle(t, y, c, g_before, tuple(leaving_out))
