@@ -212,14 +212,15 @@ def eval_rhs(t, y, sys, dy, aux):
             # derivative makes the step fail, so steps shrink until EV_SLAVE_LOST is located
             for i in range(n):
                 dy[i] = math.nan
-    else:
-        # one model call for both smooth modes (one inlined copy of the model)
-        nx, ny = 1.0, 0.0
-        if mode == SLIDE:
-            un = math.hypot(y[Y_U1], y[Y_U2])
-            nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
-            ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
+    elif mode == SLIDE:
+        un = math.hypot(y[Y_U1], y[Y_U2])
+        nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
+        ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
         _model(t, y, sys, dy, aux, nx, ny)
+    else:
+        # (a copy of the model per mode: LLVM specialises each, and one shared copy made a sliding
+        # evaluation 40 % slower)
+        _model(t, y, sys, dy, aux, 1.0, 0.0)
 
 
 @kernel

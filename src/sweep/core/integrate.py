@@ -240,7 +240,9 @@ def surface_bracket(k, span, lev, work):
     return ta, ga, tb, gb, k_event
 
 
-@kernel
+# spin_bracket and dip_bracket are inlined into first_event, their one caller: they run for every
+# active event on every step, and a call passes the step's span and work groups (~100 words).
+@kernel(inline="always")
 def spin_bracket(k, span, lev, work, have_dense):
     """A free component slower than spin_tol at both ends of the step span (layout.Span: [t, t + h]
     from work.y; e.g. just released at an un-stick) can speed past spin_tol and slow to it again
@@ -260,7 +262,7 @@ def spin_bracket(k, span, lev, work, have_dense):
     return -1.0, 0.0, have_dense
 
 
-@kernel
+@kernel(inline="always")
 def dip_bracket(k, span, lev, work, have_dense):
     """Event k positive at both ends of the step span (layout.Span: [t, t + h] from work.y) can
     still reach 0 and come back within it: a bounce off alpha = 0, a brief slip demand, a needed
