@@ -722,7 +722,9 @@ def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
     elif deep_pending(trk):
         deep_levels(span, seg.end, e_seg, trk, rec.fstats)
     record_samples(span, seg.end, rec.fstats[F_TEND] if outcome >= 0 else math.inf, consts.sample_tau, trk, rec.samples)
-    if consts.peaks_on:
+    # after the end, only while a level's frequencies wait for the motion (not for the whole deep
+    # search of the halt fit: its Phi maxima are past the scene's end)
+    if consts.peaks_on and (seg.running or trk[T_PENDING] > 0.0):
         track_frequency(span, seg.end, phi_c, have_dense, seg.running, work, rec)
     return outcome, lev
 
