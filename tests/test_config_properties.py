@@ -22,8 +22,10 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sweep import grid
+from sweep import fields, grid
 from conftest import copy_workflow
+from sweep.errors import ConfigError
+from sweep.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_PATH = grid.SCHEMA_PATH
@@ -51,7 +53,7 @@ def valid_configs(draw, levels_max: float = HALF_PI, ordinary_disk: bool = False
     if ordinary_disk:  # sizes at which the core's floating-point set-up cannot underflow
         radius = draw(st.floats(1e-3, 10.0, **FINITE))
     else:
-        radius = draw(st.floats(0.0, 10.0, exclude_min=True, **FINITE))
+        radius = draw(st.floats(1e-6, 10.0, **FINITE))
     cfg: dict = {}
     disk = {}
     if draw(st.booleans()):
@@ -63,14 +65,13 @@ def valid_configs(draw, levels_max: float = HALF_PI, ordinary_disk: bool = False
         if disk["thickness"] <= 0:
             disk["thickness"] = radius
     if draw(st.booleans()):
-        disk["mass"] = draw(st.floats(1e-3 if ordinary_disk else 0.0, 1e4, exclude_min=not ordinary_disk, **FINITE))
+        disk["mass"] = draw(st.floats(1e-3 if ordinary_disk else 1e-9, 1e4, **FINITE))
     if draw(st.booleans()):
         disk["shape"] = draw(st.sampled_from(["solid", "shell"]))
     if disk or draw(st.booleans()):
         cfg["disk"] = disk
     if draw(st.booleans()):
-        cfg["gravity"] = draw(st.floats(0.1 if ordinary_disk else 0.0, 1000.0,
-                                        exclude_min=not ordinary_disk, **FINITE))
+        cfg["gravity"] = draw(st.floats(0.1 if ordinary_disk else 1e-3, 1000.0, **FINITE))
     mu_s = draw(st.floats(0.0, 10.0, exclude_min=True, **FINITE))
     if draw(st.booleans()):
         cfg["mu_s"] = mu_s
@@ -164,31 +165,22 @@ def test_ordinary_valid_configs_pass_the_core_checks(cfg):
 
 # ------------------------------------------------------------------------------- invalid configs
 
+# The ranges the validation must enforce: the one table (sweep.fields.RANGES) that scene files
+# and the sweep schema share, and whose every row docs/pipeline.md states (test_grid checks that).
+def _bounds(key: str) -> tuple:
+    r = fields.RANGES[fields.SWEEP_KEYS[key]]
+    return r.lo, r.hi, r.lo_open, r.hi_open
+
+
 # Scalar keys: (path, lower bound, upper bound, lower open, upper open, integer)
-SCALARS = [
-    (("disk", "radius"), 0.0, 10.0, True, False, False),
-    (("disk", "mass"), 0.0, 1e4, True, False, False),
-    (("gravity",), 0.0, 1000.0, True, False, False),
-    (("mu_s",), 0.0, 10.0, True, False, False),
-    (("solver", "rtol"), 1e-14, 1e-2, False, False, False),
-    (("solver", "atol"), 1e-16, 1e-2, False, False, False),
-    (("solver", "dt"), 0.0, 1.0, True, False, False),
-    (("solver", "slip_tol"), 0.0, 1e-2, True, False, False),
-    (("solver", "spin_tol"), 0.0, 1e-2, False, False, False),
-    (("stop", "t_max"), 0.0, 1e5, True, False, False),
-    (("stop", "max_steps"), 1, 10**9, False, False, True),
-    (("chunk_size",), 1, 100_000, False, False, True),
-]
-# Axis items: (axis, lower, upper, lower open, upper open) as the schema states them
-ITEMS = [
-    ("mu_d", 0.0, 10.0, False, False),
-    ("k1", 0.0, 1.0, False, False),
-    ("k2", 0.0, 1.0, False, False),
-    ("k3", 0.0, 1.0, False, False),
-    ("alpha0", -HALF_PI, HALF_PI, True, True),
-    ("omega0", 0.0, 1e4, True, False),
-    ("levels", 0.0, HALF_PI, True, True),
-]
+SCALARS = [(tuple(key.split(".")), *_bounds(key), fields.RANGES[fields.SWEEP_KEYS[key]].integer)
+           for key in ("disk.radius", "disk.mass", "gravity", "mu_s", "solver.rtol", "solver.atol", "solver.dt",
+                       "solver.slip_tol", "solver.spin_tol", "stop.t_max", "stop.max_steps")]
+SCALARS.append((("chunk_size",), 1, 100_000, False, False, True))
+# Axis items: (axis, lower, upper, lower open, upper open), absolute bounds (mu_d <= mu_s and
+# k_i <= radius are the cross-field cases below)
+ITEMS = [(key.split(".")[-1], *_bounds(key)) for key in
+         ("grid.mu_d", "grid.k1", "grid.k2", "grid.k3", "grid.alpha0", "grid.omega0", "levels")]
 SECTIONS = ["disk", "solver", "stop", "outputs", "grid"]
 WRONG_TYPES = st.one_of(
     st.text(max_size=8), st.booleans(), st.none(),
@@ -253,7 +245,7 @@ def invalid_configs(draw):
         values.insert(i, bad)
         if bad in values[:i] + values[i + 1:]:
             return cfg, _key(_axis_path(axis)), ["duplicate"]
-        rng = {"alpha0": "(-pi/2, pi/2)", "levels": "(0, pi/2)"}.get(axis, "allowed")
+        rng = {"alpha0": "(-pi/2, pi/2)", "levels": "[1e-7, pi/2)"}.get(axis, "allowed")
         return cfg, _key(_axis_path(axis) + (i,)), [rng]
     if kind == "non_finite":
         bad = draw(st.sampled_from([math.nan, math.inf, -math.inf]))
@@ -304,7 +296,7 @@ def invalid_configs(draw):
         values = cfg["grid"]["alpha0"]
         i = draw(st.integers(0, len(values)))
         values.insert(i, draw(st.sampled_from([0, 0.0, -0.0])))
-        return cfg, f"grid.alpha0[{i}]", ["0 is not allowed", "(-pi/2, 0) or (0, pi/2)"]
+        return cfg, f"grid.alpha0[{i}]", ["0 is not allowed", "(-pi/2, pi/2), not 0"]
     if kind == "mu_d_above_mu_s":
         mu_s = cfg["mu_s"]
         values = cfg["grid"]["mu_d"]
@@ -316,7 +308,7 @@ def invalid_configs(draw):
         values = cfg["grid"][axis]
         i = draw(st.integers(0, len(values)))
         values.insert(i, draw(st.floats(cfg["disk"]["radius"], 1.0, exclude_min=True, **FINITE)))
-        return cfg, f"grid.{axis}[{i}]", ["exceeds the disk radius", "allowed [0, radius]"]
+        return cfg, f"grid.{axis}[{i}]", ["exceeds radius", "allowed [0, radius]"]
     if kind == "thickness":
         cfg["disk"]["thickness"] = draw(st.floats(4 * cfg["disk"]["radius"], 40.0, exclude_min=True, **FINITE))
         return cfg, "disk.thickness", ["exceeds 4*radius", "allowed (0, 4*radius]"]
@@ -347,26 +339,65 @@ def test_invalid_config_fails_naming_the_key_and_range(case):
 
 
 def test_level_below_the_core_minimum_names_levels_and_the_range():
-    # The schema allows levels in (0, pi/2); the core requires >= 1e-7 rad (above the
-    # face-contact inclination 1e-8 rad). Its check reports that under `levels`, before any job.
+    # Levels below 1e-7 rad (a decade under the face-contact inclination BETA_FACE = 1e-6 rad) are
+    # rejected by the sweep's own check, in the words a scene file gets.
     cfg = base()
     cfg["levels"] = [0.3, 1e-8]
     with pytest.raises(grid.SweepConfigError) as exc:
         grid.normalize(cfg, SCHEMA)
-    lines = _lines_naming(str(exc.value), "levels")
-    assert lines and "1e-08" in lines[0] and "allowed" in lines[0] and "[1e-7, pi/2)" in lines[0], str(exc.value)
+    lines = _lines_naming(str(exc.value), "levels[1]")
+    assert lines and "1e-08" in lines[0] and "allowed [1e-7, pi/2) each" in lines[0], str(exc.value)
+    with pytest.raises(ConfigError) as exc:
+        load_scene({"stop": {"levels": [0.3, 1e-8]}})
+    assert str(exc.value).startswith("stop.levels[1] = 1e-08 is invalid: allowed [1e-7, pi/2) (")
 
 
-def test_degenerate_disk_is_a_config_error_not_a_crash():
-    # A subnormal radius is inside the schema's (0, 10] m; the core's scene validation rejects it
-    # (radius >= 1e-6 m: below, chi^2 underflows), and the parse stops naming the key and range.
+def test_a_subnormal_disk_is_a_config_error_not_a_crash():
+    # A subnormal radius would make chi^2 = R/g underflow to 0 in the core's set-up; the range
+    # [1e-6, 10] m rejects it before, naming the key and the range.
     cfg = base()
     cfg["disk"].update(radius=5e-324, thickness=5e-324)
     cfg["grid"].update(k1=[0.0], k2=[0.0], k3=[0.0])
     with pytest.raises(grid.SweepConfigError) as exc:
         grid.normalize(cfg, SCHEMA)
     msg = str(exc.value)
-    assert "disk.radius" in msg and "allowed" in msg and "1e-06" in msg, msg
+    assert "disk.radius = 5e-324 is invalid: allowed [1e-6, 10] (disk radius R in m)" in msg, msg
+
+
+@pytest.mark.parametrize("key", sorted(fields.SWEEP_KEYS))
+def test_a_scene_and_a_sweep_reject_a_value_alike(key):
+    """The value just outside a field's range is rejected by a scene file and by a sweep config,
+    with the same range and meaning in the message (one table, sweep.fields)."""
+    field = fields.SWEEP_KEYS[key]
+    rng = fields.RANGES[field]
+    bad = rng.hi * 2 + 1 if not rng.integer else int(rng.hi) + 1
+    scene_cfg: dict = {}
+    section, _, name = field.rpartition(".")
+    value = bad
+    if field == "initial.spin":     # the sweep's omega0 is the scene's -omega[2]
+        section, name, value = "initial", "omega", [0.0, 0.0, -bad]
+    elif field == "stop.levels":
+        value = [bad]
+    if section:
+        scene_cfg[section] = {name: value}
+    else:
+        scene_cfg[name] = value
+    with pytest.raises(ConfigError) as exc:
+        load_scene(scene_cfg)
+    scene_line = str(exc.value)
+    cfg = base()
+    path = key.split(".")
+    if key.startswith("grid.") or key == "levels":
+        _set(cfg, tuple(path), [bad])
+    else:
+        _set(cfg, tuple(path), bad)
+    with pytest.raises(grid.SweepConfigError) as exc:
+        grid.normalize(cfg, SCHEMA, check_scenes=False)
+    sweep_lines = str(exc.value).splitlines()
+    want = f"{rng.text()}"
+    assert any(want in line and f"({rng.describe()})" in line for line in sweep_lines), (key, sweep_lines)
+    if field != "initial.spin":
+        assert want in scene_line and f"({rng.describe()})" in scene_line, scene_line
 
 
 # ------------------------------------------------------------------------------- end to end (snakemake -n)

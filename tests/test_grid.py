@@ -4,6 +4,7 @@ from __future__ import annotations
 import copy
 import itertools
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -73,18 +74,18 @@ def _bad(mutate) -> str:
     (lambda c: c["disk"].__setitem__("diameter", 0.07), ["disk.diameter = 0.07", "no such key", "allowed keys"]),
     (lambda c: c["grid"].__setitem__("omega0", []), ["grid.omega0 = []", "empty"]),
     (lambda c: c["grid"].__setitem__("alpha0", [0.9, 1.1, 0.9]), ["grid.alpha0 = ", "duplicate", "0.9"]),
-    (lambda c: c.__setitem__("levels", [0.3, 1.6]), ["levels[1] = 1.6", "(0, pi/2)"]),
-    (lambda c: c.__setitem__("levels", [0.0, 0.1]), ["levels[0] = 0.0", "(0, pi/2)"]),
+    (lambda c: c.__setitem__("levels", [0.3, 1.6]), ["levels[1] = 1.6", "[1e-7, pi/2)"]),
+    (lambda c: c.__setitem__("levels", [0.0, 0.1]), ["levels[0] = 0.0", "[1e-7, pi/2)"]),
     (lambda c: c["grid"].__setitem__("alpha0", [1.6]), ["grid.alpha0[0] = 1.6", "(-pi/2, pi/2)"]),
     (lambda c: c["grid"].__setitem__("alpha0", [0.0, 0.5]), ["grid.alpha0[0] = 0.0", "0 is not allowed"]),
     (lambda c: c["grid"].__setitem__("mu_d", [0.2, 0.6]), ["grid.mu_d[1] = 0.6", "exceeds mu_s", "[0, mu_s]"]),
     (lambda c: c["grid"].__setitem__("k1", [float("nan")]), ["grid.k1[0] = nan", "not a finite number"]),
-    (lambda c: c.__setitem__("gravity", float("inf")), ["gravity = inf", "not a finite number", "(0, 1000]"]),
+    (lambda c: c.__setitem__("gravity", float("inf")), ["gravity = inf", "not a finite number", "[1e-3, 1000]"]),
     (lambda c: c["solver"].__setitem__("method", "fixed"), ["solver.dt is missing", "required"]),
     (lambda c: c["solver"].__setitem__("method", "rk4"), ["solver.method = 'rk4'", "adaptive | fixed"]),
     (lambda c: c["stop"].__setitem__("max_steps", 10.5), ["stop.max_steps = 10.5", "integer"]),
     (lambda c: c.__setitem__("chunk_size", 0), ["chunk_size = 0", "[1, 100000]"]),
-    (lambda c: c["grid"].__setitem__("k3", [0.05]), ["grid.k3[0] = 0.05", "exceeds the disk radius"]),
+    (lambda c: c["grid"].__setitem__("k3", [0.05]), ["grid.k3[0] = 0.05", "exceeds radius = 0.03755 m", "[0, radius] = [0, 0.03755] m"]),
     (lambda c: c["outputs"].__setitem__("notebooks", ["maps"]), ["outputs.notebooks[0] = 'maps'", "halt_time"]),
     (lambda c: c["grid"].pop("k2"), ["grid.k2 is missing", "required"]),
     (lambda c: c.__setitem__("solver", 3), ["solver = 3 is invalid: not a mapping", "rtol"]),
@@ -361,3 +362,18 @@ def test_workflow_validates_against_the_packaged_schema():
     assert "sweep_grid.load_sweep(" in smk
     assert "grid.load_sweep(" in (ROOT / "src" / "sweep" / "frontdoor.py").read_text()
     assert grid.SCHEMA_PATH.is_file() and grid.SCHEMA_PATH.parent.parent == Path(grid.__file__).parent
+
+
+def test_the_config_table_in_docs_states_the_ranges_that_are_enforced():
+    """docs/pipeline.md's table of config keys gives, for every key with a range, the range of the
+    one table the validation reads (sweep.fields.RANGES), in the words the messages use."""
+    from sweep import fields
+
+    text = (ROOT / "docs" / "pipeline.md").read_text()
+    rows: dict[str, str] = {}
+    for m in re.finditer(r"^\| `([\w.]+)` \|(.*)$", text, flags=re.M):
+        rows.setdefault(m.group(1), m.group(2))   # the config table comes first
+    for key, field in fields.SWEEP_KEYS.items():
+        assert key in rows, key
+        allowed = rows[key].split("|")[2]
+        assert fields.RANGES[field].text() in allowed, (key, allowed, fields.RANGES[field].text())

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from .core.jit import kernel_sources, sources_digest
+from . import fields
 from . import outputs as _outputs
 from .errors import MISSING, ConfigError, quoted_number
 
@@ -106,15 +107,15 @@ def sha256_hex(text: str) -> str:
 
 def load_schema(path: str | Path | None = None) -> dict:
     """The config JSON schema (YAML file), by default the packaged sweep/schema/config.schema.yaml
-    (read with importlib.resources)."""
+    (read with importlib.resources), with the ranges of sweep.fields filled in (fields.apply_to_schema)."""
     import yaml
 
     if path is None:
         from importlib.resources import files
 
-        return yaml.safe_load(files(__package__).joinpath(*SCHEMA_RESOURCE).read_text(encoding="utf-8"))
+        return fields.apply_to_schema(yaml.safe_load(files(__package__).joinpath(*SCHEMA_RESOURCE).read_text(encoding="utf-8")))
     with open(path, encoding="utf-8") as fh:
-        return yaml.safe_load(fh)
+        return fields.apply_to_schema(yaml.safe_load(fh))
 
 
 def _key(path: Iterator[Any] | list[Any]) -> str:
@@ -257,39 +258,47 @@ def _number(x: Any) -> bool:
 
 
 def cross_field_errors(config: Mapping, invalid: set[str] = frozenset()) -> list[ConfigError]:
-    """Rules JSON schema cannot express; `config` must have its defaults filled.
+    """Rules JSON schema cannot express; `config` must have its defaults filled: the relative
+    bounds and excluded values of sweep.fields.RANGES (mu_d <= mu_s, k_i <= radius, thickness <=
+    4 radius, alpha0 != 0), and dt for the fixed step.
 
     `invalid`: fields that already failed the schema; a rule that reads one of them is skipped,
     so one bad value is reported once, not again as its consequences (a negative radius is not
     also "k1 exceeds the radius").
     """
     errors = []
-    disk = config.get("disk", {})
-    grid_ = config.get("grid", {})
-    radius = disk.get("radius")
-    if _valid_number(radius) and radius > 0 and "disk.radius" not in invalid:
-        thickness = disk.get("thickness", 0)
-        if _valid_number(thickness) and thickness > 4 * radius and "disk.thickness" not in invalid:
-            errors.append(ConfigError("disk.thickness", thickness, f"(0, 4*radius] = (0, {4 * radius!r}] m",
-                                      problem=f"exceeds 4*radius = {4 * radius!r} m"))
-        for k in ("k1", "k2", "k3"):
-            for i, v in enumerate(grid_.get(k, [])):
-                if _number(v) and v > radius and f"grid.{k}[{i}]" not in invalid:
-                    errors.append(ConfigError(f"grid.{k}[{i}]", v, f"[0, radius] = [0, {radius!r}] m",
-                                              problem=f"exceeds the disk radius {radius!r} m"))
-    mu_s = config.get("mu_s")
-    if _valid_number(mu_s) and mu_s > 0 and "mu_s" not in invalid:
-        for i, mu_d in enumerate(grid_.get("mu_d", [])):
-            if _number(mu_d) and mu_d > mu_s and f"grid.mu_d[{i}]" not in invalid:
-                errors.append(ConfigError(f"grid.mu_d[{i}]", mu_d, f"[0, mu_s] = [0, {mu_s!r}] (with mu_d > mu_s "
-                                          "the slip onset is inconsistent)", problem=f"exceeds mu_s = {mu_s!r}"))
-    for i, a in enumerate(grid_.get("alpha0", [])):
-        if _number(a) and a == 0:
-            errors.append(ConfigError(f"grid.alpha0[{i}]", a, "(-pi/2, 0) or (0, pi/2) (alpha = 0 is the "
-                                      "degenerate line-contact state of the model)", problem="0 is not allowed"))
+
+    def value_of(key: str):
+        node = config
+        for part in key.split("."):
+            if not isinstance(node, Mapping) or part not in node:
+                return None
+            node = node[part]
+        return node
+
+    for key, field in fields.SWEEP_KEYS.items():
+        rng = fields.RANGES[field]
+        if rng.relative is None and rng.excluded is None:
+            continue
+        value = value_of(key)
+        items = list(enumerate(value)) if isinstance(value, list) else [(None, value)]
+        other_key = fields.SWEEP_KEY_OF.get(rng.relative.field) if rng.relative else None
+        other = value_of(other_key) if other_key else None
+        other_ok = _valid_number(other) and other >= 0 and other_key not in invalid
+        for i, v in items:
+            name = key if i is None else f"{key}[{i}]"
+            if not _number(v) or name in invalid:
+                continue
+            if other_ok:
+                err = rng.relative_error(name, v, other)
+                if err is not None:
+                    errors.append(err)
+                    continue
+            if rng.excluded is not None and v == rng.excluded:
+                errors.append(ConfigError(name, v, rng.allowed(), problem=rng.problem(v)))
     solver = config.get("solver", {})
     if solver.get("method") == "fixed" and "dt" not in solver:
-        errors.append(ConfigError("solver.dt", MISSING, "(0, 1] s",
+        errors.append(ConfigError("solver.dt", MISSING, fields.RANGES["solver.dt"].allowed(),
                                   problem="required when solver.method is 'fixed'"))
     return errors
 
@@ -478,14 +487,6 @@ def load_sweep(files: Sequence[tuple[str | Path, str]], overrides: Mapping | Non
         raise src.name_errors(err) from None
 
 
-# scene-file field (sweep.scene) -> sweep config key, to name the key the user wrote
-_SCENE_FIELD_TO_KEY = {
-    "contact.mu_d": "grid.mu_d", "contact.k1": "grid.k1", "contact.k2": "grid.k2",
-    "contact.k3": "grid.k3", "initial.alpha": "grid.alpha0", "initial.omega": "grid.omega0",
-    "initial.omega[2]": "grid.omega0", "contact.mu_s": "mu_s", "stop.levels": "levels",
-}
-
-
 def check_scenes_valid(settings: Mapping) -> None:
     """Validate representative scenes with the physics core's own checks (sweep.scene).
 
@@ -504,9 +505,8 @@ def check_scenes_valid(settings: Mapping) -> None:
             try:
                 _scene.load_scene(scene(settings, point))
             except ConfigError as err:
-                key = _SCENE_FIELD_TO_KEY.get(err.field, err.field)
-                if key.startswith("stop.levels["):
-                    key = "levels"
+                base = err.field.split("[")[0]
+                key = fields.SWEEP_KEY_OF.get(base, err.field)
                 if key.startswith("grid."):   # the axis value this scene had
                     axis = key.split(".")[1]
                     key = f"{key}[{settings['grid'][axis].index(point[axis])}]"

@@ -18,14 +18,13 @@ from __future__ import annotations
 
 import copy
 import functools
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import yamlio
+from . import fields, yamlio
 from .core import model
 from .errors import ConfigError
 
@@ -54,29 +53,6 @@ DEFAULTS: dict[str, Any] = {
 }
 
 SHAPES = {"solid": 1.0, "shell": 2.0}   # k^2 of eq. (2.4)
-HALF_PI = 0.5 * math.pi
-
-
-def _num(path: str, v, lo: float, hi: float, lo_open=False, hi_open=False, allowed: str | None = None) -> float:
-    rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
-    allowed = allowed or f"a finite number in {rng}"
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ConfigError(path, v, allowed)
-    v = float(v)
-    if not math.isfinite(v):
-        raise ConfigError(path, v, allowed)
-    if v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi):
-        raise ConfigError(path, v, allowed)
-    return v
-
-
-def _int(path: str, v, lo: int, hi: int) -> int:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not float(v).is_integer():
-        raise ConfigError(path, v, f"an integer in [{lo}, {hi}]")
-    v = int(v)
-    if v < lo or v > hi:
-        raise ConfigError(path, v, f"an integer in [{lo}, {hi}]")
-    return v
 
 
 def _merge(path: str, user, default):
@@ -95,10 +71,10 @@ def _merge(path: str, user, default):
     return user   # an explicit null stays null and is rejected by the field's validator
 
 
-def _vector(path: str, v, n: int, bound: float) -> list[float]:
+def _vector(path: str, v, n: int) -> list[float]:
     if not isinstance(v, (list, tuple)) or len(v) != n:
-        raise ConfigError(path, v, f"a list of {n} finite numbers")
-    return [_num(f"{path}[{i}]", x, -bound, bound) for i, x in enumerate(v)]
+        raise ConfigError(path, v, f"a list of {n} numbers, each {fields.RANGES[path].allowed()}")
+    return [fields.check(path, x, f"{path}[{i}]") for i, x in enumerate(v)]
 
 
 @dataclass(frozen=True)
@@ -153,66 +129,45 @@ def _validate(raw) -> Scene:
     cfg = _merge("", raw, DEFAULTS)
 
     d = cfg["disk"]
-    # lower bounds keep chi, the energy scale m R^2/chi^2 and every dimensionless group normal
-    # floating-point numbers (a subnormal radius divided by zero); no rigid disk is below them
-    d["radius"] = _num("disk.radius", d["radius"], 1e-6, 10.0)
-    d["thickness"] = _num("disk.thickness", d["thickness"], 0.0, 4.0 * d["radius"], lo_open=True,
-                          allowed=f"a finite number in (0, 4*radius] = (0, {4 * d['radius']:g}] m")
-    d["mass"] = _num("disk.mass", d["mass"], 1e-9, 1e4)
+    for k in ("radius", "mass"):
+        d[k] = fields.check(f"disk.{k}", d[k])
+    d["thickness"] = fields.check("disk.thickness", d["thickness"], values={"disk.radius": d["radius"]})
     if not isinstance(d["shape"], str) or d["shape"] not in SHAPES:
         raise ConfigError("disk.shape", d["shape"], "one of: solid, shell")
     c = cfg["contact"]
-    c["mu_s"] = _num("contact.mu_s", c["mu_s"], 0.0, 100.0)
-    # mu_d > mu_s leaves no consistent slip onset (an instant can switch rolling<->sliding forever)
-    c["mu_d"] = _num("contact.mu_d", c["mu_d"], 0.0, c["mu_s"],
-                     allowed=f"a finite number in [0, mu_s] = [0, {c['mu_s']:g}] (mu_d > mu_s has no consistent slip onset)")
-    for k in ("k1", "k2", "k3"):
-        c[k] = _num(f"contact.{k}", c[k], 0.0, d["radius"],
-                    allowed=f"a finite length in [0, radius] = [0, {d['radius']:g}] m")
-    cfg["gravity"] = _num("gravity", cfg["gravity"], 1e-3, 1e3)
+    c["mu_s"] = fields.check("contact.mu_s", c["mu_s"])
+    known = {"disk.radius": d["radius"], "contact.mu_s": c["mu_s"]}
+    for k in ("mu_d", "k1", "k2", "k3"):
+        c[k] = fields.check(f"contact.{k}", c[k], values=known)
+    cfg["gravity"] = fields.check("gravity", cfg["gravity"])
     ini = cfg["initial"]
-    a = _num("initial.alpha", ini["alpha"], -HALF_PI, HALF_PI, lo_open=True, hi_open=True,
-             allowed="a number in (-pi/2, pi/2), not 0 (alpha = 0 is line contact, +-pi/2 lies flat)")
-    if a == 0.0:
-        raise ConfigError("initial.alpha", a, "a number in (-pi/2, pi/2), not 0 (alpha = 0 is line contact, +-pi/2 lies flat)")
-    ini["alpha"] = a
-    ini["omega"] = _vector("initial.omega", ini["omega"], 3, 1e5)
-    ini["slip"] = _vector("initial.slip", ini["slip"], 2, 1e3)
-    ini["theta"] = _num("initial.theta", ini["theta"], -1e6, 1e6)
-    ini["psi"] = _num("initial.psi", ini["psi"], -1e6, 1e6)
+    ini["alpha"] = fields.check("initial.alpha", ini["alpha"])
+    ini["omega"] = _vector("initial.omega", ini["omega"], 3)
+    ini["slip"] = _vector("initial.slip", ini["slip"], 2)
+    ini["theta"] = fields.check("initial.theta", ini["theta"])
+    ini["psi"] = fields.check("initial.psi", ini["psi"])
     st = cfg["stop"]
     lv = st["levels"]
     if not isinstance(lv, (list, tuple)) or not lv:
-        raise ConfigError("stop.levels", lv, "a non-empty list of inclinations in (0, pi/2) rad")
-    # levels below the face inclination (core.contact.BETA_FACE = 1e-6 rad) are crossed when the disk lies flat
-    lv = [_num(f"stop.levels[{i}]", x, 1e-7, HALF_PI, hi_open=True,
-               allowed="an inclination in [1e-7, pi/2) rad") for i, x in enumerate(lv)]
+        raise ConfigError("stop.levels", lv, "a non-empty list, each " + fields.RANGES["stop.levels"].allowed())
+    lv = [fields.check("stop.levels", x, f"stop.levels[{i}]") for i, x in enumerate(lv)]
     if len(set(lv)) != len(lv):
         raise ConfigError("stop.levels", lv, "distinct values (a level is listed twice)")
     st["levels"] = sorted(lv, reverse=True)
-    st["t_max"] = _num("stop.t_max", st["t_max"], 0.0, 1e5, lo_open=True)
-    st["max_steps"] = _int("stop.max_steps", st["max_steps"], 1, 10**9)
+    st["t_max"] = fields.check("stop.t_max", st["t_max"])
+    st["max_steps"] = fields.check("stop.max_steps", st["max_steps"])
     so = cfg["solver"]
     if not isinstance(so["method"], str) or so["method"] not in ("adaptive", "fixed"):
         raise ConfigError("solver.method", so["method"], "one of: adaptive, fixed")
-    # rtol below 1e-14 asks for less than ~50 ulp per step: the error control cannot deliver it
-    so["rtol"] = _num("solver.rtol", so["rtol"], 1e-14, 1e-2)
-    so["atol"] = _num("solver.atol", so["atol"], 1e-16, 1e-2)
-    so["dt"] = _num("solver.dt", so["dt"], 0.0, 10.0, lo_open=True)
-    so["slip_tol"] = _num("solver.slip_tol", so["slip_tol"], 0.0, 1e-2, lo_open=True)
-    so["spin_tol"] = _num("solver.spin_tol", so["spin_tol"], 0.0, 1e-2)
+    for k in ("rtol", "atol", "dt", "slip_tol", "spin_tol"):
+        so[k] = fields.check(f"solver.{k}", so[k])
     out = cfg["outputs"]
     for k in out:
         if not isinstance(out[k], bool):
             raise ConfigError(f"outputs.{k}", out[k], "true or false")
     mat = cfg["material"]   # sound synthesis only: not passed to the kernel
-    mat["E"] = _num("material.E", mat["E"], 0.0, 1e13, lo_open=True, allowed="a Young's modulus in (0, 1e13] Pa")
-    mat["density"] = _num("material.density", mat["density"], 0.0, 1e5, lo_open=True,
-                          allowed="a density in (0, 1e5] kg/m^3")
-    mat["poisson"] = _num("material.poisson", mat["poisson"], -1.0, 0.5, lo_open=True, hi_open=True,
-                          allowed="a Poisson ratio in (-1, 0.5)")
-    mat["damping"] = _num("material.damping", mat["damping"], 0.0, 1.0, lo_open=True, hi_open=True,
-                          allowed="a modal damping ratio in (0, 1)")
+    for k in ("E", "density", "poisson", "damping"):
+        mat[k] = fields.check(f"material.{k}", mat[k])
 
     params, chi = model.make_params(SHAPES[d["shape"]], d["radius"], d["thickness"], cfg["gravity"],
                                     c["mu_s"], c["mu_d"], (c["k1"], c["k2"], c["k3"]))
