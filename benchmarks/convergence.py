@@ -334,8 +334,10 @@ def analyse_knobs(recs: list[dict]) -> list[str]:
     """Each threshold knob tightened alone (KNOB_RUNS) against the default run: the share of
     well-conditioned values (those a 1e-10 rad change of alpha0 moves by < WELL_CONDITIONED at rtol
     1e-13) within AGREE and AGREE_ALL, the largest difference, and the scenes whose event counts
-    (transitions, stick phases, impacts) differ, among all scenes and among those whose counts
-    the perturbation leaves alone."""
+    (transitions, stick phases, impacts) differ, among all scenes, among those whose counts the
+    perturbation leaves alone, and among those whose counts are well-conditioned (the same at every
+    rtol and under the perturbation: a count that the integration error or a 1e-10 change of the
+    start moves is not one a knob can be held to)."""
     lines = []
     names = [name for name, _ in KNOB_RUNS if all(name in rec.get("knobs", {}) for rec in recs)]
     if not names:
@@ -344,8 +346,9 @@ def analyse_knobs(recs: list[dict]) -> list[str]:
     for name in names:
         n_wc = n_ok = n_ok_all = 0
         worst = []
-        same = robust = same_robust = 0
+        same = robust = same_robust = settled = same_settled = 0
         diff = []
+        diff_settled = []
         for rec in recs:
             ref = next(r for r in rec["runs"] if r["rtol"] == REF_RTOL)
             base = next(r for r in rec["runs"] if r["rtol"] == DEFAULT_RTOL)
@@ -358,6 +361,11 @@ def analyse_knobs(recs: list[dict]) -> list[str]:
             if "events" in pert and "events" in ref and pert["events"] == ref["events"]:
                 robust += 1
                 same_robust += ok_counts
+                if all(r.get("events") == ref["events"] for r in rec["runs"]):
+                    settled += 1
+                    same_settled += ok_counts
+                    if not ok_counts:
+                        diff_settled.append(rec["index"])
             if "q" not in ref or "q" not in pert or "q" not in base:
                 continue
             for k, vref in ref["q"].items():
@@ -378,6 +386,9 @@ def analyse_knobs(recs: list[dict]) -> list[str]:
                      f"{(worst[0][0] if worst else 0.0):.2e}; same event counts {same}/{len(recs)} scenes "
                      f"({100.0 * same / max(len(recs), 1):.1f} %), among scenes whose counts alpha0 + 1e-10 "
                      f"leaves alone {same_robust}/{robust}" + (f"; counts differ: scenes {diff[:10]}" if diff else ""))
+        lines.append(f"    same event counts among scenes whose counts are well-conditioned (every rtol and "
+                     f"alpha0 + 1e-10 alike): {same_settled}/{settled} = {100.0 * same_settled / max(settled, 1):.1f} %"
+                     + (f"; differ: scenes {diff_settled[:10]}" if diff_settled else ""))
         if worst:
             lines.append("    worst: " + "; ".join(f"scene {i} {k} {e:.2e}" for e, i, k in worst[:6]))
     return lines

@@ -21,10 +21,14 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   SLAVE_EXIT x u_s again;
 * SLIDE at |u| = slip_tol: its fate from the slip's direction dynamics near u = 0 (the direction
   flow d nu/ds = cross, d ln|u|/ds = rad integrated with the state frozen, Disk.slip_fate): a slip
-  that shrinks to u = 0 ends (plastic impulse, its loss booked to sliding; ROLL); one that passes by
-  u = 0 (it grows along the direction where the flow settles) goes through it: the impulse removes
-  the slip and a slaved slip leaves from u = 0 along that direction, no transition; one that
-  spirals out slides on with no slip end until |u| is past SLAVE_EXIT x u_s; SLIDE ->
+  that shrinks to u = 0 along nu settles onto nu (the cross slip removed plastically) and ends as a
+  slaved slip where u.s(nu) reaches 0; one that spirals out slides on with no slip end until |u| is
+  past SLAVE_EXIT x u_s; any other (an ending slip still pointing away from nu, one spiralling in,
+  one passing by u = 0) slides on and meets its fate again 16 times slower, down to the round-off
+  floor, where an ending slip is ended by the plastic impulse (its loss booked to sliding; ROLL)
+  and one that passes by u = 0 (it grows along the direction where the flow settles) goes through
+  it: the impulse removes the slip and a slaved slip leaves from u = 0 along that direction, no
+  transition; SLIDE ->
   SLAVED where |u| falls to u_s, onto the root of cross that the direction dynamics
   d nu/d tau = cross/|u| carry the slip to (the cross slip removed plastically); none on the whole
   circle, or a slip that the impulse would leave pointing against the root (it is passing by
@@ -33,7 +37,7 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   sticks if the moment needed to hold it is within k_i Phi (|sigma needed| < 1), else it passes;
   a stuck component leaves where |sigma needed| reaches 1, with that sign; a free component that
   slows to |omega.a_i| = spin_tol (from above) sticks there if its motion, integrated ahead, reaches
-  omega.a_i = 0 before it turns back (Disk.reaches_rest) and the moment can hold it, and the
+  omega.a_i = 0 before it turns back (Disk.reaches_rest) and the moment can hold it there, and the
   rate left is stopped by the least (kinetic-energy) change of the velocity that keeps the contact
   and the stuck components at rest (loss booked to k_i), else it stays free;
 * after every discrete update (the driver's 'settle'): a slide at or below slip_tol meets its fate; a
@@ -232,12 +236,14 @@ class Contact:
         self.sig = [1.0, 1.0, 1.0]
         self.stuck = [False, False, False]
         self.nu = 0.0
-        self.slave_off = False
+        self.slave_off = False   # also "below": a slow slide followed below slip_tol (slow_slide)
         self.slow_off = False    # a slide spiralling out from u = 0: no slip end until fast again
+        self.floor = 0.0         # the slip speed of its next fate (slave_off "below")
 
     def copy(self):
         c = Contact(self.side)
         c.mode, c.nu, c.slave_off, c.slow_off = self.mode, self.nu, self.slave_off, self.slow_off
+        c.floor = self.floor
         c.sig = list(self.sig)
         c.stuck = list(self.stuck)
         return c
@@ -349,13 +355,17 @@ class Disk:
     def energy(self, y, c):
         return self.be.energy(y, self.p, c.side, ROLL if c.mode == ROLL else SLIDE)
 
-    def slip_floor(self, t, phi):
-        """The slip speed at which a slide meets its fate: slip_tol, or the speed that the friction's
-        deceleration bound mu_d Phi (1 + 1/A) takes off in 256 ulps of tau where that is larger (an
-        approach to u = 0 closer than that cannot be stepped through in double precision;
-        docs/model.md, 'Where a slip ends')."""
+    def slip_roundoff(self, t, phi):
+        """The speed that the friction's deceleration bound mu_d Phi (1 + 1/A) takes off in 256 ulps
+        of tau: an approach to u = 0 closer than that cannot be stepped through in double precision
+        (docs/model.md, 'Where a slip ends')."""
         decel = self.p[P_MUD] * max(phi, 0.0) * (1.0 + 1.0 / self.p[P_A])
-        return max(self.u_tol, 256.0 * np.finfo(float).eps * max(abs(t), 1.0) * decel)
+        return 256.0 * np.finfo(float).eps * max(abs(t), 1.0) * decel
+
+    def slip_floor(self, t, phi, c):
+        """The slip speed at which a slide meets its fate: slip_tol (a slide followed below it: its
+        own floor), or the round-off floor where that is larger."""
+        return max(c.floor if c.slave_off == "below" else self.u_tol, self.slip_roundoff(t, phi))
 
     @staticmethod
     def _slip_dir(y, c):
@@ -457,10 +467,10 @@ class Disk:
         in the time s with ds = d tau/|u|, d nu/ds = cross(nu) and d ln|u|/ds = rad(nu) (the slip
         acceleration across and along s(nu) at the slip vector |u| s(nu)). Integrated (SciPy
         DOP853) until nu settles (cross at its round-off) or has turned twice round the circle:
-        ("ends", nan) where ln|u| falls at the end (the direction settles where the slip shrinks,
-        or it spirals inwards), ("passes", nu) where it grows along the settled nu, ("spirals_out",
-        nan) where it grows while turning, ("jammed", nan) where the direction runs into the
-        Painleve singularity."""
+        ("ends", nu) where ln|u| falls at the end (the direction settles on nu where the slip
+        shrinks; nan where it spirals inwards), ("passes", nu) where it grows along the settled nu,
+        ("spirals_out", nan) where it grows while turning, ("jammed", nan) where the direction runs
+        into the Painleve singularity."""
         u = math.hypot(y[Y_U1], y[Y_U2])
         nu0 = math.atan2(y[Y_U2], y[Y_U1])
         if self.no_solution(nu0, u, t, y, c):
@@ -501,28 +511,42 @@ class Disk:
                                      atol=1e-12, events=(one_turn,))
                 return ("spirals_out", math.nan) if turn.y[1, -1] > 0.0 else ("ends", math.nan)
         rad = self.cross_dot(sol_nu, u, t, y, c)[1]
-        return ("passes", sol_nu) if rad > 0.0 else ("ends", math.nan)
+        return ("passes", sol_nu) if rad > 0.0 else ("ends", sol_nu)
 
     def slow_slide(self, t, y, c):
-        """A slide at |u| = slip_tol, by its fate: it ends (plastic impulse, rolling), passes by
-        u = 0 (the impulse removes the slip and a slaved slip leaves from u = 0 along its direction
-        of growth; no transition), or spirals out (it slides on, no slip end until fast again).
-        Returns outcomes.PAINLEVE where the direction is carried into the singularity, else -1."""
+        """A slide at |u| = slip_tol (or at its own lower floor), by its fate: one that ends along nu
+        settles onto nu (the cross slip removed plastically) and ends as a slaved slip where u.s(nu)
+        reaches 0; one that spirals out slides on, no slip end until fast again; any other (an
+        ending slip still pointing away from nu, one spiralling in, one passing by u = 0) slides on
+        and meets its fate again 16 times slower, down to the round-off floor, where an ending slip
+        is ended by the plastic impulse (rolling) and a passing one goes through u = 0 (the impulse
+        removes the slip and a slaved slip leaves from u = 0 along its direction of growth; no
+        transition). Returns outcomes.PAINLEVE where the direction is carried into the singularity,
+        else -1."""
         fate, nu = self.slip_fate(t, y, c)
         if self.log is not None:
             self.log.append((t, "slip_fate", fate, nu))
         self.stats["fate_" + fate] = self.stats.get("fate_" + fate, 0) + 1
         if fate == "jammed":
             return outcomes.PAINLEVE
+        if fate == "spirals_out":
+            c.slow_off = True
+            return -1
+        if fate == "ends" and math.isfinite(nu) and self.settle_onto(nu, y, c):
+            c.slave_off = False
+            return -1
+        phi = self.model(t, y, SLIDE, c, *self._slip_dir(y, c))[1][X_PHI]
+        floor = min(self.slip_floor(t, phi, c), math.hypot(y[Y_U1], y[Y_U2])) / 16.0
+        if floor > self.slip_roundoff(t, phi):
+            c.slave_off, c.floor = "below", floor
+            return -1
         if fate == "ends":
             self.to_roll(y, c)
-        elif fate == "passes":
-            y[Y_DSLIDE] += self.be.project_velocity(y, self.p, c.side, True, c.side, False, self.S)
-            y[Y_U1] = 0.0
-            y[Y_U2] = 0.0
-            c.mode, c.nu, c.slave_off = SLAVED, nu, False
-        else:
-            c.slow_off = True
+            return -1
+        y[Y_DSLIDE] += self.be.project_velocity(y, self.p, c.side, True, c.side, False, self.S)
+        y[Y_U1] = 0.0
+        y[Y_U2] = 0.0
+        c.mode, c.nu, c.slave_off = SLAVED, nu, False
         return -1
 
     def start_slip(self, t, y, c):
@@ -545,16 +569,22 @@ class Disk:
         if math.isnan(root):
             c.slave_off = True
             return -1
+        if not self.settle_onto(root, y, c):
+            c.slave_off = True    # pointing against it: passing by u = 0, it goes on sliding
+        return -1
+
+    def settle_onto(self, root, y, c):
+        """SLIDE -> SLAVED along root, the cross slip removed by the plastic impulse, if that leaves
+        the slip along it; else nothing changes. Returns whether it settled."""
         saved = y.copy()
         loss = self.be.project_velocity(y, self.p, c.side, True, c.side, True, self.S, root)
         if y[Y_U1] * math.cos(root) + y[Y_U2] * math.sin(root) > 0.0:
             y[Y_DSLIDE] += loss
             c.mode = SLAVED
             c.nu = root
-            return -1
-        y[:] = saved          # pointing against it: passing by u = 0, it goes on sliding
-        c.slave_off = True
-        return -1
+            return True
+        y[:] = saved
+        return False
 
     def set_slip(self, t, y, c):
         """Contact state for a given slip vector (start, or after an impact while slipping)."""
@@ -608,7 +638,8 @@ class Disk:
         """Does free component i, slowing through |omega.a_i| = spin_tol, go on to rest (omega.a_i = 0)
         rather than turn back above it? Its motion in the contact state c is integrated ahead (SciPy
         DOP853, rtol 1e-12) to whichever comes first: g = sigma_i omega.a_i reaching 0, or g' reaching
-        0 (a minimum above 0); not past 8 g/|g'|, by which a motion that keeps falling has reached 0."""
+        0 (a minimum above 0); not past 8 g/|g'|, by which a motion that keeps falling has reached 0.
+        Returns (t, y) at rest, or None."""
         sig = c.sig[i]
         seed = [c.nu]
 
@@ -630,21 +661,24 @@ class Disk:
         y0 = np.array(y[:self.n], dtype=float)
         g0, d0 = g(t, y0), slope(t, y0)
         if not d0 < 0.0:
-            return False
+            return None
         sol = _si.solve_ivp(f, (t, t + 8.0 * g0 / -d0), y0, method="DOP853", rtol=1e-12,
                             atol=1e-15, events=(g, slope))
         if sol.t_events[0].size and (not sol.t_events[1].size or sol.t_events[0][0] <= sol.t_events[1][0]):
-            return True
-        return False
+            y_rest = np.array(y, dtype=float)
+            y_rest[:self.n] = sol.y_events[0][0]
+            return sol.t_events[0][0], y_rest
+        return None
 
     def spin_stop(self, i, t, y, c):
         """|omega.a_i| has slowed to spin_tol: it sticks if the moment can hold it, and the rate left
         is stopped by the least change of the velocity in the kinetic-energy metric that keeps the
         contact (rolling, or sliding with the slip free) and the stuck components at rest
         (Lagrange multipliers on all of (w1, w2, w3, u1, u2)); the loss is booked to k_i."""
-        if not self.reaches_rest(i, t, y, c):
+        rest = self.reaches_rest(i, t, y, c)
+        if rest is None:
             return False
-        need = self.needed_sigma(i, t, y, c)
+        need = self.needed_sigma(i, *rest, c)    # where the Filippov rule decides: at rest
         if abs(need) >= 1.0:
             return False
         p, h = self.p, c.side * self.p[P_H]
@@ -673,11 +707,17 @@ class Disk:
         sol = np.linalg.solve(kkt, np.concatenate([J.T @ M @ V0, rhs]))
         q = sol[:5]
         dv = V0 - J @ q
+        saved = y.copy()
         y[Y_W1], y[Y_W2], y[Y_W3] = q[0], q[1], q[2]
         if c.mode != ROLL:
             y[Y_U1], y[Y_U2] = q[3], q[4]
-        y[Y_DK1 + i] += 0.5 * float(dv @ M @ dv)
+        # the moment must hold it at the state the stop leaves as well (where later decisions read it)
         c.stuck[i] = True
+        if abs(self.needed_sigma(i, t, y, c)) >= 1.0:
+            y[:] = saved
+            c.stuck[i] = False
+            return False
+        y[Y_DK1 + i] += 0.5 * float(dv @ M @ dv)
         self.stats["n_stick"] += 1
         if self.log is not None:
             self.log.append((t, "stick_spin", i, need))
@@ -687,7 +727,7 @@ class Disk:
         """After a discrete update: bring the contact state in line with the state (see the module
         docstring). `leaving`: components just released at an un-stick (on their surface, leaving)."""
         if c.mode == SLIDE and not c.slow_off and \
-                math.hypot(y[Y_U1], y[Y_U2]) <= self.slip_floor(t, self.model(t, y, SLIDE, c, *self._slip_dir(y, c))[1][X_PHI]):
+                math.hypot(y[Y_U1], y[Y_U2]) <= self.slip_floor(t, self.model(t, y, SLIDE, c, *self._slip_dir(y, c))[1][X_PHI], c):
             code = self.slow_slide(t, y, c)
             if code >= 0:
                 return code
@@ -953,7 +993,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             if kind == "cone":
                 return p[P_MUS] * a[X_PHI] - math.hypot(a[X_F1], a[X_F2])
             if kind == "slipslow":
-                return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slip_floor(tt, a[X_PHI])
+                return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slip_floor(tt, a[X_PHI], seg)
             if kind == "slave":
                 return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slave_speed(a)
             if kind == "slipstop":

@@ -124,13 +124,13 @@ def test_deep_levels_are_dynamically_sensitive_not_numerically_unconverged():
 
 
 def test_slip_tolerance_convergence():
+    """A slip that ends settles onto the direction it arrives along and ends where u.s reaches 0, a
+    located event (docs/model.md, 'Where a slip ends'): the level time does not move with slip_tol,
+    from 1e-5 to 1e-11 m/s, beyond the integration's error (it moved at first order in slip_tol when
+    every slip ended at slip_tol: 10x smaller tolerance, 10x smaller change)."""
     lv = [0.1]
-    ts = [_level_times(1e-12, lv, solver__slip_tol=u)[0][0] for u in (1e-5, 1e-6, 1e-7, 1e-11)]
-    d = np.abs(np.array(ts[:3]) - ts[3])
-    # first order in slip_tol: each 10x smaller tolerance, ~10x smaller change
-    assert d[0] > d[1] > d[2]
-    assert d[0] / d[2] > 30
-    assert d[2] / ts[3] < 1e-8
+    ts = np.array([_level_times(1e-12, lv, solver__slip_tol=u)[0][0] for u in (1e-5, 1e-6, 1e-7, 1e-11)])
+    assert np.all(np.abs(ts[:3] - ts[3]) / ts[3] < 1e-11), ts
 
 
 def test_fixed_step_converges_to_adaptive_at_its_order():

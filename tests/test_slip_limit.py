@@ -168,7 +168,7 @@ def test_the_slip_fate_is_the_direction_flows():
 ])
 def test_cubic_reaches_zero(coeffs, reaches):
     """The cubic g + g1 s + g2 s^2/2 + g3 s^3/6 from a positive value falling: 0 reached before the
-    first minimum, or not (spin_reaches_rest's decision)."""
+    first minimum, or not (spin_rest_time's decision)."""
     assert C.cubic_reaches_zero(*coeffs) is reaches
 
 
@@ -188,12 +188,31 @@ def test_cubic_reaches_zero_agrees_with_sampling():
         assert C.cubic_reaches_zero(g, g1, g2, g3) is want, (g, g1, g2, g3)
 
 
+def test_cubic_rest_time_is_the_first_root():
+    """Where the cubic reaches 0 before its first minimum, cubic_rest_time is that root (to a few
+    ulps: c changes sign across it), the smallest positive real root of the cubic."""
+    rng = np.random.default_rng(5)
+    found = 0
+    for _ in range(300):
+        g, g1, g2, g3 = 1.0, -rng.uniform(0.1, 2.0), rng.normal(), 0.3 * rng.normal()
+        s = C.cubic_rest_time(g, g1, g2, g3)
+        if math.isnan(s):
+            continue
+        found += 1
+        roots = np.roots([g3 / 6.0, 0.5 * g2, g1, g])
+        real = sorted(r.real for r in roots if abs(r.imag) <= 1e-9 * abs(r) and r.real > 0.0)
+        assert real and s == pytest.approx(real[0], rel=1e-9), (g, g1, g2, g3, s, real)
+        c = lambda x: g + x * (g1 + x * (0.5 * g2 + x * g3 / 6.0))   # noqa: E731
+        assert c(s * (1 - 1e-12)) > 0.0 >= c(s)
+    assert found > 100
+
+
 @pytest.mark.parametrize("seed, index", [(20261122, 0), (20261122, 67), (20261122, 29)])
 def test_micro_stick_counts_do_not_depend_on_spin_tol(seed, index):
     """Harness scenes where a free component's returns towards omega.a_i = 0 turn back between
     spin_tol 1e-9 and 1e-7 rad/s: sticking every return that slowed to spin_tol counted 8309 (scene
     0) and 8166 (scene 67) stick phases at the default against 3 and 1 at 1e-9, and 2426 against
-    1853 (scene 29). A return sticks now only where its motion reaches rest (spin_reaches_rest):
+    1853 (scene 29). A return sticks now only where its motion reaches rest (spin_rest_time):
     the same counts at both."""
     cfg = harness.harness_scene(seed, index)
     default = harness._one_run(cfg, 1e-10)

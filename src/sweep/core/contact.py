@@ -15,12 +15,14 @@ Modes (docs/model.md, 'Modes, signs and sticking'):
           it hands over to SLIDE where u grows past SLAVE_EXIT u_s or the direction folds away, and
           ends in ROLL where u.s returns to 0 (located events; the velocity is continuous).
 A SLIDE not handed over (a slip spiralling into u = 0, or passing by it) meets its fate where |u|
-falls to slip_tol (slip_fate, slow_slide; docs/model.md, 'Where a slip ends'): it ends where its
-direction dynamics carry it to u = 0, else it passes through u = 0 or spirals out; the plastic
-impulse there changes the velocity by O(slip_tol), and no decision depends on slip_tol.
+falls to slip_tol (slip_fate, slow_slide; docs/model.md, 'Where a slip ends'): where its direction
+dynamics carry it to u = 0 along nu* it settles onto nu* and ends as a slaved slip at u.s = 0 (a
+located event); a slip that spirals out slides on; otherwise it is followed below slip_tol, its
+fate read again 16 times slower, until it settles, or, at the round-off floor, it ends or passes
+through u = 0 by an impulse of O(floor). No decision, and no event before it, depends on slip_tol.
 Moment components (eq. 3.3, Filippov): a free component sticks where omega.a_i reaches 0, or where
-it slows to spin_tol and its motion goes on to rest (spin_reaches_rest), if the moment
-can hold it (|sigma needed| < 1); a stuck one is released where |sigma needed| reaches 1.
+it slows to spin_tol and its motion goes on to rest, if the moment can hold it there
+(spin_sticks; |sigma needed| < 1); a stuck one is released where |sigma needed| reaches 1.
 """
 from __future__ import annotations
 
@@ -33,11 +35,11 @@ from .events import (C_CONTACT_LOST, C_FACE, C_MOMENT, C_SIDE, E_CLASS, E_COMPON
                      EV_UNSTICK1, EV_UNSTICK2, EV_UNSTICK3, EVENTS, N_DYN_EVENTS, N_EVENTS)
 from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
-from .layout import (CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
+from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
                      W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
                      System)
 from .model import (N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
-                    Y_DSLIDE, Y_U1, Y_U2, Y_W1, Contact, energy_from_trig, moment_axes_rates, rhs, sign_rate)
+                    Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, Contact, energy_from_trig, moment_axes_rates, rhs, sign_rate)
 
 # Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
 # is then 1e-6 R above the table (38 nm for the paper's disk), below any real table's flatness. A disk
@@ -56,8 +58,13 @@ SLAVE_EXIT = 4.0
 # cs[CS_SLAVE_OFF] while a slide that spirals out from u = 0 slides on below slip_tol (slow_slide):
 # the hand-over and EV_SLIP_SLOW are both off until the slip is fast again (EV_SLIP_FAST)
 SLOW_OFF = 2.0
+# cs[CS_SLAVE_OFF] while a slide below slip_tol is followed to its fate (slow_slide): an ending slip
+# whose direction has yet to turn to its direction of arrival, one spiralling in, one passing by
+# u = 0; its fate is read again at cs[CS_FLOOR], BELOW_STEP times slower each time
+BELOW = 3.0
+BELOW_STEP = 16.0
 # tau: the differences of d/dtau(omega.a_i) along the motion for its second and third derivatives
-# (spin_reaches_rest): truncation O(SPIN_DIFF^2) and O(SPIN_DIFF), round-off EPS |g1| / SPIN_DIFF^2.
+# (spin_rest_time): truncation O(SPIN_DIFF^2) and O(SPIN_DIFF), round-off EPS |g1| / SPIN_DIFF^2.
 SPIN_DIFF = 1e-3
 # A passage by u = 0 is resolved in time where it takes at least this many ulps of tau (slip_floor).
 SLIP_RESOLUTION = 256.0
@@ -76,15 +83,22 @@ JAMMED = math.inf
 
 
 @kernel
-def slip_floor(t, aux, p):
-    """The slip speed (u_hat) at which a slide meets its fate (EV_SLIP_SLOW, slow_slide): slip_tol,
-    or where larger the round-off floor of a slip's approach to u = 0 at tau = t: the speed that the
+def slip_roundoff(t, aux, p):
+    """The round-off floor of a slip's approach to u = 0 at tau = t (u_hat): the speed that the
     friction's deceleration, at most ~mu_d Phi (1 + 1/A) (aux: the right-hand side's at the state),
     takes off the slip in SLIP_RESOLUTION ulps of tau. A slide that passes or spirals closer to
-    u = 0 than that turns its direction within steps below the step-size floor (2 EPS tau); its
-    fate is taken there instead (slow_slide), an O(floor) change of the velocity."""
+    u = 0 than that turns its direction within steps below the step-size floor (2 EPS tau)."""
     decel = p[P_MUD] * max(aux[X_PHI], 0.0) * (1.0 + 1.0 / p[P_A])
-    return max(p[P_UTOL], SLIP_RESOLUTION * EPS * max(abs(t), 1.0) * decel)
+    return SLIP_RESOLUTION * EPS * max(abs(t), 1.0) * decel
+
+
+@kernel
+def slip_floor(t, aux, p, cs):
+    """The slip speed (u_hat) at which a slide meets its fate (EV_SLIP_SLOW, slow_slide): slip_tol
+    (cs[CS_FLOOR] for a slide followed BELOW it), or where larger the round-off floor (slip_roundoff), where
+    the fate is taken instead, an O(floor) change of the velocity."""
+    floor = cs[CS_FLOOR] if cs[CS_SLAVE_OFF] == BELOW else p[P_UTOL]
+    return max(floor, slip_roundoff(t, aux, p))
 
 
 @kernel
@@ -360,7 +374,7 @@ def try_slave(t, y, sys):
     SLIDE, and this hand-over is off until the slip is fast again (EV_SLIP_FAST re-arms it).
     Returns the outcome that ends the scene (PAINLEVE where the direction dynamics carry the slip
     into the Painleve singularity: see attracting_direction), else -1."""
-    p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
+    cs = sys.cs
     u = math.hypot(y[Y_U1], y[Y_U2])
     root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, sys)
     if root == JAMMED:
@@ -368,10 +382,20 @@ def try_slave(t, y, sys):
     if math.isnan(root):
         cs[CS_SLAVE_OFF] = 1.0
         return -1
-    # the slip component across the slaved direction is removed by a plastic impulse (O(u^2) loss).
-    # Where that would leave the slip pointing against the direction, the slip is not settling onto
-    # it but passing by u = 0 (its direction turning towards a root along which it grows): it goes
-    # on sliding, as the sliding equations carry it, past u = 0 or to slip_tol (docs/model.md)
+    # where the slip points against the direction, it is not settling onto it but passing by u = 0
+    # (its direction turning towards a root along which it grows): it goes on sliding, as the
+    # sliding equations carry it, past u = 0 or to slip_tol (docs/model.md)
+    if not settle_onto(root, y, sys):
+        cs[CS_SLAVE_OFF] = 1.0
+    return -1
+
+
+@kernel
+def settle_onto(root, y, sys):
+    """SLIDE -> SLAVED along the direction root: the slip component across it is removed by a
+    plastic impulse (O(u^2) loss), if that leaves the slip along it (u.s(root) > 0); else the state
+    is left as it was. Returns whether the slip settled."""
+    p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     side = int(cs[CS_SIDE])
     saved = wk[W_YSLIP]
     for i in range(n):
@@ -381,11 +405,10 @@ def try_slave(t, y, sys):
         y[Y_DSLIDE] += loss
         cs[CS_MODE] = SLAVED
         cs[CS_NU] = root
-        return -1
+        return True
     for i in range(n):
         y[i] = saved[i]
-    cs[CS_SLAVE_OFF] = 1.0
-    return -1
+    return False
 
 
 # What a slide whose speed has fallen to slip_tol does next (slip_fate): it reaches u = 0 and ends,
@@ -400,8 +423,9 @@ SPIRAL_POINTS = 64
 @kernel
 def slip_fate(t, y, sys):
     """Where a slide goes from a slow slip, decided by the slip's direction dynamics at the state
-    (docs/model.md, 'Where a slip ends'): (fate, nu), fate one of FATE_*, nu the direction in which a
-    passing slip leaves u = 0 (FATE_PASSES), else NaN.
+    (docs/model.md, 'Where a slip ends'): (fate, nu), fate one of FATE_*, nu the root nu* that the
+    direction reaches (the one along which a passing slip leaves u = 0, or an ending slip arrives),
+    NaN for a spiral.
 
     Near u = 0 the slip acceleration a_P depends on the slip's direction s(nu) and hardly on its
     size, so along the slide d nu/d ln|u| = cross(nu)/rad(nu) (cross, rad: a_P across and along s).
@@ -425,7 +449,7 @@ def slip_fate(t, y, sys):
         _, rad = slip_rates(root, u, t, y, sys, dy, aux, ys)
         if rad > 0.0:
             return FATE_PASSES, root
-        return FATE_ENDS, math.nan
+        return FATE_ENDS, root
     turn = 0.0
     for j in range(SPIRAL_POINTS):
         cross, rad = slip_rates(2.0 * math.pi * j / SPIRAL_POINTS, u, t, y, sys, dy, aux, ys)
@@ -437,29 +461,45 @@ def slip_fate(t, y, sys):
 
 @kernel
 def slow_slide(t, y, sys):
-    """A slide whose speed has reached slip_tol (EV_SLIP_SLOW, or a discrete update that left it
-    there), by its fate (slip_fate): one that ends is ended by the plastic contact impulse (end_slip);
-    one that passes by u = 0 goes through it, its remaining slip removed by the same impulse, and
-    leaves as a slaved slip from u = 0 along its direction of growth (no transition: it never rolls);
-    one that spirals out slides on, and this event is off until the slip is fast again. The impulse
-    changes the velocity by O(slip_tol): the answer converges at first order as slip_tol -> 0, and no
-    decision moves with it. Returns the outcome that ends the scene (PAINLEVE), else -1."""
+    """A slide whose speed has reached its floor (slip_floor: slip_tol, or cs[CS_FLOOR] below it;
+    EV_SLIP_SLOW, or a discrete update that left it there), by its fate (slip_fate). One that ends
+    along a direction nu* settles onto it (settle_onto: the O(u^2) impulse of the hand-over) and
+    ends as a slaved slip where u.s(nu*) reaches 0, a located event. Otherwise, an ending slip whose
+    direction has yet to turn to nu*, a slip that spirals in, or one that passes by u = 0 is
+    followed below: it slides on (BELOW), its fate read again BELOW_STEP times slower, so that the
+    events of its last approach to u = 0 happen as in the limit slip_tol -> 0. At the round-off
+    floor (slip_roundoff) an ending slip is ended by the plastic contact impulse (end_slip), and a
+    passing one goes through u = 0: the same impulse removes what is left of the slip and a slaved
+    slip leaves from u = 0 along its direction of growth (no transition: it never rolls). A slip
+    that spirals out slides on, and this event is off until the slip is fast again. Neither the
+    decisions nor the events before them move with slip_tol; an impulse at the floor changes the
+    velocity by O(floor). Returns the outcome that ends the scene (PAINLEVE), else -1."""
     p, cs, wk = sys.p, sys.cs, sys.wk
     fate, nu = slip_fate(t, y, sys)
     if fate == FATE_JAMMED:
         return oc.PAINLEVE
+    if fate == FATE_SPIRALS_OUT:
+        cs[CS_SLAVE_OFF] = SLOW_OFF
+        return -1
+    if fate == FATE_ENDS and not math.isnan(nu) and settle_onto(nu, y, sys):
+        cs[CS_SLAVE_OFF] = 0.0
+        return -1
+    eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+    floor = min(slip_floor(t, wk[W_AUXTMP], p, cs), math.hypot(y[Y_U1], y[Y_U2])) / BELOW_STEP
+    if floor > slip_roundoff(t, wk[W_AUXTMP], p):
+        cs[CS_SLAVE_OFF] = BELOW
+        cs[CS_FLOOR] = floor
+        return -1
     if fate == FATE_ENDS:
         end_slip(y, sys)
-    elif fate == FATE_PASSES:
-        side = int(cs[CS_SIDE])
-        y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
-        y[Y_U1] = 0.0
-        y[Y_U2] = 0.0
-        cs[CS_MODE] = SLAVED
-        cs[CS_NU] = nu
-        cs[CS_SLAVE_OFF] = 0.0
-    else:
-        cs[CS_SLAVE_OFF] = SLOW_OFF
+        return -1
+    side = int(cs[CS_SIDE])
+    y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
+    y[Y_U1] = 0.0
+    y[Y_U2] = 0.0
+    cs[CS_MODE] = SLAVED
+    cs[CS_NU] = nu
+    cs[CS_SLAVE_OFF] = 0.0
     return -1
 
 
@@ -557,15 +597,15 @@ def stick_or_flip(i, t, y, sys):
 
 
 @kernel
-def spin_reaches_rest(i, t, y, sys):
-    """Free component i slowing through |omega.a_i| = spin_tol: does it go on to rest, omega.a_i = 0,
-    rather than turn back above it (docs/model.md, 'Sticking at spin_tol')? Read from the state:
-    g = sigma_i omega.a_i and its first three derivatives along the motion, g1 exact from the
-    right-hand side, g2 and g3 by differences of g1 at the trajectory points tau +- SPIN_DIFF
-    (second-order Taylor steps of the state); the cubic g + g1 s + g2 s^2/2 + g3 s^3/6 reaches 0
-    before its first minimum, or not. Where the motion turns back, its minimum lies above 0 and the
-    exact Filippov rule never sticks it; where it reaches 0, it gets the stick test there and is
-    stuck at spin_tol instead, O(spin_tol) early. Uses wk[W_SCRATCH:W_SCRATCH + 6]."""
+def spin_rest_time(i, t, y, sys):
+    """Free component i slowing through |omega.a_i| = spin_tol: the time s (tau) after t at which its
+    motion reaches rest, omega.a_i = 0, NaN where it turns back above 0 instead (docs/model.md,
+    'Sticking at spin_tol'). Read from the state: g = sigma_i omega.a_i and its first three
+    derivatives along the motion, g1 exact from the right-hand side, g2 and g3 by differences of g1
+    at the trajectory points tau +- SPIN_DIFF (second-order Taylor steps of the state); the cubic
+    g + g1 s + g2 s^2/2 + g3 s^3/6 reaches 0 before its first minimum, or not (cubic_rest_time).
+    Leaves the right-hand side at y and at y +- SPIN_DIFF f in wk[W_SCRATCH:W_SCRATCH + 3] (for
+    spin_sticks); uses wk[W_SCRATCH:W_SCRATCH + 6]."""
     cs, n, wk = sys.cs, sys.n, sys.wk
     f0 = wk[W_SCRATCH]
     fp = wk[W_SCRATCH + 1]
@@ -579,7 +619,7 @@ def spin_reaches_rest(i, t, y, sys):
     g = sig * moment_axes_rates(y)[i]
     g1 = sig * sign_rate(i, y, f0)
     if not g1 < 0.0:
-        return False
+        return math.nan
     for j in range(n):
         ys[j] = y[j] + d * f0[j]
     eval_rhs(t + d, ys, sys, fp, auxs)
@@ -597,50 +637,100 @@ def spin_reaches_rest(i, t, y, sys):
     down = sig * sign_rate(i, ys, dys)
     g2 = (up - down) / (2.0 * d)
     g3 = (up - 2.0 * g1 + down) / (d * d)
-    return cubic_reaches_zero(g, g1, g2, g3)
+    return cubic_rest_time(g, g1, g2, g3)
+
+
+@kernel
+def spin_sticks(i, t, y, sys):
+    """Would free component i, slowing through |omega.a_i| = spin_tol at t, stick: does its motion
+    reach rest (spin_rest_time: s later), and can the moment hold it there (|sigma needed| < 1 at
+    the state at t + s, y + s f + s^2/2 f', the stick test of stick_or_flip where the exact
+    Filippov rule makes it)? A hold that is lost between spin_tol and rest is not taken for one."""
+    n, wk = sys.n, sys.wk
+    s = spin_rest_time(i, t, y, sys)
+    if math.isnan(s):
+        return False
+    f0 = wk[W_SCRATCH]
+    fp = wk[W_SCRATCH + 1]
+    fm = wk[W_SCRATCH + 2]
+    ys = wk[W_SCRATCH + 3]
+    c = 0.25 * s * s / SPIN_DIFF
+    for j in range(n):
+        ys[j] = y[j] + s * f0[j] + c * (fp[j] - fm[j])
+    return abs(needed_sigma(i, t + s, ys, sys, wk[W_SCRATCH + 4], wk[W_SCRATCH + 5])) < 1.0
+
+
+@kernel
+def cubic_rest_time(g, g1, g2, g3):
+    """The first s > 0 at which c(s) = g + g1 s + g2 s^2/2 + g3 s^3/6, with g > 0 and g1 < 0, reaches
+    0 before its first local minimum there (the first root of c'(s) = g1 + g2 s + g3 s^2/2 where
+    c'' > 0; without one, c falls for ever), NaN where the minimum lies above 0. c falls on [0, s]:
+    bisection."""
+    a = 0.5 * g3
+    s_min = math.inf
+    if a == 0.0:
+        if g2 > 0.0:
+            s_min = -g1 / g2
+    else:
+        disc = g2 * g2 - 4.0 * a * g1
+        if disc >= 0.0:
+            r = math.sqrt(disc)
+            # the roots of a s^2 + g2 s + g1, written without cancellation
+            q = -0.5 * (g2 + (r if g2 >= 0.0 else -r))
+            if q != 0.0:
+                for x in (q / a, g1 / q):
+                    if 0.0 < x < s_min and g2 + 2.0 * a * x > 0.0:
+                        s_min = x
+    if s_min < math.inf:
+        if g + s_min * (g1 + s_min * (0.5 * g2 + s_min * g3 / 6.0)) > 0.0:
+            return math.nan
+        hi = s_min
+    else:
+        hi = -g / g1
+        for _ in range(200):
+            if g + hi * (g1 + hi * (0.5 * g2 + hi * g3 / 6.0)) <= 0.0:
+                break
+            hi *= 2.0
+    lo = 0.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        if g + mid * (g1 + mid * (0.5 * g2 + mid * g3 / 6.0)) > 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return hi
 
 
 @kernel
 def cubic_reaches_zero(g, g1, g2, g3):
     """Does c(s) = g + g1 s + g2 s^2/2 + g3 s^3/6, with g > 0 and g1 < 0, reach 0 at some s > 0 before
-    its first local minimum there? (The minimum is the first root of c'(s) = g1 + g2 s + g3 s^2/2
-    where c'' > 0; without one, c falls for ever.)"""
-    a = 0.5 * g3
-    if a == 0.0:
-        if not g2 > 0.0:
-            return True
-        s = -g1 / g2
-    else:
-        disc = g2 * g2 - 4.0 * a * g1
-        if disc < 0.0:
-            return True            # c' < 0 for every s (a < 0 here): c falls through 0
-        r = math.sqrt(disc)
-        # the roots of a s^2 + g2 s + g1, written without cancellation
-        q = -0.5 * (g2 + (r if g2 >= 0.0 else -r))
-        s = math.inf
-        if q != 0.0:
-            for x in (q / a, g1 / q):
-                if 0.0 < x < s and g2 + 2.0 * a * x > 0.0:
-                    s = x
-        if s == math.inf:
-            return True
-    return g + s * (g1 + s * (0.5 * g2 + s * g3 / 6.0)) <= 0.0
+    its first local minimum there (cubic_rest_time)?"""
+    return not math.isnan(cubic_rest_time(g, g1, g2, g3))
 
 
 @kernel
 def stick_at_spin_tol(i, t, y, sys):
-    """A free component has slowed to |omega.a_i| = spin_tol: if it goes on to rest
-    (spin_reaches_rest) and the moment can hold it there (|sigma needed| < 1, the stick test of
-    stick_or_flip), it sticks, and the rate left is stopped by an impulsive contact moment
-    (impulse.stop_axis_rate, its energy booked to k_i). Else it stays free with its sign (it will
-    cross 0, where the Filippov rule decides, or speed up again). Returns whether it stuck."""
+    """A free component has slowed to |omega.a_i| = spin_tol: if it goes on to rest and the moment
+    can hold it there (spin_sticks), it sticks, and the rate left is stopped by an impulsive contact
+    moment (impulse.stop_axis_rate, its energy booked to k_i), where the moment must hold it as well.
+    Else it stays free with its sign (it will cross 0, where the Filippov rule decides, or speed up
+    again). Returns whether it stuck."""
     p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
-    if spin_reaches_rest(i, t, y, sys) \
-            and abs(needed_sigma(i, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])) < 1.0:
-        cs[CS_STUCK + i] = 1.0
-        y[Y_DK1 + i] += stop_axis_rate(y, p, cs, i, wk[W_SCRATCH:W_SCRATCH + 7])
+    if not spin_sticks(i, t, y, sys):
+        return False
+    w1, w2, w3, u1, u2 = y[Y_W1], y[Y_W2], y[Y_W3], y[Y_U1], y[Y_U2]
+    cs[CS_STUCK + i] = 1.0
+    loss = stop_axis_rate(y, p, cs, i, wk[W_SCRATCH:W_SCRATCH + 7])
+    # the stop changes the velocity (and, sliding, the slip): the moment must hold the component at
+    # the state it leaves too, where every later decision (settle_signs) reads it; else no stick
+    if abs(needed_sigma(i, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])) < 1.0:
+        y[Y_DK1 + i] += loss
         istats[I_STICK] += 1
         return True
+    y[Y_W1], y[Y_W2], y[Y_W3], y[Y_U1], y[Y_U2] = w1, w2, w3, u1, u2
+    cs[CS_STUCK + i] = 0.0
     return False
 
 
@@ -767,7 +857,7 @@ def event_values(t, y, aux, p, cs, lev, g):
         g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
     elif mode == SLIDE:
         if cs[CS_SLAVE_OFF] != SLOW_OFF:
-            g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p)
+            g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p, cs)
         if cs[CS_SLAVE_OFF] == 0.0:
             g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(aux, p)
         else:
@@ -906,7 +996,7 @@ def settle_event(t, y, sys, g_before, own):
     p, cs, wk = sys.p, sys.cs, sys.wk
     if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF:
         eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
-        if math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, wk[W_AUXTMP], p):
+        if math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, wk[W_AUXTMP], p, cs):
             # the slip reached its floor within the located event's bracket (a stiff slip decays
             # by orders of magnitude in 1e-11 tau): its own event can no longer happen
             code = slow_slide(t, y, sys)

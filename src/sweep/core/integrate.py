@@ -14,8 +14,8 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
-from .contact import (apply_event, count_transition, confirm_slaved, spin_reaches_rest,
-                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, needed_sigma, reads_forces, set_slip, start_slip)
+from .contact import (apply_event, count_transition, confirm_slaved, spin_sticks,
+                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, reads_forces, set_slip, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .events import (C_MOMENT, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
                      EV_LEVEL, EVENTS, N_DYN_EVENTS, R_SPIN, R_SURFACE)
@@ -313,15 +313,13 @@ def dip_bracket(k, span, lev, work, have_dense):
 
 @kernel
 def spin_holds(i, t_event, span):
-    """Would free component i stick at its spin event at t_event on span's dense output (it goes on
-    to rest and |sigma needed| < 1 there, the tests contact.stick_at_spin_tol makes)? Where it would not, the event
+    """Would free component i stick at its spin event at t_event on span's dense output
+    (contact.spin_sticks, the test contact.stick_at_spin_tol makes)? Where it would not, the event
     changes nothing, and the step goes on instead of restarting there (the same trajectory, fewer
     restarts)."""
     sys = span.sys
-    wk = sys.wk
     span_state(t_event, span)
-    return spin_reaches_rest(i, t_event, wk[W_YBUF], sys) \
-        and abs(needed_sigma(i, t_event, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])) < 1.0
+    return spin_sticks(i, t_event, sys.wk[W_YBUF], sys)
 
 
 @kernel

@@ -8,7 +8,9 @@ Contact state `cs` (float64, N_CS): the discrete state of the hybrid system.
     CS_STUCK   3 slots: 1 where omega.a_i is held at 0 by the dry-friction moment (Filippov)
     CS_NU      slip direction angle on (a1, a2) (rad): the slaved friction direction
     CS_SLAVE_OFF  1 while a slip that found no quasi-static direction stays in SLIDE; 2 (contact.SLOW_OFF)
-                  while a slide spiralling out from u = 0 slides on below slip_tol
+                  while a slide spiralling out from u = 0 slides on below slip_tol; 3
+                  (contact.BELOW) while a slow slide is followed below slip_tol to its fate
+    CS_FLOOR   the slip speed (u_hat) at which a slide followed BELOW meets its fate again
 Work buffer `wk` (float64, N_WORK x N_FULL): rows used as vectors; `K` (N_KROWS x N_FULL) holds the
 RK stages of this step (rows 0..15) and of the previous step (rows K_PREV.., kept while its dense
 output was not built), `F` (14 x N_FULL) the dense-output coefficients of this step (rows 0..6) and
@@ -34,7 +36,8 @@ CS_SIG = 2       # 2, 3, 4
 CS_STUCK = 5     # 5, 6, 7
 CS_NU = 8
 CS_SLAVE_OFF = 9  # 1 after a failed SLIDE -> SLAVED hand-over, until the slip is fast again
-N_CS = 10
+CS_FLOOR = 10
+N_CS = 11
 
 # --- work-buffer rows ---------------------------------------------------------------------------
 W_Y = 0          # state at the step start
