@@ -185,12 +185,88 @@ def test_a_window_open_at_the_end_keeps_its_symmetric_part_unless_a_guard_cut_it
         for i in range(fr.WIN_LEN):
             row[fr.LW_HEAD + i] = 10.0 + (i - mid) * 0.25 / S              # lattice times
             row[fr.LW_HEAD + fr.WIN_LEN + i] = 1.0 + 0.1 * math.cos(0.8 * 2 * math.pi * i / S)
-        level_out = np.full((1, 6), math.nan)
+        level_out = np.full((1, L.LEVEL_COLS), math.nan)
         fr.finish_levels(fq, level_out, cut)
         got = level_out[0, L.L_PRECESSION]
         assert (math.isnan(got) and math.isnan(want)) or abs(got / want - 1) < 1e-12, (cut, got)
         assert fq[fr.FQ_LEVEL0, fr.LW_STATE] == 3.0
         assert cut or level_out[0, L.L_CYCLES] == 2.0
+
+
+def _ramp_window(mb, nf, rate0=2.0 * math.pi / 0.25, growth=0.05):
+    """A level window at tau 10 whose lattice points come from a precession rate growing linearly
+    in tau (dtheta/dtau = rate0 (1 + growth (tau - 10))): mb whole cycles before the level, nf
+    lattice points after it. Returns (fq, the exact rate at the level)."""
+    S = fr.SAMPLES_PER_CYCLE
+    mid = fr.HALF_CYCLES * S
+    fq = np.zeros((fr.FQ_LEVEL0 + 1, fr.FQ_COLS))
+    row = fq[fr.FQ_LEVEL0]
+    row[fr.LW_STATE], row[fr.LW_DIR], row[fr.LW_MB], row[fr.LW_NF] = 2.0, 0.0, float(mb), float(nf)
+    # theta(tau) = rate0 ((tau - 10) + growth (tau - 10)^2 / 2): the time of lattice point k
+    for i in range(fr.WIN_LEN):
+        th = (i - mid) * 2.0 * math.pi / S
+        a, b, c = 0.5 * rate0 * growth, rate0, -th
+        row[fr.LW_HEAD + i] = 10.0 + (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
+        row[fr.LW_HEAD + fr.WIN_LEN + i] = 1.0
+    return fq, rate0
+
+
+@pytest.mark.parametrize("mb, nf, side", [(4, 5, -1.0), (3, 15, -1.0), (0, 64, 1.0), (0, 40, 1.0)])
+def test_a_one_sided_window_gives_the_next_cycle_with_an_honest_error(mb, nf, side):
+    """Whole cycles on one side of the level only (the motion ended within a cycle after it, or
+    the level came within the first cycle), at least two: precession from the whole cycle next to
+    the level, its window error the change to the next cycle's mean, which covers the exact rate at
+    the level (a rate growing 5 % per tau, ~1.2 % per cycle); no ringing ratio."""
+    fq, exact = _ramp_window(mb, nf)
+    level_out = np.full((1, L.LEVEL_COLS), math.nan)
+    fr.finish_levels(fq, level_out, False)
+    assert level_out[0, L.L_WINDOW] == side and math.isnan(level_out[0, L.L_PRECESSION])
+    assert math.isnan(level_out[0, L.L_RINGING])
+    got, err = level_out[0, L.L_PREC_SIDE], level_out[0, L.L_PREC_ERR]
+    assert 0.0 < err < 0.03 * exact
+    assert abs(got - exact) <= err, (got, exact, err)
+
+
+def test_fewer_than_two_whole_cycles_on_the_only_side_give_no_value():
+    fq, _ = _ramp_window(1, 5)
+    level_out = np.full((1, L.LEVEL_COLS), math.nan)
+    fr.finish_levels(fq, level_out, False)
+    assert np.all(np.isnan(level_out[0, [L.L_PRECESSION, L.L_PREC_SIDE, L.L_PREC_ERR, L.L_WINDOW]]))
+
+
+@pytest.mark.parametrize("mb, nf", [(4, 64), (2, 40), (1, 20)])
+def test_a_centred_window_has_an_error_that_covers_the_exact_rate(mb, nf):
+    """A centred window on a rate growing 10 % per tau (~20 % across 8 cycles): the mean is off the
+    rate at the level by its second-order bias, which the window error estimates (Richardson, from
+    the two cycles next to the level; for one cycle each side the first-order bound)."""
+    fq, exact = _ramp_window(mb, nf, growth=0.1)
+    level_out = np.full((1, L.LEVEL_COLS), math.nan)
+    fr.finish_levels(fq, level_out, False)
+    got, err = level_out[0, L.L_PRECESSION], level_out[0, L.L_PREC_ERR]
+    assert level_out[0, L.L_WINDOW] == 0.0 and level_out[0, L.L_CYCLES] == 2 * min(mb, nf // fr.SAMPLES_PER_CYCLE)
+    assert abs(got - exact) <= 1.05 * err, (got, exact, err)
+    assert err < 0.02 * exact
+
+
+def test_a_level_near_the_end_gets_the_cycle_before_it_within_its_error():
+    """The paper's disk stopped (t_max) a fifth of a precession cycle after it reaches 0.1 rad: no
+    centred window, so precession_hz is the mean over the whole cycle before the level, and its
+    error bar and the centred 8-cycle value's of the same scene run on cover their difference."""
+    base = dict(stop__levels=[0.3, 0.1, 0.01], outputs__normal_force_frequency=True)
+    full = sweep.simulate(make_scene(**base)).summary["levels"][1]
+    assert full["precession_window"] == 0.0 and np.isfinite(full["ringing_hz"])
+    t_cut = full["t"] + 0.2 / full["precession_hz"]
+    cut = sweep.simulate(make_scene(**base, stop__t_max=t_cut)).summary
+    lv = cut["levels"][1]
+    assert cut["outcome"] == "t_max" and lv["precession_window"] == -1.0
+    assert math.isnan(lv["ringing_hz"])
+    # the two values agree within their error bars (the centred 8-cycle value has its own: its
+    # window's bias, which near 0.1 rad, where the precession ramps up, is the larger one)
+    assert abs(lv["precession_hz"] - full["precession_hz"]) <= lv["precession_hz_error"] + full["precession_hz_error"]
+    assert lv["precession_hz_error"] < 0.05 * lv["precession_hz"]
+    from sweep import reasons
+    assert reasons.level_flags(cut, lv) == {"precession_hz_flag": 0, "ringing_hz_flag": reasons.NO_WHOLE_CYCLE_WINDOW,
+                                            "normal_force_hz_flag": reasons.level_flags(cut, lv)["normal_force_hz_flag"]}
 
 
 def test_the_last_levels_frequencies_do_not_depend_on_a_step_count_after_the_halt():

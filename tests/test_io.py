@@ -39,6 +39,7 @@ def fake_summary(point, levels) -> dict:
         "t_halt_error": 1e-3 * base, "halt_finite": code == outcomes.HALTED, "approach_exponent": 0.5 + mu_d,
         "ramp_exponent": math.nan if code else 1.0 + k3, "ramp_exponent_error": math.nan if code else 0.01 * a0,
         "levels": [{"inclination": lv, "t": base + j, "precession_hz": w0 / (j + 1), "ringing_hz": 0.8 * w0 / (j + 1),
+                    "precession_hz_error": 1e-3 * w0, "precession_window": 0.0, "precession_cycles": 8.0,
                     "ringing_ratio": 0.8 + 0.01 * j,
                     "normal_force_hz": math.nan if j == 0 else 2 * w0 * j} for j, lv in enumerate(levels)],
         "slip_fraction": mu_d / 2, "n_transitions": int(w0), "n_stick": int(10 * a0), "n_impacts": 0,

@@ -46,6 +46,10 @@ def test_each_level_reason():
         R.VALUE, R.NO_WHOLE_CYCLE_WINDOW, R.LEVEL_CROSSED_LYING_FLAT]
     # the same level time without lying flat is a level reached by the motion
     assert R.level_flags(dict(flat, lay_flat=False), flat["levels"][2])["precession_hz_flag"] == R.NO_WHOLE_CYCLE_WINDOW
+    # a one-sided precession value (no centred window): it has a value, the ringing has none for that reason
+    one = dict(s["levels"][2], precession_window=-1.0)
+    assert R.level_flags(s, one)["precession_hz_flag"] == R.VALUE
+    assert R.level_flags(s, one)["ringing_hz_flag"] == R.NO_WHOLE_CYCLE_WINDOW
     failed = io.error_summary(3)
     assert {v for lv in failed["levels"] for v in R.level_flags(failed, lv).values()} == {R.NO_RESULT}
     assert set(R.fit_flags(failed).values()) == {R.NO_RESULT}
@@ -147,10 +151,14 @@ def test_flags_agree_with_the_kernels_own_state(name):
             assert not math.isfinite(raw["t"]) and not st["opened"]
         elif flag == R.LEVEL_CROSSED_LYING_FLAT:
             assert s["lay_flat"] and math.isfinite(raw["t"]) and not st["opened"]
-        elif flag == R.NO_WHOLE_CYCLE_WINDOW:   # the kernel had no whole cycle on one side, or was cut
-            assert st["opened"] and (st["before"] == 0 or st["after"] < 16 * st["before"] or cut), st
+        # whole cycles before and after the level in the kernel's window: a centred value needs one
+        # each side, a one-sided one two on its side
+        before, after = st["before"], st["after"] // 16
+        if flag == R.NO_WHOLE_CYCLE_WINDOW:   # the kernel had too few whole cycles, or was cut
+            assert st["opened"] and ((min(before, after) == 0 and max(before, after) < 2) or cut), st
         elif flag == R.VALUE:
-            assert st["opened"] and st["before"] >= 1
+            assert st["opened"] and not cut and (min(before, after) >= 1 or max(before, after) >= 2), st
+            assert (lv["precession_window"] == 0.0) == (min(before, after) >= 1)
         if lv["normal_force_hz_flag"] == R.TOO_FEW_MAXIMA:
             assert st["pending"] or st["maxima_before"] < 3, st
     assert seen - {R.VALUE}, "the scene has no missing value"

@@ -23,7 +23,8 @@ from . import outcomes, reasons
 from .core import model
 from .core.fits import D_APPROACH, D_HALT_FINITE, D_RAMP, D_RAMP_ERR, D_THALT, D_THALT_ERR
 from .core.layout import (F_DIMPACT, F_E0, F_EEND, F_NFMAX, F_SLIDETIME, F_TEND, I_EVENTS, I_FLAT, I_IMPACTS,
-                          I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK, I_TRANS)
+                          I_OUTCOME, I_REJECTED, I_RHS, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK, I_TRANS,
+                          L_CYCLES, L_FHAT, L_PREC_ERR, L_PREC_SIDE, L_PRECESSION, L_RINGING, L_TAU, L_WINDOW)
 
 # What the values are taken from: the scene (sweep.scene.Scene: chi, energy scale, levels), the
 # kernel's istats, fstats, levels rows (layout.LEVEL_COLS: tau, alpha, mean dtheta/dtau, f_hat,
@@ -79,8 +80,10 @@ def _energy(value: Callable[[Source], float]) -> Callable[[Source, int], float]:
 
 
 def _precession_hz(s: Source, j: int) -> float:
-    # the magnitude of the mean dtheta/dt over whole precession cycles around the level / 2 pi
-    return _finite(abs(s.lev[j, 2]) / s.scene.chi / (2.0 * math.pi))
+    # the magnitude of the mean dtheta/dt over whole precession cycles around the level / 2 pi: the
+    # centred window's, else the one-sided one's (core.frequency.window_values)
+    rate = s.lev[j, L_PRECESSION] if math.isfinite(s.lev[j, L_PRECESSION]) else s.lev[j, L_PREC_SIDE]
+    return _finite(abs(rate) / s.scene.chi / (2.0 * math.pi))
 
 
 OUTPUTS: tuple[Output, ...] = (
@@ -108,17 +111,27 @@ OUTPUTS: tuple[Output, ...] = (
     Output("inclination", "float", "rad", "inclination level", lambda s, j: float(s.scene.levels[j]),
            where="levels", cube=None),
     Output("t", "float", "s", "time at which the inclination first reaches the level",
-           lambda s, j: _finite(s.lev[j, 0] * s.scene.chi), where="levels", cube="t_level", numerical_error=True),
-    Output("precession_hz", "float", "Hz", "precession frequency at the level: mean dtheta/dt / 2 pi over 8 "
-           "whole precession cycles around the level time", _precession_hz, where="levels", numerical_error=True),
+           lambda s, j: _finite(s.lev[j, L_TAU] * s.scene.chi), where="levels", cube="t_level", numerical_error=True),
+    Output("precession_hz", "float", "Hz", "precession frequency at the level: mean dtheta/dt / 2 pi over up to 8 "
+           "whole precession cycles centred on the level time, or over the whole cycle next to it where only one "
+           "side has whole cycles (see precession_window)", _precession_hz, where="levels", numerical_error=True),
+    Output("precession_hz_error", "float", "Hz", "window error of precession_hz, the bias of averaging over "
+           "whole cycles (centred: Richardson's estimate from the two cycles next to the level; one-sided: the "
+           "change of the rate to the next cycle)", lambda s, j: _finite(abs(s.lev[j, L_PREC_ERR]) / s.scene.chi / (2.0 * math.pi)),
+           where="levels"),
+    Output("precession_window", "float", "1", "window of precession_hz: 0 whole cycles centred on the level, -1 "
+           "the cycles before it only, +1 after it only (NaN: no value)",
+           lambda s, j: _finite(s.lev[j, L_WINDOW]), where="levels"),
+    Output("precession_cycles", "float", "1", "whole precession cycles precession_hz averages over (8 at most, "
+           "as many each side; 1 for a one-sided value)", lambda s, j: _finite(s.lev[j, L_CYCLES]), where="levels"),
     Output("ringing_hz", "float", "Hz", "ringing frequency at the level: dominant frequency of the normal force "
-           "over the same whole precession cycles",
-           lambda s, j: _finite(s.lev[j, 4] * _precession_hz(s, j)), where="levels", numerical_error=True),
+           "over the same whole precession cycles (centred windows only)",
+           lambda s, j: _finite(s.lev[j, L_RINGING] * _precession_hz(s, j)), where="levels", numerical_error=True),
     Output("ringing_ratio", "float", "1", "ringing frequency / precession frequency at the level (normal-force "
-           "oscillations per precession cycle)", lambda s, j: _finite(s.lev[j, 4]), where="levels"),
+           "oscillations per precession cycle)", lambda s, j: _finite(s.lev[j, L_RINGING]), where="levels"),
     Output("normal_force_hz", "float", "Hz", "paper's normal-force frequency f_hat = 2/T, T spanning the three "
            "counted normal-force maxima before the level (1 % hysteresis)",
-           lambda s, j: _finite(s.lev[j, 3] / s.scene.chi), where="levels", numerical_error=True),
+           lambda s, j: _finite(s.lev[j, L_FHAT] / s.scene.chi), where="levels", numerical_error=True),
     Output("normal_force_hz_max", "float", "Hz", "largest normal-force frequency f_hat over the run",
            lambda s, j: float(s.fstats[F_NFMAX]) / s.scene.chi if s.fstats[F_NFMAX] > 0.0 else math.nan, cube=None),
     # the discrete sequence can hinge on a near-tangent crossing (a slip demand or a spin that only

@@ -47,7 +47,9 @@ REASONS: dict[int, tuple[str, str]] = {
         "no_whole_cycle_window",
         "the level was reached, but fewer than one whole precession cycle lies before it (since the start) or "
         "after it (before the motion ended, or before a numerical stop cut the steps: see outcome), so there is "
-        "no window of whole cycles to average over; the scene's summary does not tell which side"),
+        "no window of whole cycles centred on it: precession_hz then comes from the whole cycle next to the "
+        "level on the other side where that side has two (precession_window -1 or +1, its error "
+        "precession_hz_error), and is missing where it has fewer; the ringing needs the centred window"),
     NO_RINGING_TONE: (
         "no_ringing_tone",
         "the normal force over the level's window of whole cycles does not oscillate: its best-fitting "
@@ -77,7 +79,7 @@ REASONS: dict[int, tuple[str, str]] = {
 
 # flag variable -> (the variables it explains, the codes it can take, long_name)
 FLAGS: dict[str, tuple[tuple[str, ...], tuple[int, ...], str]] = {
-    "precession_hz_flag": (("precession_hz",), (VALUE, NO_RESULT, LEVEL_NOT_REACHED, LEVEL_CROSSED_LYING_FLAT,
+    "precession_hz_flag": (("precession_hz", "precession_hz_error", "precession_window", "precession_cycles"), (VALUE, NO_RESULT, LEVEL_NOT_REACHED, LEVEL_CROSSED_LYING_FLAT,
                                                 NO_WHOLE_CYCLE_WINDOW),
                            "why precession_hz is missing (0: it has a value)"),
     "ringing_hz_flag": (("ringing_hz", "ringing_ratio"), (VALUE, NO_RESULT, LEVEL_NOT_REACHED,
@@ -122,8 +124,10 @@ def level_flags(summary: Mapping, lv: Mapping) -> dict[str, int]:
     """The per-level flags of level `lv` of a scene's `summary`."""
     base = _level_reason(summary, lv)
     prec = VALUE if not _nan(lv.get("precession_hz")) else (base or NO_WHOLE_CYCLE_WINDOW)
-    # the ringing ratio comes from the precession's window: without a window, the same reason
-    ring = VALUE if not _nan(lv.get("ringing_hz")) else (prec or NO_RINGING_TONE)
+    # the ringing ratio comes from the precession's centred window: without one, the same reason
+    # (a one-sided precession value has no ringing)
+    one_sided = lv.get("precession_window") in (-1.0, 1.0)
+    ring = VALUE if not _nan(lv.get("ringing_hz")) else (prec or (NO_WHOLE_CYCLE_WINDOW if one_sided else NO_RINGING_TONE))
     nf = VALUE if not _nan(lv.get("normal_force_hz")) else (base or TOO_FEW_MAXIMA)
     return {"precession_hz_flag": prec, "ringing_hz_flag": ring, "normal_force_hz_flag": nf}
 

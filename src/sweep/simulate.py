@@ -11,7 +11,7 @@ from . import outputs
 from .core import model
 from .core.fits import N_DERIVED, summary_fits
 from .core.integrate import integrate
-from .core.layout import I_FLAT, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX
+from .core.layout import I_FLAT, L_PRECESSION, L_TAU, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX
 from .errors import ConfigError
 from .scene import Scene, load_scene
 
@@ -94,9 +94,10 @@ def summary_from(sc: Scene, istats: np.ndarray, fstats: np.ndarray, lev: np.ndar
     computes them per scene in its worker)."""
     if fits is None:
         chi = sc.chi
-        # the level times (s) and precession frequencies (Hz) the fits read, as the summary holds them
-        level_t = lev[:, 0] * chi
-        prec_hz = np.abs(lev[:, 2]) / chi / (2.0 * math.pi)
+        # the level times (s) and precession frequencies (Hz) the fits read: the centred windows'
+        # only (a one-sided value, the summary's where there is no centred one, is not fitted)
+        level_t = lev[:, L_TAU] * chi
+        prec_hz = np.abs(lev[:, L_PRECESSION]) / chi / (2.0 * math.pi)
         fits = np.empty(N_DERIVED)
         summary_fits(level_t, prec_hz, np.asarray(sc.levels, dtype=float), len(sc.levels), bool(istats[I_FLAT]),
                      np.asarray(fstats, dtype=float), chi, fits)

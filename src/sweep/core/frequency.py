@@ -7,7 +7,10 @@ dense output (theta reaching a lattice value it never reached before), with Phi 
 buffer per direction keeps the last HALF_CYCLES cycles of them. A level crossed at t_L takes the
 direction of the first lattice point reached after t_L; J is the last index reached at or before
 t_L, and the window is the lattice indices J - m S ... J + m S: m = HALF_CYCLES whole cycles on
-each side, or as many as the scene has before and after the level (the same on both sides). Then
+each side, or as many as the scene has before and after the level (the same on both sides); where
+one side has none (the level is reached within the first cycle, or the motion ends within one
+after it), the whole cycle next to the level on the other side, with the next one for its error
+(window_values). Then
 
     mean dtheta/dtau = d 2 pi (2 m) / (T(J + m S) - T(J - m S)),   d = +1 or -1 (direction),
 
@@ -29,8 +32,9 @@ it rose H above the lowest Phi since the previous counted maximum, and it is con
 Buffer `fq` (float64, (FQ_LEVEL0 + n_levels) x FQ_COLS): row 0 scalars (Q_*), rows 1, 2 the ring
 buffers (up, down: times then Phi), row FQ_LEVEL0 + L the window of level L (LW_* head, then the
 times and the Phi values at window positions 0 .. WIN_LEN - 1, position HALF_CYCLES S being J).
-level_out columns written here (layout.L_*): L_PRECESSION the mean dtheta/dtau, L_RINGING the
-ringing ratio, L_CYCLES the cycles in the window.
+level_out columns written here (layout.L_*): L_PRECESSION the mean dtheta/dtau (centred window),
+L_PREC_SIDE the one-sided one, L_PREC_ERR the window error, L_WINDOW the window's side, L_RINGING
+the ringing ratio, L_CYCLES the cycles in the window.
 """
 from __future__ import annotations
 
@@ -39,7 +43,7 @@ import math
 from .contact import eval_rhs
 from .dop853 import dense_component, dense_eval
 from .jit import kernel
-from .layout import L_CYCLES, L_PRECESSION, L_RINGING, T_PENDING, W_AUXBUF, W_DYBUF, W_YBUF, W_YSEG
+from .layout import L_CYCLES, L_PREC_ERR, L_PREC_SIDE, L_PRECESSION, L_RINGING, L_WINDOW, T_PENDING, W_AUXBUF, W_DYBUF, W_YBUF, W_YSEG
 from .model import X_PHI, Y_THETA
 
 SAMPLES_PER_CYCLE = 16          # S: lattice points per precession cycle (Nyquist: 8 Phi cycles per precession cycle)
@@ -202,19 +206,16 @@ def push_lattice(r, tc, phi, fq, level_out, trk):
                 src = (head - k) % RING
                 fq[row, LW_HEAD + mid - k] = fq[1 + r, src]
                 fq[row, LW_HEAD + WIN_LEN + mid - k] = fq[1 + r, RING + src]
-            if mb == 0:
-                fq[row, LW_STATE] = 3.0     # no whole cycle before the level: no value
-                trk[T_PENDING] -= 1.0
-            else:
-                fq[row, LW_STATE] = 2.0
+            # no whole cycle before the level: the window collects HALF_CYCLES after it (one-sided)
+            fq[row, LW_STATE] = 2.0
         if fq[row, LW_STATE] == 2.0 and fq[row, LW_DIR] == r:
             nf = int(fq[row, LW_NF]) + 1
             fq[row, LW_HEAD + mid + nf] = tc
             fq[row, LW_HEAD + WIN_LEN + mid + nf] = phi
             fq[row, LW_NF] = nf
             mb = int(fq[row, LW_MB])
-            if nf == mb * S:
-                window_values(L, mb, fq, level_out)
+            if nf == (mb if mb > 0 else HALF_CYCLES) * S:
+                window_values(L, mb, nf // S, fq, level_out)
                 trk[T_PENDING] -= 1.0
     head = (head + 1) % RING
     fq[1 + r, head] = tc
@@ -225,32 +226,71 @@ def push_lattice(r, tc, phi, fq, level_out, trk):
 
 
 @kernel
-def window_values(L, m, fq, level_out):
-    """Mean precession rate and ringing ratio of level L over its m whole cycles each side."""
-    row = FQ_LEVEL0 + L
-    mid = HALF_CYCLES * SAMPLES_PER_CYCLE
-    i0 = mid - m * SAMPLES_PER_CYCLE
-    i1 = mid + m * SAMPLES_PER_CYCLE
+def cycle_rate(fq, row, a, b):
+    """Mean dtheta/dtau between the window positions a < b of level row `row` (whole cycles apart)."""
     sgn = 1.0 - 2.0 * fq[row, LW_DIR]
-    dt = fq[row, LW_HEAD + i1] - fq[row, LW_HEAD + i0]
-    level_out[L, L_PRECESSION] = sgn * 2.0 * math.pi * 2.0 * m / dt if dt > 0.0 else math.nan
-    level_out[L, L_RINGING] = ringing_ratio(fq[row], LW_HEAD + WIN_LEN + i0, LW_HEAD + WIN_LEN + i1,
-                                             SAMPLES_PER_CYCLE)
-    level_out[L, L_CYCLES] = 2.0 * m
+    dt = fq[row, LW_HEAD + b] - fq[row, LW_HEAD + a]
+    return sgn * 2.0 * math.pi * (b - a) / SAMPLES_PER_CYCLE / dt if dt > 0.0 else math.nan
+
+
+@kernel
+def window_values(L, mb, ma, fq, level_out):
+    """The precession rate and ringing ratio of level L from the whole cycles around it: mb before
+    and ma after it in its window (docs/model.md, 'Frequencies at the levels').
+
+    Centred (m = min(mb, ma) >= 1): the mean dtheta/dtau and the ringing ratio over m whole cycles
+    on each side; its window error, the bias of the mean over a window centred in theta, which
+    grows as the window's length squared, is its difference from the mean over the two cycles next
+    to the level times m^2/(m^2 - 1) (m >= 2), or half the difference of those two cycles' own
+    means, a first-order bound (m = 1). One-sided (whole cycles on one side only, at
+    least two: the level is reached within the first precession cycle, or the motion ends within
+    one after it): the mean over the whole cycle next to the level, its window error the
+    difference from the next cycle's mean (the change of the rate over one cycle, where the level
+    lies half a cycle from the first's centre); no ringing ratio (its tone fit needs the centred
+    window). Fewer: no value."""
+    row = FQ_LEVEL0 + L
+    S = SAMPLES_PER_CYCLE
+    mid = HALF_CYCLES * S
+    m = min(mb, ma)
+    if m >= 1:
+        i0 = mid - m * S
+        i1 = mid + m * S
+        rate = cycle_rate(fq, row, i0, i1)
+        level_out[L, L_PRECESSION] = rate
+        if m >= 2:
+            # the window's bias grows as its length squared: Richardson's estimate of the 2m-cycle
+            # mean's from its difference to the 2-cycle one
+            level_out[L, L_PREC_ERR] = abs(rate - cycle_rate(fq, row, mid - S, mid + S)) * m * m / (m * m - 1.0)
+        else:
+            level_out[L, L_PREC_ERR] = 0.5 * abs(cycle_rate(fq, row, mid, mid + S) - cycle_rate(fq, row, mid - S, mid))
+        level_out[L, L_RINGING] = ringing_ratio(fq[row], LW_HEAD + WIN_LEN + i0, LW_HEAD + WIN_LEN + i1, S)
+        level_out[L, L_CYCLES] = 2.0 * m
+        level_out[L, L_WINDOW] = 0.0
+    elif max(mb, ma) >= 2:
+        side = 1.0 if ma >= 2 else -1.0
+        if side > 0.0:
+            near = cycle_rate(fq, row, mid, mid + S)
+            far = cycle_rate(fq, row, mid + S, mid + 2 * S)
+        else:
+            near = cycle_rate(fq, row, mid - S, mid)
+            far = cycle_rate(fq, row, mid - 2 * S, mid - S)
+        level_out[L, L_PREC_SIDE] = near
+        level_out[L, L_PREC_ERR] = abs(near - far)
+        level_out[L, L_CYCLES] = 1.0
+        level_out[L, L_WINDOW] = side
     fq[row, LW_STATE] = 3.0
 
 
 @kernel
 def finish_levels(fq, level_out, cut):
-    """At the end of the scene: windows still open get the largest symmetric window they have where
-    the motion ended there (t_max, an event's outcome, twice a halt's tau), no value where a
-    numerical guard stopped the steps (cut: step budget, step floor, a NaN state)."""
+    """At the end of the scene: windows still open get what their whole cycles give
+    (window_values: the largest centred window, else one side's) where the motion ended there
+    (t_max, an event's outcome, twice a halt's tau), no value where a numerical guard stopped the
+    steps (cut: step budget, step floor, a NaN state)."""
     for L in range(fq.shape[0] - FQ_LEVEL0):
         row = FQ_LEVEL0 + L
         if fq[row, LW_STATE] == 2.0 and not cut:
-            m = min(int(fq[row, LW_MB]), int(fq[row, LW_NF]) // SAMPLES_PER_CYCLE)
-            if m >= 1:
-                window_values(L, m, fq, level_out)
+            window_values(L, int(fq[row, LW_MB]), int(fq[row, LW_NF]) // SAMPLES_PER_CYCLE, fq, level_out)
         fq[row, LW_STATE] = 3.0
 
 

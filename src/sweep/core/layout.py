@@ -116,11 +116,14 @@ N_KROWS = 2 * N_STAGES_EXTENDED
 
 # --- output buffers: their columns -------------------------------------------------------------
 # a level's row: tau where it is crossed, alpha there, the mean dtheta/dtau over whole precession
-# cycles, f_hat (2/T over three counted Phi maxima), the ringing ratio (Phi's cycles per precession
-# cycle), the whole cycles in the window (core.frequency); in the kernel's buffer L_PENDING is 1
-# while the level's f_hat waits for a maximum
-L_TAU, L_ALPHA, L_PRECESSION, L_FHAT, L_RINGING, L_CYCLES = range(6)
-LEVEL_COLS = 6
+# cycles centred on the level, f_hat (2/T over three counted Phi maxima), the ringing ratio (Phi's
+# cycles per precession cycle), the whole cycles in the window, the mean dtheta/dtau over the whole
+# cycle next to the level where only one side has whole cycles, the window error of the mean
+# dtheta/dtau given, the window's side (0 centred, -1 before the level only, +1 after it only; NaN
+# none) (core.frequency); in the kernel's buffer L_PENDING is 1 while the level's f_hat waits for a
+# maximum
+L_TAU, L_ALPHA, L_PRECESSION, L_FHAT, L_RINGING, L_CYCLES, L_PREC_SIDE, L_PREC_ERR, L_WINDOW = range(9)
+LEVEL_COLS = 9
 L_PENDING = LEVEL_COLS
 # a sample's row: the state y[0:N_FULL], its energy, Phi, the mode (cs[CS_MODE])
 SA_Y, SA_ENERGY, SA_PHI, SA_MODE = 0, N_FULL, N_FULL + 1, N_FULL + 2
