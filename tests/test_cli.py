@@ -35,8 +35,8 @@ def test_json_output_and_samples_match_the_api(tmp_path):
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert SUMMARY_KEYS <= set(out)
-    assert set(out["levels"][0]) == {"inclination", "t", "precession_hz", "ringing_hz", "ringing_ratio",
-                                     "normal_force_hz"}
+    assert set(out["levels"][0]) == {"inclination", "t", "precession_hz", "precession_hz_error", "precession_window",
+                                     "precession_cycles", "ringing_hz", "ringing_ratio", "normal_force_hz"}
     assert set(out["dissipation"]) == {"sliding", "k1", "k2", "k3", "impact"}
     s = out["samples"]
     assert s["t"] == [0.0, 0.5, 1.25]

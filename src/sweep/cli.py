@@ -78,10 +78,14 @@ def _print_human(s: dict) -> None:
     print(f"t_halt           {s['t_halt']:.6f} s  +- {s['t_halt_error']:.3g} s  (finite: {s['halt_finite']})")
     print(f"ramp exponent    {s['ramp_exponent']:.4f} +- {s['ramp_exponent_error']:.2g}   "
           f"approach exponent {s['approach_exponent']:.4f}")
-    print("levels           inclination (rad)   t (s)          precession (Hz)   ringing (Hz)      "
+    print("levels           inclination (rad)   t (s)          precession (Hz), window error   ringing (Hz)      "
           "normal force f_hat (Hz)")
+    sides = {-1.0: " (cycle before)", 1.0: " (cycle after)"}
     for lv in s["levels"]:
-        print(f"                 {lv['inclination']:<18.3g} {lv['t']:<14.6f} {lv['precession_hz']:<17.6g} "
+        prec = f"{lv['precession_hz']:.6g}"
+        if lv["precession_hz"] == lv["precession_hz"]:
+            prec += f" +- {lv['precession_hz_error']:.2g}" + sides.get(lv["precession_window"], "")
+        print(f"                 {lv['inclination']:<18.3g} {lv['t']:<14.6f} {prec:<31} "
               f"{lv['ringing_hz']:<17.6g} {lv['normal_force_hz']:.6g}")
     print(f"max normal-force frequency {s['normal_force_hz_max']:.6g} Hz")
     print(f"slip fraction    {s['slip_fraction']:.4f}   transitions {s['n_transitions']}   stick episodes {s['n_stick']}   impacts {s['n_impacts']}")

@@ -116,8 +116,9 @@ OUTPUTS: tuple[Output, ...] = (
            "whole precession cycles centred on the level time, or over the whole cycle next to it where only one "
            "side has whole cycles (see precession_window)", _precession_hz, where="levels", numerical_error=True),
     Output("precession_hz_error", "float", "Hz", "window error of precession_hz, the bias of averaging over "
-           "whole cycles (centred: Richardson's estimate from the two cycles next to the level; one-sided: the "
-           "change of the rate to the next cycle)", lambda s, j: _finite(abs(s.lev[j, L_PREC_ERR]) / s.scene.chi / (2.0 * math.pi)),
+           "whole cycles (centred: Richardson's estimate from the two cycles next to the level, an upper one where "
+           "the nutation modulates the rate from cycle to cycle; one-sided: the change of the rate to the next "
+           "cycle)", lambda s, j: _finite(abs(s.lev[j, L_PREC_ERR]) / s.scene.chi / (2.0 * math.pi)),
            where="levels"),
     Output("precession_window", "float", "1", "window of precession_hz: 0 whole cycles centred on the level, -1 "
            "the cycles before it only, +1 after it only (NaN: no value)",
