@@ -206,7 +206,8 @@ def _ramp_window(mb, nf, rate0=2.0 * math.pi / 0.25, growth=0.05):
     for i in range(fr.WIN_LEN):
         th = (i - mid) * 2.0 * math.pi / S
         a, b, c = 0.5 * rate0 * growth, rate0, -th
-        row[fr.LW_HEAD + i] = 10.0 + (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
+        disc = b * b - 4 * a * c       # < 0: before the rate's zero (a position the window leaves unused)
+        row[fr.LW_HEAD + i] = 10.0 + (-b + math.sqrt(disc)) / (2 * a) if disc >= 0.0 else math.nan
         row[fr.LW_HEAD + fr.WIN_LEN + i] = 1.0
     return fq, rate0
 
@@ -227,8 +228,12 @@ def test_a_one_sided_window_gives_the_next_cycle_with_an_honest_error(mb, nf, si
     assert abs(got - exact) <= err, (got, exact, err)
 
 
-def test_fewer_than_two_whole_cycles_on_the_only_side_give_no_value():
-    fq, _ = _ramp_window(1, 5)
+@pytest.mark.parametrize("mb, nf, growth", [(1, 5, 0.05), (0, 64, 8.0)])
+def test_a_single_cycle_or_two_unlike_cycles_on_the_only_side_give_no_value(mb, nf, growth):
+    """One whole cycle before the level and none after: no value. Four after it, none before, but
+    the rate changes by half or more from the first to the second (here 8x per tau: the second
+    cycle's rate is 1.62 times the first's): no frequency at the level."""
+    fq, _ = _ramp_window(mb, nf, growth=growth)
     level_out = np.full((1, L.LEVEL_COLS), math.nan)
     fr.finish_levels(fq, level_out, False)
     assert np.all(np.isnan(level_out[0, [L.L_PRECESSION, L.L_PREC_SIDE, L.L_PREC_ERR, L.L_WINDOW]]))

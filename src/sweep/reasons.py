@@ -48,7 +48,7 @@ REASONS: dict[int, tuple[str, str]] = {
         "the level was reached, but fewer than one whole precession cycle lies before it (since the start) or "
         "after it (before the motion ended, or before a numerical stop cut the steps: see outcome), so there is "
         "no window of whole cycles centred on it: precession_hz then comes from the whole cycle next to the "
-        "level on the other side where that side has two (precession_window -1 or +1, its error "
+        "level on the other side where that side has two within half of each other (precession_window -1 or +1, its error "
         "precession_hz_error), and is missing where it has fewer; the ringing needs the centred window"),
     NO_RINGING_TONE: (
         "no_ringing_tone",

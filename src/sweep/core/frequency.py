@@ -50,6 +50,7 @@ SAMPLES_PER_CYCLE = 16          # S: lattice points per precession cycle (Nyquis
 HALF_CYCLES = 4                 # whole precession cycles on each side of the level (8 in the window)
 RING = HALF_CYCLES * SAMPLES_PER_CYCLE + 1
 WIN_LEN = 2 * HALF_CYCLES * SAMPLES_PER_CYCLE + 1
+ONE_SIDED_CHANGE = 0.5           # a one-sided value needs its two cycles' rates within this fraction
 PEAK_HYSTERESIS = 0.01          # fraction of Phi's swing a normal-force maximum must rise and fall by
 RINGING_MIN_AMPLITUDE = 1e-8    # below this amplitude of Phi's oscillation (relative to Phi) no ringing
 ZERO_PAD = 4                    # coarse frequency grid: 1/(ZERO_PAD window length) per cycle
@@ -246,8 +247,8 @@ def window_values(L, mb, ma, fq, level_out):
     least two: the level is reached within the first precession cycle, or the motion ends within
     one after it): the mean over the whole cycle next to the level, its window error the
     difference from the next cycle's mean (the change of the rate over one cycle, where the level
-    lies half a cycle from the first's centre); no ringing ratio (its tone fit needs the centred
-    window). Fewer: no value."""
+    lies half a cycle from the first's centre), if that is below ONE_SIDED_CHANGE of it; no ringing
+    ratio (its tone fit needs the centred window). Fewer: no value."""
     row = FQ_LEVEL0 + L
     S = SAMPLES_PER_CYCLE
     mid = HALF_CYCLES * S
@@ -274,10 +275,13 @@ def window_values(L, mb, ma, fq, level_out):
         else:
             near = cycle_rate(fq, row, mid - S, mid)
             far = cycle_rate(fq, row, mid - 2 * S, mid - S)
-        level_out[L, L_PREC_SIDE] = near
-        level_out[L, L_PREC_ERR] = abs(near - far)
-        level_out[L, L_CYCLES] = 1.0
-        level_out[L, L_WINDOW] = side
+        # a rate that changes by half or more from one cycle to the next (theta turning back, an
+        # impact) has no frequency at the level
+        if abs(near - far) < ONE_SIDED_CHANGE * abs(near):
+            level_out[L, L_PREC_SIDE] = near
+            level_out[L, L_PREC_ERR] = abs(near - far)
+            level_out[L, L_CYCLES] = 1.0
+            level_out[L, L_WINDOW] = side
     fq[row, LW_STATE] = 3.0
 
 
