@@ -879,9 +879,9 @@ def event_values(t, y, aux, p, cs, lev, g):
 
 @kernel
 def end_slip(y, sys):
-    """SLIDE -> ROLL at slip_tol: a plastic contact impulse removes the slip (its energy goes to
-    sliding)."""
-    p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
+    """SLIDE -> ROLL: a plastic contact impulse removes the slip (its energy goes to sliding); for
+    a slip that ends at the round-off floor or spirals in (slow_slide)."""
+    p, cs, wk = sys.p, sys.cs, sys.wk
     side = int(cs[CS_SIDE])
     y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
     cs[CS_MODE] = ROLL
@@ -920,9 +920,9 @@ def moment_event(k, t, y, sys):
 @kernel
 def slip_event(k, t, y, sys):
     """The update of the contact's slip at its event k (EV_CONE .. EV_SLAVE, EV_SLAVE_LOST): the
-    onset of a slip, its end by slip_tol or along the slaved direction, the hand-over to and from
+    onset of a slip, its fate below slip_tol or its end along the slaved direction, the hand-over to and from
     the slaved direction. Returns the outcome code that ends the scene, or -1."""
-    p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
+    p, cs, wk = sys.p, sys.cs, sys.wk
     if k == EV_CONE:
         start_slip(t, y, sys)
         cs[CS_SLAVE_OFF] = 0.0
