@@ -58,11 +58,14 @@ class Range:
     hi_text: str = ""
     note: str = ""
 
+    def _lower(self) -> str:
+        """The range's opening: `[0`, `(-pi/2`."""
+        return f"{'(' if self.lo_open else '['}{self.lo_text or number_text(self.lo)}"
+
     def text(self) -> str:
         """The range as the messages print it: `[1e-14, 1e-2]`, `(0, 4*radius]`, `(-pi/2, pi/2), not 0`."""
-        lo = self.lo_text or number_text(self.lo)
         hi = self.relative.label if self.relative else (self.hi_text or number_text(self.hi))
-        text = f"{'(' if self.lo_open else '['}{lo}, {hi}{')' if self.hi_open else ']'}"
+        text = f"{self._lower()}, {hi}{')' if self.hi_open else ']'}"
         if self.integer:
             text = "integer " + text
         if self.excluded is not None:
@@ -74,9 +77,9 @@ class Range:
         text = f"{self.meaning} in {self.unit}" if self.unit else self.meaning
         return f"{text}, {self.note}" if self.note else text
 
-    def allowed(self, each: bool = False) -> str:
+    def allowed(self) -> str:
         """What a message says is allowed: `[1e-14, 1e-2] (relative error tolerance ...)`."""
-        return f"{self.text()}{' each' if each else ''} ({self.describe()})"
+        return f"{self.text()} ({self.describe()})"
 
     def schema_bounds(self) -> dict:
         """The JSON-schema keywords of the absolute bounds."""
@@ -107,9 +110,8 @@ class Range:
         bound = r.factor * other
         why = f" ({r.why})" if r.why else ""
         unit = f" {self.unit}" if self.unit else ""
-        lo = self.lo_text or number_text(self.lo)
-        opening = "(" if self.lo_open else "["
-        return ConfigError(field, v, f"{opening}{lo}, {r.label}] = {opening}{lo}, {bound!r}]{unit}{why}",
+        lower = self._lower()
+        return ConfigError(field, v, f"{lower}, {r.label}] = {lower}, {bound!r}]{unit}{why}",
                            problem=f"exceeds {r.label} = {bound!r}{unit}")
 
 
