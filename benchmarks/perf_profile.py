@@ -3,6 +3,7 @@
 
     .venv/bin/python benchmarks/perf_profile.py [--seed 20261122] [--index 27 36 9 13 22] [--top 30]
     .venv/bin/python benchmarks/perf_profile.py --rolling 1e-10 [--repeat 40]   # issue #42's rolling scene
+    .venv/bin/python benchmarks/perf_profile.py --paper [--repeat 40]           # the paper's case
 
 numba's machine code has no symbols that perf can read, so this compiles the core afresh (into a
 temporary NUMBA_CACHE_DIR: code loaded from the cache keeps no LLVM module to name it), writes
@@ -15,7 +16,8 @@ disk, mu 5, k1 = k3 = 0, to T = 57.84 s; its 'lean' configuration: one level, no
 frequency; a sample at T, so the kinematics are integrated), --repeat times: where a rolling step's
 time goes (the right-hand side, contact.eval_rhs with model.rhs inlined, against the machinery).
 Needs `perf` and permission to record this process (perf_event_paranoid <= 2 for one's own
-processes). Compiling takes a few minutes.
+processes). With --paper, the paper's case (config/scenes/kessler2002.yaml at the default settings,
+the issue #42 comparison's third figure). Compiling takes a few minutes.
 """
 from __future__ import annotations
 
@@ -81,7 +83,9 @@ def main(argv=None) -> int:
     ap.add_argument("--top", type=int, default=30)
     ap.add_argument("--rolling", type=float, default=None, metavar="RTOL",
                     help="profile the peer_heyoka rolling scene at this rtol instead of harness scenes")
-    ap.add_argument("--repeat", type=int, default=40, help="runs of the rolling scene (--rolling)")
+    ap.add_argument("--paper", action="store_true",
+                    help="the paper's case (config/scenes/kessler2002.yaml, default settings), --repeat times")
+    ap.add_argument("--repeat", type=int, default=40, help="runs of the rolling scene (--rolling) or the paper's case (--paper)")
     a = ap.parse_args(argv)
     if os.environ.get("_PERF_PROFILE_CHILD") != "1":
         tmp = tempfile.mkdtemp(prefix="perf-profile-")
@@ -105,6 +109,14 @@ def main(argv=None) -> int:
         def run(i):
             return sweep.simulate(rolling, sample_times=[T])
         a.index = list(range(a.repeat))
+    elif a.paper:
+        import sweep
+        from sweep.scene import load_scene
+        paper = load_scene(HERE.parent / "config" / "scenes" / "kessler2002.yaml")
+
+        def run(i):
+            return sweep.simulate(paper)
+        a.index = list(range(a.repeat))
     else:
         rng = np.random.default_rng(a.seed)
         scenes = [cv._valid_levels(cv.draw_scene(rng)) for _ in range(max(a.index) + 1)]
@@ -127,7 +139,7 @@ def main(argv=None) -> int:
     rep = subprocess.run(["perf", "report", "-i", str(data), "--no-children", "--sort", "symbol", "--stdio"],
                          capture_output=True, text=True).stdout
     what = (f"rolling scene at rtol {a.rolling:g}, {a.repeat} runs" if a.rolling is not None
-            else f"seed {a.seed}, scenes {a.index}")
+            else f"the paper's case, {a.repeat} runs" if a.paper else f"seed {a.seed}, scenes {a.index}")
     print(f"{what}: {cpu:.1f} s CPU recorded; {n_fn} jitted functions mapped\n")
     print("| share | function |")
     print("|---|---|")

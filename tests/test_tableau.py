@@ -62,3 +62,76 @@ def test_step_order_is_8_and_dense_order_is_7():
     # first halving); local error of the 7th-order interpolant dominates the dense error: 2^7.
     assert min(p_step) > 7.5, (errs_step, p_step)
     assert min(p_dense) > 6.5, (errs_dense, p_dense)
+
+
+def test_the_generated_sums_are_the_generators_text():
+    """dop853_sums.py is what tableau.sums_source() writes: an edit of the tableau or the generator
+    without `python -m sweep.core.tableau` fails here."""
+    from pathlib import Path
+    path = Path(T.__file__).with_name(T.SUMS_MODULE)
+    assert path.read_text() == T.sums_source()
+
+
+def _loop_sum(coefs, cols, K, i):
+    """The sum as a loop from 0.0 over the tableau's nonzero coefficients in stage order."""
+    acc = 0.0
+    for j in cols:
+        if coefs[j] != 0.0:
+            acc += float(coefs[j]) * float(K[j, i])
+    return acc
+
+
+def test_the_generated_sums_add_the_same_terms_in_the_same_order():
+    """increment, error_sums, dense_rows and main_stages/dense_stages (through a jitted linear
+    right-hand side) against loops over the tableau in plain Python: equal to the last bit."""
+    import numba
+    from sweep.core import dop853_sums as S
+    from sweep.core import layout as L
+
+    rng = np.random.default_rng(7)
+    n = 14
+    K = rng.standard_normal((32, n))
+    h = 0.0371
+    y = rng.standard_normal(n)
+    y_new, delta = np.zeros(n), np.zeros(n)
+    S.increment(K, h, y, y_new, delta, n)
+    for i in range(n):
+        d = h * _loop_sum(T.B, T.B_COLS, K, i)
+        assert delta[i] == d and y_new[i] == y[i] + d
+        a5, a3 = S.error_sums(K, i)
+        assert a5 == _loop_sum(T.E5, T.E_COLS, K, i) and a3 == _loop_sum(T.E3, T.E_COLS, K, i)
+    F = np.zeros((7, n))
+    S.dense_rows(K, h, F, n)
+    for r in range(4):
+        for i in range(n):
+            assert F[3 + r, i] == h * _loop_sum(T.D[r], T.D_COLS, K, i)
+
+    M = rng.standard_normal((n, n)) * 0.3
+
+    @numba.njit
+    def linear(t, ys, sys, dy, aux):
+        for i in range(sys.n):
+            acc = 0.0
+            for j in range(sys.n):
+                acc += M[i, j] * ys[j]
+            dy[i] = acc + t
+
+    @numba.njit
+    def both(y, h, K, wk):
+        sys = L.System(np.zeros(1), np.zeros(1), n, wk, np.zeros(1, np.int64))
+        S.main_stages(linear, 0.5, y, h, sys, K)
+        S.dense_stages(linear, 0.5, y, h, sys, K)
+
+    K2 = np.zeros((16, n))
+    K2[0] = M @ y + 0.5
+    K2[12] = rng.standard_normal(n)
+    K1 = K2.copy()
+    both(y, h, K2, np.zeros((L.N_WORK, L.N_WCOLS)))
+    for s in list(range(1, 12)) + list(range(13, 16)):
+        ytmp = np.array([y[i] + h * _loop_sum(T.A[s], range(s), K1, i) for i in range(n)])
+        for i in range(n):   # the right-hand side's own sum, in the jitted loop's order
+            acc = 0.0
+            for j in range(n):
+                acc += float(M[i, j]) * ytmp[j]
+            K1[s, i] = acc + (0.5 + float(T.C[s]) * h)
+    assert np.array_equal(K1, K2)

@@ -5,10 +5,11 @@ dop853 (5th/3rd-order embedded estimates), safety 0.9, factor in [0.2, 10], expo
 The stepper does not know the physics: the right-hand side comes in as a kernel argument,
 `rhs(t, y, sys, dy, aux)` (dy = d y/d t and its aux at (t, y); the integrator passes
 contact.eval_rhs), with `sys` (layout.System) passed through to it; of sys the stepper reads only
-the state size n and the work buffer wk (its rows W_YTMP, W_DYTMP, W_AUXTMP, W_DELTA). Stage counts
-come from the tableau (tableau.py).
+the state size n and the work buffer wk (its rows W_YTMP, W_DYTMP, W_AUXTMP, W_DELTA). The sums
+over the stages are straight-line code generated from the tableau (dop853_sums.py, from tableau.py).
 
-The kernels that call rhs (stages, rk_step, dense_coeffs, initial_step) are inlined into their
+The kernels that call rhs (dop853_sums.main_stages and dense_stages, rk_step, dense_coeffs,
+initial_step) are inlined into their
 callers (inline="always"). numba compiles a kernel passed as a value into a compiled call as the
 address of its Python object, and a library holding such an address cannot be cached: without the
 inlining, integrate.run and every caller of these kernels compiled afresh in each process (and
@@ -20,38 +21,16 @@ from __future__ import annotations
 import math
 
 from .jit import kernel
+from .dop853_sums import dense_rows, dense_stages, error_sums, increment, main_stages
 from .layout import W_AUXTMP, W_DELTA, W_DYTMP, W_YTMP
 from .model import N_CORE, Y_ALPHA, Y_U1, Y_U2
-from .tableau import A as RK_A, B as RK_B, C as RK_C, D as RK_D, E3 as RK_E3, E5 as RK_E5
-from .tableau import A_COLS, A_COUNT, B_COLS, D_COLS, E_COLS, N_STAGES, N_STAGES_EXTENDED
+from .tableau import N_STAGES
 
 SAFETY = 0.9
 MIN_FACTOR = 0.2
 MAX_FACTOR = 10.0
 ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8)
 N_DENSE = 7                 # rows of dense-output coefficients
-
-
-@kernel(inline="always")
-def stages(rhs, first, last, t, y, h, sys, K):
-    """Evaluate RK stages first..last-1 into K (stage s uses K[0:s] and row s of the tableau).
-
-    The sums run stage by stage over whole rows of K (contiguous, vectorisable) and skip the
-    tableau's zeros; per component they add the same terms in the same order as a plain dot product.
-    """
-    n, wk = sys.n, sys.wk
-    ytmp = wk[W_YTMP]
-    for s in range(first, last):
-        for i in range(n):
-            ytmp[i] = 0.0
-        for jj in range(A_COUNT[s]):
-            j = A_COLS[s, jj]
-            a = RK_A[s, j]
-            for i in range(n):
-                ytmp[i] += a * K[j, i]
-        for i in range(n):
-            ytmp[i] = y[i] + h * ytmp[i]
-        rhs(t + RK_C[s] * h, ytmp, sys, K[s], wk[W_AUXTMP])
 
 
 @kernel(inline="always")
@@ -63,17 +42,8 @@ def rk_step(rhs, t, h, start, end, sys, K):
     y, f, y_new, f_new = start.y, start.f, end.y, end.f
     for i in range(n):
         K[0, i] = f[i]
-    stages(rhs, 1, N_STAGES, t, y, h, sys, K)
-    for i in range(n):
-        y_new[i] = 0.0
-    for j in B_COLS:
-        b = RK_B[j]
-        for i in range(n):
-            y_new[i] += b * K[j, i]
-    delta = sys.wk[W_DELTA]
-    for i in range(n):
-        delta[i] = h * y_new[i]
-        y_new[i] = y[i] + delta[i]
+    main_stages(rhs, t, y, h, sys, K)
+    increment(K, h, y, y_new, sys.wk[W_DELTA], n)
     rhs(t + h, y_new, sys, f_new, end.aux)
     for i in range(n):
         K[N_STAGES, i] = f_new[i]
@@ -101,11 +71,7 @@ def error_norm(K, h, y, y_new, n, rtol, atol, u_atol):
         if i == Y_ALPHA:
             mag = min(mag, max(0.5 * math.pi - min(abs(y[i]), abs(y_new[i])), 0.0))
         sc = (u_atol if i == Y_U1 or i == Y_U2 else atol) + rtol * mag
-        a5 = 0.0
-        a3 = 0.0
-        for j in E_COLS:
-            a5 += RK_E5[j] * K[j, i]
-            a3 += RK_E3[j] * K[j, i]
+        a5, a3 = error_sums(K, i)
         e5 += (a5 / sc) ** 2
         e3 += (a3 / sc) ** 2
     if e5 == 0.0 and e3 == 0.0:
@@ -137,22 +103,13 @@ def dense_coeffs(rhs, t, y, h, y_new, sys, K, F):
     """Coefficients F[0:7] of the continuous extension of the step from y at t over h to y_new, from
     its stages K[0:13] (K[12] = f(t + h, y_new)); 3 extra RHS calls: stages 13..15."""
     n = sys.n
-    stages(rhs, N_STAGES + 1, N_STAGES_EXTENDED, t, y, h, sys, K)
+    dense_stages(rhs, t, y, h, sys, K)
     for i in range(n):
         dyv = y_new[i] - y[i]
         F[0, i] = dyv
         F[1, i] = h * K[0, i] - dyv
         F[2, i] = 2.0 * dyv - h * (K[N_STAGES, i] + K[0, i])
-    for r in range(4):
-        row = F[3 + r]
-        for i in range(n):
-            row[i] = 0.0
-        for j in D_COLS:
-            d = RK_D[r, j]
-            for i in range(n):
-                row[i] += d * K[j, i]
-        for i in range(n):
-            row[i] = h * row[i]
+    dense_rows(K, h, F, n)
 
 
 @kernel
