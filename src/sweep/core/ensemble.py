@@ -60,7 +60,11 @@ def zero_rows(a, rows):
             a[r, c] = 0.0
 
 
-@kernel
+# solve_scene and solve_loaded are inlined into solve_index, their one caller: numba links a
+# separate kernel's callees (integrate.run and all below it) into its own library and optimises the
+# whole again, so each layer between solve_index and run cost ~3 s of LLVM time at the first
+# simulate_batch (10 s with them separate, 4 s inlined; benchmarks/compile_time.py).
+@kernel(inline="always")
 def solve_scene(inp, chi, work, rec, fits):
     """Integrate one scene on a worker's buffers, as integrate.integrate does without samples or
     trajectory, then its fits. inp (SceneInputs, nl = inp.level_e.shape[0] levels), chi (s); work
@@ -147,7 +151,7 @@ def store_outputs(i, nl, rec, fits, batch_out):
         batch_out.DER[i, j] = fits.derived[j]
 
 
-@kernel
+@kernel(inline="always")
 def solve_loaded(inp, nl, chi, work, rec, fits):
     """solve_scene on the first nl levels of a worker's loaded inputs."""
     solve_scene(SceneInputs(inp.y0, inp.p, inp.settings, inp.level_e[:nl], inp.levels[:nl]), chi, work, rec, fits)
