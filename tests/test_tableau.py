@@ -66,7 +66,7 @@ def test_step_order_is_8_and_dense_order_is_7():
 
 def test_the_generated_sums_are_the_generators_text():
     """dop853_sums.py is what tableau.sums_source() writes: an edit of the tableau or the generator
-    without `python -m sweep.core.tableau` fails here."""
+    without `python src/sweep/core/tableau.py` fails here."""
     from pathlib import Path
     path = Path(T.__file__).with_name(T.SUMS_MODULE)
     assert path.read_text() == T.sums_source()

@@ -10,6 +10,7 @@
     contact.py   contact modes (roll, slide, slaved slip), event functions, discrete updates
     impulse.py   plastic contact impulse (side change)
     tableau.py   DOP853 coefficients
+    dop853_sums.py  the tableau's sums as straight-line code, generated from tableau.py
     dop853.py    step, error norm, dense output, starting step, for a right-hand side passed in
     roots.py     event location and Phi maxima on the dense output
     tracking.py  halt levels, samples, normal-force maxima, trajectory

@@ -1,5 +1,5 @@
-"""DOP853's sums as straight-line code, GENERATED from tableau.py by `python -m sweep.core.tableau`:
-do not edit; edit the generator (tableau.sums_source) and rerun it.
+"""DOP853's sums as straight-line code, GENERATED from tableau.py: do not edit; edit the
+generator (tableau.sums_source) and rerun it: `python src/sweep/core/tableau.py`.
 
 Each sum adds its terms from 0.0 in increasing stage order over the tableau's nonzero
 coefficients (dop853.py calls these kernels)."""

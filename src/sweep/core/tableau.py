@@ -147,15 +147,15 @@ def _stages_source(name: str, first: int, last: int, what: str) -> list[str]:
 
 def sums_source() -> str:
     """The source of dop853_sums.py: DOP853's stage, increment, error and dense-output sums as
-    straight-line code with the tableau's coefficients as literals (`python -m sweep.core.tableau`
-    writes it; tests/test_tableau.py checks that the file is this text).
+    straight-line code with the tableau's coefficients as literals (`python
+    src/sweep/core/tableau.py` writes it; tests/test_tableau.py checks that the file is this text).
 
     A loop over the tableau's nonzero entries (A_COLS, ...) ran one short loop over the state per
     term, ~60 per step, each with its set-up: 365 ns of a step's sums against 178 ns as one loop
     per stage (rk_step with a trivial right-hand side, n = 14). The sums are the same: each
     component's terms are added from 0.0 in increasing stage order, as before."""
-    out = ['"""DOP853\'s sums as straight-line code, GENERATED from tableau.py by `python -m sweep.core.tableau`:',
-           "do not edit; edit the generator (tableau.sums_source) and rerun it.", "",
+    out = ['"""DOP853\'s sums as straight-line code, GENERATED from tableau.py: do not edit; edit the',
+           "generator (tableau.sums_source) and rerun it: `python src/sweep/core/tableau.py`.", "",
            "Each sum adds its terms from 0.0 in increasing stage order over the tableau's nonzero",
            'coefficients (dop853.py calls these kernels)."""',
            "from .jit import kernel",
