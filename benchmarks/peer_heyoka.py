@@ -55,7 +55,10 @@ Parts (`--parts`, default all):
   `git worktree` of that commit, each side in its own subprocess with PYTHONPATH at its own src (its
   own numba cache; the baseline's first run compiles it, and that time is reported), rounds
   interleaved, minimum over --paper-rounds (the thread's CPU time of the simulate call, and the
-  kernel's wall time); the worktree is removed afterwards.
+  kernel's wall time); the worktree is removed afterwards. In the same rounds, each side also runs
+  the rolling scene of `wp` ('lean', rtol 1e-10, a sample at T): its CPU per try side by side, and
+  whether the two end states are identical to the last bit (they are where a change leaves the
+  numerics alone, e.g. `--baseline 708eac6` against the generated DOP853 sums).
 
 Prints the tables and writes benchmarks/out/peer_heyoka.md and peer_heyoka.json (benchmarks/out/ is
 git-ignored). Reports the machine's load average before and after each part: the machine is shared.
@@ -901,16 +904,24 @@ import json, sys, time, copy
 import sweep, yaml
 cfg = yaml.safe_load(open(sys.argv[1]))
 cfg.setdefault("stop", {})["levels"] = [1e-1, 1e-2, 1e-3]
+rolling, t_roll = json.loads(sys.argv[2]), float(sys.argv[3])
 out = {"file": sweep.__file__}
 t0 = time.perf_counter(); r = sweep.simulate(copy.deepcopy(cfg)); out["first_s"] = time.perf_counter() - t0
+sweep.simulate(copy.deepcopy(rolling), sample_times=[t_roll])
 print(json.dumps(out), flush=True)
 for line in sys.stdin:
     c = copy.deepcopy(cfg)
     t0, c0 = time.perf_counter(), time.thread_time()
     s = sweep.simulate(c).summary
     t1, c1 = time.perf_counter(), time.thread_time()
+    c2 = time.thread_time()
+    rr = sweep.simulate(copy.deepcopy(rolling), sample_times=[t_roll])
+    c3 = time.thread_time()
     print(json.dumps({"call_s": t1 - t0, "call_cpu_s": c1 - c0, "kernel_s": s["wall_time"], "steps": s["n_steps"],
-                      "t3": s["levels"][-1]["t"], "outcome": s["outcome"]}), flush=True)
+                      "t3": s["levels"][-1]["t"], "outcome": s["outcome"], "roll_cpu_s": c3 - c2,
+                      "roll_tries": rr.summary["n_steps"] + rr.summary["n_rejected"],
+                      "roll_state": [float(rr.samples["alpha"][0])] + [float(v) for v in rr.samples["omega"][0]]}),
+          flush=True)
 """
 
 
@@ -920,6 +931,11 @@ def part_paper(ctx: dict, res: dict) -> None:
     scene_file = ROOT / "config" / "scenes" / "kessler2002.yaml"
     say(f"\n## The paper's case to the 1e-3 level: this checkout ({git_head()}) vs {base}; {rounds} interleaved "
         f"rounds; {load()}\n")
+    # the rolling scene of the work-precision part, lean, at the default rtol: the same steps on both
+    # sides where the kernel's numerics agree, so the CPU per try compares the machinery alone
+    rolling = scene_cfg(**copy.deepcopy(CONFIGS["lean"]))
+    rolling["stop"] = dict(rolling["stop"], t_max=T_S)
+    rolling["solver"] = {"rtol": 1e-10, "atol": 1e-12}
     tmp = Path(tempfile.mkdtemp(prefix="sweep-baseline-")) / "wt"
     subprocess.run(["git", "worktree", "add", "--detach", str(tmp), base], cwd=ROOT, check=True,
                    capture_output=True, text=True)
@@ -928,8 +944,9 @@ def part_paper(ctx: dict, res: dict) -> None:
         for name, src in (("current", ROOT / "src"), ("baseline", tmp / "src")):
             env = dict(os.environ, PYTHONPATH=str(src))
             env.pop("NUMBA_CACHE_DIR", None)
-            procs[name] = subprocess.Popen([sys.executable, "-c", CHILD, str(scene_file)], env=env, cwd=str(src.parent),
-                                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+            procs[name] = subprocess.Popen([sys.executable, "-c", CHILD, str(scene_file), json.dumps(rolling), str(T_S)],
+                                           env=env, cwd=str(src.parent), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                           text=True)
         first = {}
         for name, p in procs.items():
             first[name] = json.loads(p.stdout.readline())
@@ -962,7 +979,8 @@ def part_paper(ctx: dict, res: dict) -> None:
                       "call_min_s": min(r["call_s"] for r in rr),
                       "cpu_median_s": float(np.median([r["call_cpu_s"] for r in rr])),
                       "steps": rr[0]["steps"], "t3": rr[0]["t3"], "outcome": rr[0]["outcome"],
-                      "first_s": first[name]["first_s"]}
+                      "first_s": first[name]["first_s"], "roll_cpu_min_s": min(r["roll_cpu_s"] for r in rr),
+                      "roll_tries": rr[0]["roll_tries"], "roll_state": rr[0]["roll_state"]}
     ratio = summ["baseline"]["cpu_min_s"] / summ["current"]["cpu_min_s"]
     ratio_wall = summ["baseline"]["kernel_min_s"] / summ["current"]["kernel_min_s"]
     lines = ["| checkout | simulate CPU min (ms) | CPU median (ms) | kernel wall min (ms) | steps | t(1e-3) (s) | "
@@ -975,8 +993,20 @@ def part_paper(ctx: dict, res: dict) -> None:
     say(table)
     say(f"\nspeed-up of the current checkout over {base}: {ratio:.3f}x (thread-CPU minima of the simulate call), "
         f"{ratio_wall:.3f}x (wall minima of the kernel call)")
+    rlines = ["| checkout | rolling scene CPU min (ms) | tries | CPU per try (us) |", "|---|---|---|---|"]
+    for name, lab in (("current", f"current ({git_head()})"), ("baseline", base)):
+        d = summ[name]
+        rlines.append(f"| {lab} | {1e3 * d['roll_cpu_min_s']:.2f} | {d['roll_tries']} | "
+                      f"{1e6 * d['roll_cpu_min_s'] / d['roll_tries']:.3f} |")
+    roll_ratio = summ["baseline"]["roll_cpu_min_s"] / summ["current"]["roll_cpu_min_s"]
+    same = summ["baseline"]["roll_state"] == summ["current"]["roll_state"]
+    say("\nthe rolling scene (lean, rtol 1e-10, to T; simulate with a sample at T, thread CPU of the call), same rounds:\n")
+    say("\n".join(rlines))
+    say(f"\nspeed-up {roll_ratio:.3f}x; end states (alpha, omega at T) "
+        + ("identical to the last bit" if same else "differ: the kernels' numerics differ"))
+    table += "\n\n" + "\n".join(rlines)
     res["paper"] = {"baseline": base, "rounds": rounds, "sides": summ, "speedup": ratio, "speedup_wall": ratio_wall,
-                    "table": table, "load_after": load()}
+                    "rolling_speedup": roll_ratio, "rolling_identical": same, "table": table, "load_after": load()}
     say(f"\n({load()})")
 
 
