@@ -521,7 +521,6 @@ def part_check(ctx: dict, res: dict) -> None:
         + ", ".join(f"{k} {v:.1e}" for k, v in chk["max_rel"].items())
         + "; normwise: (dw1, dw2, dw3) {dw:.1e}, (Phi, F1, F2) {forces:.1e}".format(**chk["max_normwise"]))
     # the scene's own checks
-    sc = ctx["scene"]
     t3, s3 = level_time(SCENE)
     res["scene_check"] = {"t_level_1e-3": t3, "T": T_S, "T_over_t3": T_S / t3,
                           "transitions_to_level": s3["n_transitions"]}
