@@ -9,12 +9,12 @@ the state size n and the work buffer wk (its rows W_YTMP, W_DYTMP, W_AUXTMP, W_D
 over the stages are straight-line code generated from the tableau (dop853_sums.py, from tableau.py).
 
 The kernels that call rhs (dop853_sums.main_stages and dense_stages, rk_step, dense_coeffs,
-initial_step) are inlined into their
-callers (inline="always"). numba compiles a kernel passed as a value into a compiled call as the
-address of its Python object, and a library holding such an address cannot be cached: without the
-inlining, integrate.run and every caller of these kernels compiled afresh in each process (and
-core.jit's cache locator failed on numba's warning). Inlined, the argument is only ever the name
-of the function called, and the callers cache as before.
+initial_step) are inlined into their callers (inline="always"). numba compiles a kernel passed as
+a value into a compiled call as the address of its Python object, and a library holding such an
+address cannot be cached: without the inlining, integrate.run and every caller of these kernels
+compiled afresh in each process (and core.jit's cache locator failed on numba's warning).
+Inlined, the argument is only ever the name of the function called, and the callers cache as
+before.
 """
 from __future__ import annotations
 
