@@ -17,7 +17,9 @@ import json
 import logging
 import math
 import os
+import shutil
 import subprocess
+import tempfile
 import uuid
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -537,6 +539,7 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
     """
     import nbclient
     import nbformat
+    from traitlets.config import Config
 
     figure = Path(figure).resolve()
     figure.parent.mkdir(parents=True, exist_ok=True)
@@ -545,15 +548,23 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
                 "MPLBACKEND": "Agg"}
     saved = {k: os.environ.get(k) for k in env_keys}
     os.environ.update(env_keys)  # the kernel inherits this process's environment
+    # The kernel talks to this process over Unix sockets in a folder of its own, not over TCP: a
+    # TCP port is picked free and then bound by the kernel, and two notebooks starting at once
+    # (snakemake -j2) could pick the same one ("Address already in use", the kernel dies and the
+    # figure job fails).
+    sockets = tempfile.mkdtemp(prefix="sweep-kernel-")
+    config = Config()
+    config.KernelManager.transport = "ipc"
+    config.KernelManager.ip = os.path.join(sockets, "kernel")
     try:
         nb = nbformat.read(str(notebook), as_version=4)
-        # log level ERROR: no start-up warnings from the kernel (e.g. "running over TCP without
-        # encryption": the kernel is local and talks only to this process)
+        # log level ERROR: no start-up warnings from the kernel
         client = nbclient.NotebookClient(nb, timeout=NOTEBOOK_CELL_TIMEOUT_S, kernel_name="python3",
                                          resources={"metadata": {"path": str(Path.cwd())}},
-                                         extra_arguments=["--log-level=ERROR"])
+                                         extra_arguments=["--log-level=ERROR"], config=config)
         client.execute()
     finally:
+        shutil.rmtree(sockets, ignore_errors=True)
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)
