@@ -510,34 +510,25 @@ def test_a_notebook_kernel_talks_over_unix_sockets_in_a_folder_of_its_own(tmp_pa
     """io.run_notebook starts the kernel with the IPC transport: no TCP port is picked and bound
     later, so two figure jobs starting at once (snakemake -j2) cannot collide on one ("Address
     already in use": the kernel died and the sweep failed). The kernel reads its own connection
-    file; the socket folder is gone afterwards."""
-    import tempfile
-
+    file; the socket folder is gone afterwards, and its path fits a Unix socket's limit."""
     import nbformat
 
+    seen = tmp_path / "connection.json"
     cell = ("import json, os, ipykernel\n"
             "info = json.load(open(ipykernel.get_connection_file()))\n"
-            "assert info['transport'] == 'ipc', info\n"
-            "assert os.path.dirname(info['ip']).startswith(os.path.join(os.environ['TMPDIR'], 'sweep-kernel-')), info\n"
+            f"open({str(seen)!r}, 'w').write(json.dumps(info))\n"
             "open(os.environ['SWEEP_FIGURE'], 'wb').write(b'\\x89PNG')\n")
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(cell)])
     path = tmp_path / "probe.ipynb"
     nbformat.write(nb, str(path))
-    sockets = tmp_path / "tmp"
-    sockets.mkdir()
-    old = os.environ.get("TMPDIR")
-    os.environ["TMPDIR"] = str(sockets)
-    tempfile.tempdir = None
-    try:
-        fig = io.run_notebook(path, tmp_path / "cube.nc", tmp_path / "probe.png", tmp_path / "probe-run.ipynb")
-    finally:
-        if old is None:
-            os.environ.pop("TMPDIR")
-        else:
-            os.environ["TMPDIR"] = old
-        tempfile.tempdir = None
+    fig = io.run_notebook(path, tmp_path / "cube.nc", tmp_path / "probe.png", tmp_path / "probe-run.ipynb")
     assert fig.read_bytes() == b"\x89PNG"
-    assert list(sockets.iterdir()) == []
+    info = json.loads(seen.read_text())
+    folder = Path(info["ip"]).parent
+    assert info["transport"] == "ipc", info
+    assert folder.name.startswith("sweep-kernel-") and len(str(folder)) <= io.UNIX_SOCKET_DIR_MAX, info
+    assert not folder.exists()
+
 
 def test_figure_helpers_name_the_sweep_fix_fraction_scales_and_keep_numbers_legible(tmp_path):
     import matplotlib

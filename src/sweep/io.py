@@ -528,6 +528,9 @@ def reduce_to(da, keep: Sequence[str], how: str = "median"):
 # A notebook cell that runs longer than this is stuck: the figure notebooks reduce the cube
 # with dask and plot a handful of panels, which takes seconds even for 10^6 scenes.
 NOTEBOOK_CELL_TIMEOUT_S = 600
+# The longest folder for the kernel's Unix sockets (a socket path, folder + "/kernel-NNNNN", has
+# at most 107 bytes on Linux).
+UNIX_SOCKET_DIR_MAX = 90
 
 
 def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
@@ -553,6 +556,10 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
     # (snakemake -j2) could pick the same one ("Address already in use", the kernel dies and the
     # figure job fails).
     sockets = tempfile.mkdtemp(prefix="sweep-kernel-")
+    if len(sockets) > UNIX_SOCKET_DIR_MAX:
+        # a socket's path has at most ~107 bytes; a cluster's TMPDIR can be deep
+        shutil.rmtree(sockets, ignore_errors=True)
+        sockets = tempfile.mkdtemp(prefix="sweep-kernel-", dir="/tmp")
     config = Config()
     config.KernelManager.transport = "ipc"
     config.KernelManager.ip = os.path.join(sockets, "kernel")
