@@ -555,11 +555,10 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
     # TCP port is picked free and then bound by the kernel, and two notebooks starting at once
     # (snakemake -j2) could pick the same one ("Address already in use", the kernel dies and the
     # figure job fails).
-    sockets = tempfile.mkdtemp(prefix="sweep-kernel-")
-    if len(sockets) > UNIX_SOCKET_DIR_MAX:
-        # a socket's path has at most ~107 bytes; a cluster's TMPDIR can be deep
-        shutil.rmtree(sockets, ignore_errors=True)
-        sockets = tempfile.mkdtemp(prefix="sweep-kernel-", dir="/tmp")
+    # a socket's path has at most ~107 bytes; a cluster's TMPDIR can be deep ("sweep-kernel-" and
+    # mkdtemp's suffix add 22)
+    deep = len(tempfile.gettempdir()) + 22 > UNIX_SOCKET_DIR_MAX
+    sockets = tempfile.mkdtemp(prefix="sweep-kernel-", dir="/tmp" if deep else None)
     config = Config()
     config.KernelManager.transport = "ipc"
     config.KernelManager.ip = os.path.join(sockets, "kernel")
