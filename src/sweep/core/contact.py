@@ -127,21 +127,32 @@ def _mode_energy_trig(y, p, cs, s, c):
 
 
 @kernel(inline="always")
-def _model(t, y, sys, dy, aux, n0x, n0y):
-    """The model's right-hand side for the contact state sys.cs (SLAVED evaluates as sliding), the
-    friction along (n0x, n0y) at slip speeds <= slip_tol; counts the call."""
+def _model(t, y, sys, mode, dy, aux, n0x, n0y):
+    """The model's right-hand side in mode ROLL or SLIDE (a constant at each call site, so that LLVM
+    specialises the copy), the friction along (n0x, n0y) at slip speeds <= slip_tol; counts the call."""
     cs = sys.cs
-    mode = SLIDE if cs[CS_MODE] != ROLL else ROLL
     rhs(t, y, sys.p, Contact(mode, int(cs[CS_SIDE]), cs[CS_SIG:CS_SIG + 3], cs[CS_STUCK:CS_STUCK + 3], n0x, n0y),
         sys.n, dy, aux)
     sys.istats[I_RHS] += 1
 
 
 @kernel
+def slide_model(t, y, sys, dy, aux, n0x, n0y):
+    """The sliding right-hand side (contact states SLIDE and SLAVED), the friction along (n0x, n0y) at
+    slip speeds <= slip_tol: the one compiled copy of the sliding model, which every sliding
+    evaluation calls (the rolling one is inlined into eval_rhs, where the steps of a rolling motion
+    call it; each inlined copy of the model costs ~3 s of compilation)."""
+    _model(t, y, sys, SLIDE, dy, aux, n0x, n0y)
+
+
+@kernel
 def model_call(t, y, sys, dy, aux, n0x, n0y):
-    """_model as a call of its own, where a discrete update reads the right-hand side once
-    (start_slip, set_slip): only the evaluations the steps repeat inline the model."""
-    _model(t, y, sys, dy, aux, n0x, n0y)
+    """The model for the contact state sys.cs (SLAVED evaluates as sliding, along (n0x, n0y)), where a
+    discrete update reads the right-hand side once (start_slip, set_slip)."""
+    if sys.cs[CS_MODE] == ROLL:
+        eval_rhs(t, y, sys, dy, aux)
+    else:
+        slide_model(t, y, sys, dy, aux, n0x, n0y)
 
 
 @kernel
@@ -155,7 +166,7 @@ def slip_rates(nu, u, t, y, sys, dy, aux, ys):
         ys[i] = y[i]
     ys[Y_U1] = u * c
     ys[Y_U2] = u * s
-    _model(t, ys, sys, dy, aux, c, s)
+    slide_model(t, ys, sys, dy, aux, c, s)
     return dy[Y_U2] * c - dy[Y_U1] * s, dy[Y_U1] * c + dy[Y_U2] * s
 
 
@@ -198,7 +209,7 @@ def friction_along(nu, t, y, sys, dy, aux):
     for i in range(N_PARAMS):
         pf[i] = p[i]
     pf[P_UTOL] = math.inf
-    _model(t, y, System(pf, sys.cs, sys.n, wk, sys.istats), dy, aux, math.cos(nu), math.sin(nu))
+    slide_model(t, y, System(pf, sys.cs, sys.n, wk, sys.istats), dy, aux, math.cos(nu), math.sin(nu))
 
 
 @kernel
@@ -230,11 +241,11 @@ def eval_rhs(t, y, sys, dy, aux):
         un = math.hypot(y[Y_U1], y[Y_U2])
         nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
         ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
-        _model(t, y, sys, dy, aux, nx, ny)
+        _model(t, y, sys, SLIDE, dy, aux, nx, ny)
     else:
-        # (a copy of the model per mode: LLVM specialises each, and one shared copy made a sliding
-        # evaluation 40 % slower)
-        _model(t, y, sys, dy, aux, 1.0, 0.0)
+        # (the rolling model inlined: the steps of a rolling motion call it, and a call passes ~50
+        # words of arguments)
+        _model(t, y, sys, ROLL, dy, aux, 1.0, 0.0)
 
 
 @kernel
