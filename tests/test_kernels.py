@@ -543,7 +543,7 @@ def test_onset_direction_takes_a_root_with_a_solution_and_never_a_painleve_pole(
         cs = cs0.copy()
         cs[L.CS_SIDE] = 1.0 if y[M.Y_ALPHA] >= 0.0 else -1.0
         cs[L.CS_SIG:L.CS_SIG + 3] = np.sign(rng.normal(size=3))
-        C._model(0.0, y, _sys(p, cs, n, wk, ist), dy, aux, 1.0, 0.0)
+        C.model_call(0.0, y, _sys(p, cs, n, wk, ist), dy, aux, 1.0, 0.0)
         if aux[M.X_OK] != 1.0 or aux[M.X_PHI] <= 0.0:
             continue
         F1, F2 = aux[M.X_F1], aux[M.X_F2]
