@@ -2,7 +2,7 @@
 safe only while no kernel allocates and none returns an array. An allocation fails to compile (every
 test that runs a scene sees it); this test checks the return types of every kernel the CPU paths
 compile, in a fresh process with an empty cache (a warm cache loads the callers' machine code and
-never types the kernels they call)."""
+never types the kernels they call), and that none was compiled for a literal constant's type."""
 from __future__ import annotations
 
 import json
@@ -41,6 +41,9 @@ SCRIPT = textwrap.dedent("""
                     "error_model": obj.targetoptions.get("error_model"),
                     "inline": obj.targetoptions.get("inline", "never"),
                     "cached": type(obj._cache).__name__ != "NullCache",
+                    "kernel": type(obj).__name__,
+                    "literal_args": [str(s.args) for s in obj.nopython_signatures
+                                     if any(isinstance(a, types.Literal) for a in s.args)],
                     "returns": [str(s.return_type) for s in obj.nopython_signatures],
                     "array_return": any(arrays_in(s.return_type) for s in obj.nopython_signatures),
                 }
@@ -69,3 +72,5 @@ def test_kernels_compile_without_refcounts_and_return_no_arrays(tmp_path):
     for name, k in kernels.items():
         assert k["nrt"] is False and k["cached"], name
         assert not k["array_return"], (name, k["returns"])
+        # a constant argument (dense_eval(F, 0, ...)) does not compile a copy of its own (core.jit.Kernel)
+        assert k["kernel"] == "Kernel" and not k["literal_args"], (name, k["literal_args"])

@@ -1,12 +1,12 @@
 """How the core kernels are compiled for the CPU: `@kernel`, and where their machine code is cached.
 
-`kernel` is numba's `njit` with the compiled code cached on disk, without numba's reference-
-counting runtime (NRT), and with NumPy's floating-point error model: a division by zero gives inf
-or NaN, which the integrator's checks turn into a rejected try (a non-finite stage) or a failure
-outcome, instead of a ZeroDivisionError that ends the whole run and loses the scene (a slip onset's
-bisection can close on a Painleve pole, where Phi's coefficient is exactly 0: docs/model.md,
-'Roll -> slip'). Results where nothing divides by zero are the same to the bit; the divisions no longer
-test their divisor.
+`kernel` is numba's `njit` with the compiled code cached on disk, one compilation per signature of
+non-literal types (`Kernel`), without numba's reference-counting runtime (NRT), and with NumPy's
+floating-point error model: a division by zero gives inf or NaN, which the integrator's checks
+turn into a rejected try (a non-finite stage) or a failure outcome, instead of a ZeroDivisionError
+that ends the whole run and loses the scene (a slip onset's bisection can close on a Painleve
+pole, where Phi's coefficient is exactly 0: docs/model.md, 'Roll -> slip'). Results where nothing
+divides by zero are the same to the bit; the divisions no longer test their divisor.
 
 The kernels never allocate (every buffer comes from the caller) and never return arrays, so nothing
 in them needs a reference count; with the runtime on, every row view
@@ -33,7 +33,8 @@ import os
 import tempfile
 from pathlib import Path
 
-from numba import njit
+from numba.core import types as _types
+from numba.core.registry import CPUDispatcher
 from numba.core import caching as _caching
 from numba.core import config as _config
 
@@ -114,14 +115,33 @@ def register_locator(impl_class) -> None:
 register_locator(_caching.CacheImpl)
 
 
+class Kernel(CPUDispatcher):
+    """numba's dispatcher, compiled once per signature of non-literal types. numba types a constant
+    argument at a call site from jitted code (`dense_eval(F, 0, ...)`, `tally_step(cs, istats,
+    True, 1)`) as a Literal of its value, and compiled one copy of the kernel, with its callees
+    linked in again, per value: 25 of the 189 signatures a first `simulate` compiled. The values
+    are the same, so is the code that computes with them."""
+
+    def get_call_template(self, args, kws):
+        return super().get_call_template(tuple(_types.unliteral(a) for a in args),
+                                         {k: _types.unliteral(v) for k, v in kws.items()})
+
+
 def kernel(fn=None, **options):
-    """`@kernel` or `@kernel(nogil=True)`: compile fn with njit and CPU_OPTIONS (plus options).
+    """`@kernel` or `@kernel(nogil=True)`: compile fn as numba's `njit` does, with CPU_OPTIONS (plus
+    options), as a Kernel (one compilation per signature of non-literal types).
 
     `@kernel(inline="always")` has numba inline fn into each caller before LLVM sees it: the parts of
     `model.rhs` use it, since LLVM alone kept the larger ones as calls, and a call that returns a
     tuple through memory made a right-hand side ~20 % slower than the one-function version it
     replaced (CHANGELOG.md)."""
-    opts = {**CPU_OPTIONS, **options}
     if fn is None:
-        return njit(**opts)
-    return njit(**opts)(fn)
+        return lambda f: kernel(f, **options)
+    if _config.DISABLE_JIT:
+        return fn
+    opts = {**CPU_OPTIONS, **options}
+    cache = opts.pop("cache")
+    disp = Kernel(py_func=fn, locals={}, targetoptions={"nopython": True, **opts})
+    if cache:
+        disp.enable_caching()
+    return disp
