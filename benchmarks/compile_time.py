@@ -5,6 +5,7 @@
     .venv/bin/python benchmarks/compile_time.py --top 25     # more dispatchers in the table
     .venv/bin/python benchmarks/compile_time.py --json out.json
     .venv/bin/python benchmarks/compile_time.py --opt 2 1   # also cold compiles at NUMBA_OPT 2, 1 (~2 min each)
+    .venv/bin/python benchmarks/compile_time.py --against 378a4e3 --pairs 3   # side by side (~10 min)
 
 Each measurement runs in a fresh Python process (the numba cache is per process and per disk folder):
 
@@ -24,6 +25,12 @@ of @kernel functions, the inline="always" ones and their call sites, the separat
 single call site, how deep the separate libraries nest below the entry points, and the kernels
 linked into the most other libraries (numba links a callee's LLVM module into each caller's library
 and optimises and compiles the whole linked module again there).
+
+`--against COMMIT` runs only the side-by-side: cold compiles of this checkout and of COMMIT (a
+temporary git worktree), alternated --pairs times, each in a fresh process with an empty cache
+(the compile times of a shared machine drift by up to 1.5x within an hour, so only alternated runs
+compare); their first simulate's and first simulate_batch's thread CPU, and the ratios at the
+minima and the medians.
 
 Each process then times the paper's case (to the 1e-3 level, thread CPU, minimum of 3 runs), so that
 `--opt` levels (NUMBA_OPT for the whole compilation) show compile time against the code's speed.
@@ -234,9 +241,9 @@ def static_call_graph(core: Path = ROOT / "src" / "sweep" / "core") -> dict:
             "most_linked": linked[:8]}
 
 
-def run_child(cache_dir: str, opt: int | None = None) -> dict:
+def run_child(cache_dir: str, opt: int | None = None, src: Path = ROOT / "src") -> dict:
     import resource
-    env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, PYTHONPATH=str(ROOT / "src"))
+    env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir, PYTHONPATH=str(src))
     if opt is not None:
         env["NUMBA_OPT"] = str(opt)
     r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -277,6 +284,46 @@ def phase_lines(name: str, ph: dict) -> list[str]:
         f"{other:.2f} | {max(ph['cpu_s'] - ph['compile_s'], 0.0):.2f} |"]
 
 
+def side_by_side(commit: str, pairs: int) -> int:
+    """Cold compiles of this checkout and of `commit` (a temporary git worktree), alternated, `pairs`
+    times, each in a fresh process with an empty cache: the first simulate's and the first
+    simulate_batch's thread CPU, and their ratios at the minima and the medians."""
+    import shutil
+    import statistics
+    wt = Path(tempfile.mkdtemp(prefix="sweep-compile-base-")) / "wt"
+    subprocess.run(["git", "worktree", "add", "--detach", str(wt), commit], cwd=ROOT, check=True,
+                   capture_output=True, text=True)
+    runs = {"current": [], commit: []}
+    try:
+        for i in range(pairs):
+            for name, src in (("current", ROOT / "src"), (commit, wt / "src")):
+                tmp = tempfile.mkdtemp(prefix="sweep-compile-time-")
+                try:
+                    r = run_child(tmp, src=src)
+                finally:
+                    shutil.rmtree(tmp, ignore_errors=True)
+                runs[name].append((r["simulate"]["cpu_s"], r["simulate_batch"]["cpu_s"], r["simulate"]["n_compiled"]))
+                print(f"pair {i + 1}: {name}: first simulate {r['simulate']['cpu_s']:.1f} s CPU "
+                      f"({r['simulate']['n_compiled']} signatures), first simulate_batch "
+                      f"{r['simulate_batch']['cpu_s']:.1f} s ({load()})", flush=True)
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(wt)], cwd=ROOT, capture_output=True)
+        subprocess.run(["git", "worktree", "prune"], cwd=ROOT, capture_output=True)
+        shutil.rmtree(wt.parent, ignore_errors=True)
+    print("\n| checkout | first simulate CPU (s), each pair | min | median | first simulate_batch CPU (s) | signatures |")
+    print("|---|---|---|---|---|---|")
+    for name, rr in runs.items():
+        sim = [x[0] for x in rr]
+        print(f"| {name} | {' / '.join(f'{v:.1f}' for v in sim)} | {min(sim):.1f} | {statistics.median(sim):.1f} | "
+              f"{' / '.join(f'{x[1]:.1f}' for x in rr)} | {rr[0][2]} |")
+    cur = [x[0] for x in runs["current"]]
+    base = [x[0] for x in runs[commit]]
+    print(f"\ncurrent / {commit}: {min(cur) / min(base):.3f} at the minima, "
+          f"{statistics.median(cur) / statistics.median(base):.3f} at the medians, pairwise "
+          + ", ".join(f"{c / b:.3f}" for c, b in zip(cur, base)))
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--top", type=int, default=15, help="dispatchers listed (by exclusive compile time)")
@@ -284,8 +331,13 @@ def main(argv=None) -> int:
     ap.add_argument("--opt", type=int, nargs="*", default=[],
                     help="also cold-compile with these NUMBA_OPT levels (0-3; default 3) in fresh processes and "
                          "report compile CPU against the paper case's CPU time")
+    ap.add_argument("--against", metavar="COMMIT", default=None,
+                    help="only the side-by-side: cold compiles of this checkout and COMMIT alternated (--pairs)")
+    ap.add_argument("--pairs", type=int, default=3)
     a = ap.parse_args(argv)
     print(f"# compile_time: {os.cpu_count()} CPUs, python {sys.version.split()[0]}; {load()}\n", flush=True)
+    if a.against:
+        return side_by_side(a.against, a.pairs)
     st = static_call_graph()
     print(f"the core's call graph (source): {st['kernels']} @kernel functions, {st['inline_always']} of them "
           f"inline=\"always\" (call sites: {st['inline_call_sites']}); {st['single_call_site']} separate kernels "
