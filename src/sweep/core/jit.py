@@ -33,10 +33,10 @@ import os
 import tempfile
 from pathlib import Path
 
-from numba.core import types as _types
-from numba.core.registry import CPUDispatcher
 from numba.core import caching as _caching
 from numba.core import config as _config
+from numba.core import types as _types
+from numba.core.registry import CPUDispatcher
 
 CPU_OPTIONS = {"cache": True, "_nrt": False, "error_model": "numpy"}
 
@@ -119,8 +119,9 @@ class Kernel(CPUDispatcher):
     """numba's dispatcher, compiled once per signature of non-literal types. numba types a constant
     argument at a call site from jitted code (`dense_eval(F, 0, ...)`, `tally_step(cs, istats,
     True, 1)`) as a Literal of its value, and compiled one copy of the kernel, with its callees
-    linked in again, per value: 25 of the 189 signatures a first `simulate` compiled. The values
-    are the same, so is the code that computes with them."""
+    linked in again, per value: 25 of the 189 signatures a first `simulate` compiled. Typed
+    without its value, the argument is the same number at run time, and the kernel computes the
+    same results from it."""
 
     def get_call_template(self, args, kws):
         return super().get_call_template(tuple(_types.unliteral(a) for a in args),
