@@ -48,7 +48,10 @@ level, inclusive); LLVM (all llvm_lock time, and how much of it inside the lower
 lowering, Python side (the lowering pass less the LLVM time inside it); the other passes; the CPU
 time outside any compile event (cache writes, loading, Python); and the dispatchers by exclusive
 time (their own typing, lowering and LLVM, not their callees' compilations), with the number of
-signatures compiled.
+signatures compiled. The cold first simulate's LLVM time is also split by what it does (timed
+around numba's code-library methods): function passes, the module passes on each library's final
+module (its functions and a linked copy of all its callees'), and machine code; with the number of
+function bodies the module passes saw against the distinct functions among them.
 """
 from __future__ import annotations
 
@@ -132,6 +135,36 @@ rec = Recorder()
 for kind in ("numba:compile", "numba:run_pass", "numba:llvm_lock"):
     ev.register(kind, rec)
 
+# The LLVM time by what it does, timed around numba's code-library methods (numba.core.codegen):
+# function passes on each new function; the module passes on a library's final module, which holds
+# its own functions and a linked copy of every callee library's (so a callee is optimised again in
+# each library above it); machine code for that whole module. Also how many function bodies those
+# module passes saw, against the distinct functions among them.
+from numba.core import codegen as _cg
+SPLIT = {"function_passes_s": 0.0, "module_passes_s": 0.0, "machine_code_s": 0.0, "libraries": 0,
+         "bodies_optimised": 0, "distinct": set()}
+def _timed(key, fn):
+    def wrapper(self, *a, **k):
+        t = CLOCK()
+        try:
+            return fn(self, *a, **k)
+        finally:
+            SPLIT[key] += CLOCK() - t
+    return wrapper
+_final = _cg.CPUCodeLibrary._optimize_final_module
+def _optimize_final_module(self):
+    names = [f.name for f in self._final_module.functions if not f.is_declaration]
+    SPLIT["libraries"] += 1
+    SPLIT["bodies_optimised"] += len(names)
+    SPLIT["distinct"].update(names)
+    return _final(self)
+_cg.CPUCodeLibrary._optimize_functions = _timed("function_passes_s", _cg.CPUCodeLibrary._optimize_functions)
+_cg.CPUCodeLibrary._optimize_final_module = _timed("module_passes_s", _optimize_final_module)
+_cg.JITCodeLibrary._finalize_specific = _timed("machine_code_s", _cg.JITCodeLibrary._finalize_specific)
+def split_reset():
+    for k in SPLIT:
+        SPLIT[k] = set() if k == "distinct" else type(SPLIT[k])()
+
 out = {}
 t = time.perf_counter()
 import sweep
@@ -144,13 +177,15 @@ PAPER = sys.argv[1]
 
 def phase(name, fn):
     rec.reset()
+    split_reset()
     t, c = time.perf_counter(), time.thread_time()
     fn()
     wall, cpu = time.perf_counter() - t, time.thread_time() - c
     out[name] = {"wall_s": wall, "cpu_s": cpu, "compile_s": rec.top_compile, "n_compiled": rec.n_compile, "llvm_s": rec.llvm,
                  "llvm_in": rec.llvm_in, "passes": rec.by_pass,
                  "dispatchers": {k: {"exclusive_s": v[0], "inclusive_s": v[1], "signatures": v[2], "llvm_s": v[3]}
-                                 for k, v in rec.by_disp.items()}}
+                                 for k, v in rec.by_disp.items()},
+                 "llvm_split": {k: (len(v) if k == "distinct" else v) for k, v in SPLIT.items()}}
 
 def batch():
     import inspect
@@ -368,6 +403,12 @@ def main(argv=None) -> int:
             lines += phase_lines(f"{run}: first {ph}" if ph != "second_simulate" else f"{run}: second simulate", r[ph])
     print("\n".join(lines))
 
+    sp = cold["simulate"]["llvm_split"]
+    print(f"\ncold, first simulate, LLVM by what it does: function passes {sp['function_passes_s']:.1f} s, module "
+          f"passes on the {sp['libraries']} libraries' final modules {sp['module_passes_s']:.1f} s, machine code "
+          f"{sp['machine_code_s']:.1f} s; the module passes saw {sp['bodies_optimised']} function bodies, "
+          f"{sp['distinct']} distinct ({sp['bodies_optimised'] / max(sp['distinct'], 1):.1f} times each on average: "
+          f"a callee's code is linked into every library above it and optimised and compiled again there)")
     for ph in ("simulate", "simulate_batch"):
         d = cold[ph]["dispatchers"]
         tot = sum(v["exclusive_s"] for v in d.values())

@@ -70,7 +70,10 @@ Parts (`--parts`, default all):
   kernel's wall time); the worktree is removed afterwards. In the same rounds, each side also runs
   the rolling scene of `wp` ('lean', rtol 1e-10, a sample at T): its CPU per try side by side, and
   whether the two end states are identical to the last bit (they are where a change leaves the
-  numerics alone, e.g. `--baseline 708eac6` against the generated DOP853 sums).
+  numerics alone, e.g. `--baseline 708eac6` against the generated DOP853 sums). Then, in this
+  process, the current checkout's right-hand-side floor: its paper case's RHS count times the cost
+  of one call (ROLL and SLIDE, in proportion to the tries), against the run's CPU time in the same
+  interleaved rounds: the most any change that keeps the RHS count can gain.
 
 Prints the tables and writes benchmarks/out/peer_heyoka.md and peer_heyoka.json (benchmarks/out/ is
 git-ignored). Reports the machine's load average before and after each part: the machine is shared.
@@ -91,6 +94,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -485,44 +489,93 @@ def level_time(base: dict, level: float = 1e-3) -> tuple[float, dict]:
     return s["levels"][-1]["t"], s
 
 
-def rhs_cost_ns(p, y, n: int = 1_000_000) -> dict:
-    """Thread-CPU ns per right-hand side as the kernel calls it: `core.contact.eval_rhs` (the
-    contact-state dispatch around model.rhs, and the RHS count) in ROLL, side +1, sigma (1, 1, 1),
-    with N_CORE and N_FULL components, in a jitted loop whose mode and size are run-time values and
-    that feeds a bit of the result back (so nothing is hoisted or folded)."""
-    from numba import njit
+_RHS_LOOP = None
 
-    from sweep.core import contact, layout
 
-    @njit(cache=False, error_model="numpy")
-    def loop(y, sys, n, dy, aux):
-        acc = 0.0
-        for i in range(n):
-            contact.eval_rhs(0.0, y, sys, dy, aux)
-            y[1] += 1e-300 * dy[1]
-            acc += dy[3]
-        return acc
+def rhs_loop():
+    """A jitted loop of `core.contact.eval_rhs` (the contact-state dispatch around model.rhs, and the
+    RHS count) whose mode and size are run-time values and that feeds a bit of the result back (so
+    nothing is hoisted or folded); compiled once per process."""
+    global _RHS_LOOP
+    if _RHS_LOOP is None:
+        from numba import njit
 
+        from sweep.core import contact
+
+        @njit(cache=False, error_model="numpy")
+        def loop(y, sys, n, dy, aux):
+            acc = 0.0
+            for i in range(n):
+                contact.eval_rhs(0.0, y, sys, dy, aux)
+                y[1] += 1e-300 * dy[1]
+                acc += dy[3]
+            return acc
+
+        _RHS_LOOP = loop
+    return _RHS_LOOP
+
+
+def rhs_call_ns(p, y, mode: int, nstate: int, n: int = 1_000_000, repeat: int = 7) -> float:
+    """Thread-CPU ns per right-hand side as the kernel calls it, in contact mode `mode` (side +1,
+    sigma (1, 1, 1)) with `nstate` components: the minimum of `repeat` loops of n calls."""
+    from sweep.core import layout
+
+    loop = rhs_loop()
     cs = np.zeros(layout.N_CS)
-    cs[layout.CS_MODE] = layout.ROLL
+    cs[layout.CS_MODE] = mode
     cs[layout.CS_SIDE] = 1.0
     cs[layout.CS_SIG:layout.CS_SIG + 3] = 1.0
-    out = {}
-    for nstate, name in ((M.N_CORE, "core"), (M.N_FULL, "full")):
-        yy = y.copy()
-        dy = np.zeros(M.N_FULL)
-        aux = np.zeros(M.N_AUX)
-        wk = np.zeros((layout.N_WORK, layout.N_WCOLS))
-        istats = np.zeros(layout.N_ISTATS, np.int64)
-        sys_ = layout.System(p, cs, nstate, wk, istats)
-        loop(yy, sys_, 1000, dy, aux)
-        best = math.inf
-        for _ in range(7):
-            c0 = time.thread_time()
-            loop(yy, sys_, n, dy, aux)
-            best = min(best, time.thread_time() - c0)
-        out[name] = best / n * 1e9
-    return out
+    yy = y.copy()
+    dy = np.zeros(M.N_FULL)
+    aux = np.zeros(M.N_AUX)
+    sys_ = layout.System(p, cs, nstate, np.zeros((layout.N_WORK, layout.N_WCOLS)),
+                         np.zeros(layout.N_ISTATS, np.int64))
+    loop(yy, sys_, 1000, dy, aux)
+    best = math.inf
+    for _ in range(repeat):
+        c0 = time.thread_time()
+        loop(yy, sys_, n, dy, aux)
+        best = min(best, time.thread_time() - c0)
+    return best / n * 1e9
+
+
+def rhs_cost_ns(p, y, n: int = 1_000_000) -> dict:
+    """ns per right-hand side in ROLL with N_CORE and N_FULL components (rhs_call_ns)."""
+    from sweep.core import layout
+
+    return {name: rhs_call_ns(p, y, layout.ROLL, nstate, n)
+            for nstate, name in ((M.N_CORE, "core"), (M.N_FULL, "full"))}
+
+
+def paper_rhs_floor(cfg: dict, rounds: int) -> dict:
+    """What the right-hand side alone costs in the paper's case (this checkout): its RHS count times
+    the cost of one call, in ROLL and in SLIDE (rhs_call_ns at the initial state, with 5 % of the
+    contact speed as slip for SLIDE, N_FULL components as the run integrates), each mode's calls
+    in proportion to its tries; against the paper case's own CPU time, interleaved over `rounds`
+    (minima). The floor is what the run would cost if everything around the right-hand side
+    (stage sums, error norm, acceptance test, event scan and location, outputs) cost nothing, at the
+    same RHS count: run CPU / floor is the most any change that keeps the steps can gain."""
+    from sweep.core import layout
+
+    scene = load_scene(copy.deepcopy(cfg))
+    y0, _ = initial_state(scene)
+    ys = y0.copy()
+    ys[M.Y_U1], ys[M.Y_U2] = 0.05, 0.015
+    s = sweep.simulate(copy.deepcopy(cfg)).summary
+    run, roll, slide = [], [], []
+    for _ in range(rounds):
+        c0 = time.thread_time()
+        sweep.simulate(copy.deepcopy(cfg))
+        run.append(time.thread_time() - c0)
+        roll.append(rhs_call_ns(scene.params, y0, layout.ROLL, M.N_FULL, 200_000, 1))
+        slide.append(rhs_call_ns(scene.params, ys, layout.SLIDE, M.N_FULL, 200_000, 1))
+    tries = s["n_steps"] + s["n_rejected"]
+    slide_share = (s["n_steps_sliding"] + s["n_rejected_sliding"]) / tries
+    per_call = (1.0 - slide_share) * min(roll) + slide_share * min(slide)
+    floor = s["n_rhs"] * per_call * 1e-9
+    return {"run_cpu_min_s": min(run), "n_rhs": s["n_rhs"], "tries": tries, "slide_share": slide_share,
+            "roll_ns": min(roll), "slide_ns": min(slide), "floor_s": floor, "floor_share": floor / min(run),
+            "max_speedup_same_rhs": min(run) / floor}
 
 
 # ---------------------------------------------------------------------------------------- parts
@@ -1022,8 +1075,19 @@ def part_paper(ctx: dict, res: dict) -> None:
     say(f"\nspeed-up {roll_ratio:.3f}x; end states (alpha, omega at T) "
         + ("identical to the last bit" if same else "differ: the kernels' numerics differ"))
     table += "\n\n" + "\n".join(rlines)
+    cfg = yaml.safe_load(scene_file.read_text())
+    cfg.setdefault("stop", {})["levels"] = [1e-1, 1e-2, 1e-3]
+    fl = paper_rhs_floor(cfg, rounds)
+    fline = (f"the right-hand side alone in the current checkout's paper case: {fl['n_rhs']} calls ({100 * fl['slide_share']:.0f} % "
+             f"of the tries sliding) x {fl['roll_ns']:.1f} ns (ROLL) / {fl['slide_ns']:.1f} ns (SLIDE) = {1e3 * fl['floor_s']:.1f} ms, "
+             f"{100 * fl['floor_share']:.1f} % of the run's {1e3 * fl['run_cpu_min_s']:.1f} ms ({rounds} interleaved rounds, minima): "
+             f"with everything else free and the same RHS count, at most {fl['max_speedup_same_rhs']:.2f}x this checkout, "
+             f"{fl['max_speedup_same_rhs'] * ratio:.2f}x {base}")
+    say("\n" + fline)
+    table += "\n\n" + fline
     res["paper"] = {"baseline": base, "rounds": rounds, "sides": summ, "speedup": ratio, "speedup_wall": ratio_wall,
-                    "rolling_speedup": roll_ratio, "rolling_identical": same, "table": table, "load_after": load()}
+                    "rolling_speedup": roll_ratio, "rolling_identical": same, "rhs_floor": fl, "table": table,
+                    "load_after": load()}
     say(f"\n({load()})")
 
 
