@@ -549,15 +549,18 @@ def rhs_cost_ns(p, y, n: int = 1_000_000) -> dict:
 
 def paper_rhs_floor(cfg: dict, rounds: int) -> dict:
     """What the right-hand side alone costs in the paper's case (this checkout): its RHS count times
-    the cost of one call, in ROLL and in SLIDE (rhs_call_ns at the initial state, with 5 % of the
-    contact speed as slip for SLIDE, N_FULL components as the run integrates), each mode's calls
-    in proportion to its tries; against the paper case's own CPU time, interleaved over `rounds`
-    (minima). The floor is what the run would cost if everything around the right-hand side
+    the cost of one call, in ROLL and in SLIDE (rhs_call_ns at the initial state, with the
+    dimensionless slip (0.05, 0.015) for SLIDE, with as many components as the run integrates:
+    integrate.state_size), each mode's calls in proportion to its tries; against the paper case's
+    own CPU time, interleaved over `rounds` (minima). The floor is what the run would cost if everything around the right-hand side
     (stage sums, error norm, acceptance test, event scan and location, outputs) cost nothing, at the
     same RHS count: run CPU / floor is the most any change that keeps the steps can gain."""
     from sweep.core import layout
+    from sweep.core.integrate import state_size
+    from sweep.simulate import _settings
 
     scene = load_scene(copy.deepcopy(cfg))
+    nstate = int(state_size(_settings(scene)))
     y0, _ = initial_state(scene)
     ys = y0.copy()
     ys[M.Y_U1], ys[M.Y_U2] = 0.05, 0.015
@@ -567,13 +570,13 @@ def paper_rhs_floor(cfg: dict, rounds: int) -> dict:
         c0 = time.thread_time()
         sweep.simulate(copy.deepcopy(cfg))
         run.append(time.thread_time() - c0)
-        roll.append(rhs_call_ns(scene.params, y0, layout.ROLL, M.N_FULL, 200_000, 1))
-        slide.append(rhs_call_ns(scene.params, ys, layout.SLIDE, M.N_FULL, 200_000, 1))
+        roll.append(rhs_call_ns(scene.params, y0, layout.ROLL, nstate, 200_000, 1))
+        slide.append(rhs_call_ns(scene.params, ys, layout.SLIDE, nstate, 200_000, 1))
     tries = s["n_steps"] + s["n_rejected"]
     slide_share = (s["n_steps_sliding"] + s["n_rejected_sliding"]) / tries
     per_call = (1.0 - slide_share) * min(roll) + slide_share * min(slide)
     floor = s["n_rhs"] * per_call * 1e-9
-    return {"run_cpu_min_s": min(run), "n_rhs": s["n_rhs"], "tries": tries, "slide_share": slide_share,
+    return {"run_cpu_min_s": min(run), "n_rhs": s["n_rhs"], "nstate": nstate, "tries": tries, "slide_share": slide_share,
             "roll_ns": min(roll), "slide_ns": min(slide), "floor_s": floor, "floor_share": floor / min(run),
             "max_speedup_same_rhs": min(run) / floor}
 
@@ -1079,7 +1082,8 @@ def part_paper(ctx: dict, res: dict) -> None:
     cfg.setdefault("stop", {})["levels"] = [1e-1, 1e-2, 1e-3]
     fl = paper_rhs_floor(cfg, rounds)
     fline = (f"the right-hand side alone in the current checkout's paper case: {fl['n_rhs']} calls ({100 * fl['slide_share']:.0f} % "
-             f"of the tries sliding) x {fl['roll_ns']:.1f} ns (ROLL) / {fl['slide_ns']:.1f} ns (SLIDE) = {1e3 * fl['floor_s']:.1f} ms, "
+             f"of the tries sliding) x {fl['roll_ns']:.1f} ns (ROLL) / {fl['slide_ns']:.1f} ns (SLIDE) with {fl['nstate']} "
+             f"components = {1e3 * fl['floor_s']:.1f} ms, "
              f"{100 * fl['floor_share']:.1f} % of the run's {1e3 * fl['run_cpu_min_s']:.1f} ms ({rounds} interleaved rounds, minima): "
              f"with everything else free and the same RHS count, at most {fl['max_speedup_same_rhs']:.2f}x this checkout, "
              f"{fl['max_speedup_same_rhs'] * ratio:.2f}x {base}")
