@@ -57,7 +57,14 @@ AGREE_ALL = 1e-3
 # default run (slip_tol 1e-9 m/s, spin_tol 1e-7 rad/s): the answers must not move (docs/model.md,
 # 'Where a slip ends'; 'Sticking at spin_tol')
 KNOB_RUNS = [("slip_tol 1e-11", {"slip_tol": 1e-11}), ("slip_tol 1e-13", {"slip_tol": 1e-13}),
-             ("spin_tol 1e-9", {"spin_tol": 1e-9})]
+             ("spin_tol 1e-9", {"spin_tol": 1e-9}), ("slave_tol 1e-4", {"slave_tol": 1e-4})]
+# The near-edge band: scenes drawn as the others, with mu_d / mu_s in [EDGE_LO, 1] (a quarter of them
+# exactly mu_d = mu_s), numbered from EDGE_BASE in a draw of their own (--edge N), so the main
+# draw's scenes keep their indices
+EDGE_LO = 0.95
+EDGE_BASE = 100000
+# mu_d / mu_s bands of the cost report (tries per unit of content)
+BANDS = ((0.0, 0.9), (0.9, 0.95), (EDGE_LO, 1.0))
 DENSITY = 7800.0
 # outcomes whose t_end is a located event time (a quantity of the scene's end, like a level time)
 LOCATED_ENDS = ("contact_lost", "line_contact", "painleve")
@@ -108,6 +115,27 @@ def draw_scene(rng: np.random.Generator) -> dict:
     }
 
 
+def draw_edge_scene(seed: int, j: int) -> dict:
+    """Scene j of the near-edge draw for seed: a harness scene (draw_scene) with mu_d / mu_s in
+    [EDGE_LO, 1], exactly 1 for every fourth."""
+    rng = np.random.default_rng([seed, EDGE_BASE])
+    for _ in range(j + 1):
+        cfg = draw_scene(rng)
+        ratio = rng.uniform(EDGE_LO, 1.0)
+    c = cfg["contact"]
+    c["mu_d"] = c["mu_s"] if j % 4 == 0 else c["mu_s"] * ratio
+    return cfg
+
+
+def draw(seed: int, index: int) -> dict:
+    """Scene `index` of the harness for seed: the main draw below EDGE_BASE, the near-edge draw
+    from it (its levels not yet filtered)."""
+    if index >= EDGE_BASE:
+        return draw_edge_scene(seed, index - EDGE_BASE)
+    rng = np.random.default_rng(seed)
+    return [draw_scene(rng) for _ in range(index + 1)][index]
+
+
 def _valid_levels(cfg: dict) -> dict:
     """Keep only the levels for which the energy-equivalent inclination is defined for this disk."""
     from sweep.core import model
@@ -125,8 +153,7 @@ def _valid_levels(cfg: dict) -> dict:
 def harness_scene(seed: int, index: int, rtol: float | None = None, t_max: float | None = None) -> dict:
     """Scene `index` of the harness's draw for `seed` (its levels filtered as the harness does),
     with the solver at rtol (atol = ATOL_RATIO rtol) and stop.t_max (s) set where given."""
-    rng = np.random.default_rng(seed)
-    cfg = _valid_levels([draw_scene(rng) for _ in range(index + 1)][index])
+    cfg = _valid_levels(draw(seed, index))
     if rtol is not None:
         cfg["solver"] = {"rtol": rtol, "atol": rtol * ATOL_RATIO}
     if t_max is not None:
@@ -161,6 +188,7 @@ def _one_run(cfg: dict, rtol: float, d_alpha: float = 0.0, atol_ratio: float = A
     q.update(end_quantities(s["outcome"], s["t_end"], r.samples["alpha"][-1]))
     return {"rtol": rtol, "outcome": s["outcome"], "t_end": s["t_end"], "q": q, "t_halt_error": q_halt_error,
             "events": [s["n_transitions"], s["n_stick"], s["n_impacts"]], "n_steps": s["n_steps"] + s["n_rejected"],
+            "cycles": r.precession_cycles, "located": s["n_events"],
             "cpu": cpu, "budget": budget, "nan_in_summary": _has_bad(s)}
 
 
@@ -327,7 +355,46 @@ def analyse(recs: list[dict]) -> str:
     lines.append(f"cpu at rtol 1e-10: median {1e3 * pct(cpu, 50):.1f} ms, p90 {1e3 * pct(cpu, 90):.1f} ms, "
                  f"p99 {1e3 * pct(cpu, 99):.1f} ms, max {1e3 * cpu.max():.1f} ms, total {cpu.sum():.1f} s, "
                  f"p99/median {pct(cpu, 99) / max(pct(cpu, 50), 1e-9):.1f}")
+    lines.extend(cost_by_band(recs))
     return "\n".join(lines)
+
+
+def tries_per_content(run: dict) -> float:
+    """Tries (accepted + rejected steps) per unit of the motion's content: precession cycles plus
+    physical events (roll<->slip transitions, stick phases, rim-edge impacts; at least 1)."""
+    content = run.get("cycles", math.nan) + sum(run.get("events", []))
+    return run["n_steps"] / max(content, 1.0) if math.isfinite(content) else math.nan
+
+
+def cost_by_band(recs: list[dict]) -> list[str]:
+    """Tries per unit of content at rtol 1e-10 by mu_d / mu_s band (BANDS): scenes, median, p99 and
+    the band's median against that of mu_d / mu_s < 0.9; the whole set's p99 / median."""
+    def ratio(rec):
+        c = rec["scene"]["contact"]
+        return c["mu_d"] / c["mu_s"] if c["mu_s"] > 0 else 0.0
+    default = [(ratio(rec), next(r for r in rec["runs"] if r["rtol"] == DEFAULT_RTOL)) for rec in recs]
+    vals = [(x, tries_per_content(r), r.get("n_steps", 0)) for x, r in default if "n_steps" in r]
+    if not vals or not any(math.isfinite(v) for _, v, _ in vals):
+        return ["tries per unit of content: not in this record"]
+    lines = ["tries per unit of content (precession cycles + transitions, stick phases, impacts) at rtol 1e-10, "
+             "by mu_d / mu_s:"]
+    base = None
+    for lo, hi in BANDS:
+        inside = [(v, s) for x, v, s in vals if lo <= x < hi or x == hi == 1.0]
+        sel = np.array([v for v, _ in inside if math.isfinite(v)])
+        steps = sum(s for _, s in inside)
+        if sel.size == 0:
+            lines.append(f"  [{lo:g}, {hi:g}{']' if hi == 1.0 else ')'}: no scenes")
+            continue
+        med = float(np.median(sel))
+        base = med if base is None else base
+        lines.append(f"  [{lo:g}, {hi:g}{']' if hi == 1.0 else ')'}: {sel.size} scenes, median {med:.1f}, "
+                     f"p99 {np.percentile(sel, 99):.1f}, max {sel.max():.1f}, median / that of [0, 0.9) "
+                     f"{med / base:.2f}; tries in all {steps}")
+    allv = np.array([v for _, v, _ in vals if math.isfinite(v)])
+    lines.append(f"  all: {allv.size} scenes, median {np.median(allv):.1f}, p99 {np.percentile(allv, 99):.1f}, "
+                 f"p99 / median {np.percentile(allv, 99) / np.median(allv):.1f}")
+    return lines
 
 
 def analyse_knobs(recs: list[dict]) -> list[str]:
@@ -403,6 +470,9 @@ def main(argv=None) -> int:
     ap.add_argument("--tag", default=None)
     ap.add_argument("--atol-ratio", type=float, default=ATOL_RATIO,
                     help=f"atol = this x rtol in every run (default {ATOL_RATIO:g}, the product's default scaled)")
+    ap.add_argument("--edge", type=int, default=None,
+                    help=f"near-edge scenes (mu_d / mu_s in [{EDGE_LO:g}, 1]) beside the main draw "
+                         "(default: a fifth of --scenes)")
     ap.add_argument("--analyse", metavar="JSONL", help="only analyse an existing record file")
     ap.add_argument("--only", type=int, nargs="+", metavar="INDEX",
                     help="run only these scene indices of the seed's draw (e.g. a table's exceptions again)")
@@ -415,15 +485,15 @@ def main(argv=None) -> int:
         print(analyse(recs))
         return 0
     n = a.scenes or (100 if a.quick else 500)
-    if a.only:
-        n = max(a.only) + 1
+    n_edge = n // 5 if a.edge is None else a.edge
     tag = a.tag or f"n{n}-seed{a.seed}"
-    rng = np.random.default_rng(a.seed)
-    scenes = [(i, draw_scene(rng), a.atol_ratio) for i in range(n)]
     if a.only:
-        only = set(a.only)
-        scenes = [sc for sc in scenes if sc[0] in only]
-        n = len(scenes)
+        scenes = [(i, draw(a.seed, i), a.atol_ratio) for i in a.only]
+    else:
+        rng = np.random.default_rng(a.seed)
+        scenes = [(i, draw_scene(rng), a.atol_ratio) for i in range(n)]
+        scenes += [(EDGE_BASE + j, draw_edge_scene(a.seed, j), a.atol_ratio) for j in range(n_edge)]
+    n = len(scenes)
     path = OUT / f"convergence-{tag}.jsonl"
     t0 = time.time()
     recs = []

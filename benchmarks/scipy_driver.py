@@ -7,15 +7,16 @@ discrete rules are written here again from the physics in docs/model.md, in plai
 independently of `sweep.core.contact` (only constants are read from the kernel):
 
 * modes ROLL (no slip; the friction that rolling needs, inside the static cone), SLIDE (friction
-  -mu_d Phi u/|u|) and SLAVED (a slow slip whose direction nu is the attracting quasi-static one:
-  the root of cross(nu) = 0, the slip acceleration at the slip |u| s(nu) parallel to s(nu), with
-  d cross/d nu < 0; the sliding equations are evaluated at the slip vector u itself with the
-  friction held on -mu_d Phi s(nu));
+  -mu_d Phi u/|u|) and SLAVED (a slow slip whose direction is the slow manifold of its direction
+  dynamics: the attracting quasi-static direction nu, the root of cross(nu) = 0 (the slip
+  acceleration at the slip |u| s(nu) parallel to s(nu), d cross/d nu < 0), plus its lag
+  (Disk.lag); the sliding equations are evaluated at the slip vector u itself with the friction
+  held on -mu_d Phi s(nu + lag));
 * ROLL -> SLAVED where mu_s Phi - |F| reaches 0: the slip starts at u = 0 along a direction in which
   the sliding equations make it grow (a_P parallel to s, a_P.s > 0), attracting, nearest -F/|F|;
 * SLAVED -> ROLL where u.s(nu) reaches 0 (plastic impulse removes what is left of the slip);
   SLAVED -> SLIDE where |u| grows to SLAVE_EXIT x the slaving speed u_s = max(slip_tol,
-  SLAVE_EPS mu_d Phi), or where the attracting direction ceases to exist (a fold: d cross/d nu
+  slave_tol mu_d Phi / (1 + |theta'|)), or where the attracting direction ceases to exist (a fold: d cross/d nu
   reaches 0, or no root is left near the last one: the stepper cannot continue and the fold is the
   last accepted point); after a fold the hand-over back to SLAVED is off until |u| grows past
   SLAVE_EXIT x u_s again;
@@ -92,8 +93,8 @@ from sweep import outcomes
 from sweep.core import contact as _contact
 from sweep.core import impulse as _impulse
 from sweep.core import model
-from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, X_F1, X_F2, X_G1,
-                              X_OK, X_PHI, X_SIG1, Y_ALPHA, Y_DK1, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3)
+from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_SLAVE, P_UTOL, P_WTOL, X_F1, X_F2,
+                              X_G1, X_LAG, X_NU, X_OK, X_PHI, X_SLAVE_ERR, X_SIG1, Y_ALPHA, Y_DK1, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3)
 from sweep.scene import Scene, load_scene
 from sweep.simulate import initial_state, level_energies
 
@@ -102,7 +103,6 @@ __all__ = ["run_scipy", "numba_backend", "numpy_backend", "Backend"]
 # physical constants of the rules (documented in docs/model.md)
 BETA_FACE = _contact.BETA_FACE
 ZENO_DTAU = _contact.ZENO_DTAU
-SLAVE_EPS = _contact.SLAVE_EPS
 SLAVE_EXIT = _contact.SLAVE_EXIT
 
 ROLL, SLIDE, SLAVED = 0, 1, 2     # driver modes; model.rhs knows ROLL (0) and SLIDE (1)
@@ -111,6 +111,7 @@ CONE_SAMPLES = 7                  # interior points at which a step's cone margi
 ROUNDOFF = 1e-14                  # ... or |cross| below this fraction of the slip acceleration
 DIR_JUMP = 0.3                    # rad: a root farther than this from the last one is another root
 DCROSS_STEP = 1e-6                # rad: central difference of d cross/d nu (error ~1e-12 relative)
+FLOW_STEP = 1e-6                  # tau: central difference of d cross/d tau along the motion (the lag)
 
 # events in a fixed order (a tie goes to the first)
 SIGN = ("sign0", "sign1", "sign2")
@@ -307,6 +308,33 @@ class Disk:
         return (self.cross_dot(nu + DCROSS_STEP, u, t, y, c)[0]
                 - self.cross_dot(nu - DCROSS_STEP, u, t, y, c)[0]) / (2.0 * DCROSS_STEP)
 
+    def lag(self, nu, u, t, y, c):
+        """The slaved slip's lag (rad) behind the quasi-static direction nu: the slow manifold of
+        d nu/d tau = cross(nu)/u with the lag proportional to u (it shrinks and grows with the
+        slip, as fast as the direction relaxes): u (nu*' + lag') = c' lag, lag' = lag u'/u, so
+        lag = u nu*'/(c' - u') with nu*' = -(d cross/d tau at fixed nu)/c' (the root moves with
+        the motion), c' = d cross/d nu, u' = rad; central differences in nu and along the motion
+        (docs/model.md, 'Slow slip'). 0 where c' - u' >= 0 or c' >= 0.
+
+        Returns (lag, err): err = |u| (1 + |theta'|) / (u' - c') + |lag|, how far this first order
+        is from exact (inf where the direction does not relax onto the root)."""
+        cross0, rad0 = self.cross_dot(nu, u, t, y, c)
+        dc = self.dcross(nu, u, t, y, c)
+        if not (dc < 0.0 and dc - rad0 < 0.0):
+            return 0.0, math.inf
+        if u == 0.0:
+            return 0.0, 0.0
+        cs, sn = math.cos(nu), math.sin(nu)
+        ys = np.array(y[:self.n], dtype=float)
+        ys[Y_U1], ys[Y_U2] = u * cs, u * sn
+        dy, _ = self.model(t, ys, SLIDE, c, cs, sn)
+        step = min(FLOW_STEP, 0.5 * u / abs(rad0)) if rad0 != 0.0 else FLOW_STEP   # the slip stays > 0
+        up = self.cross_dot(nu, u + step * rad0, t + step, ys + step * dy, c)[0]
+        um = self.cross_dot(nu, u - step * rad0, t - step, ys - step * dy, c)[0]
+        root_rate = -((up - um) / (2.0 * step)) / dc
+        lag = u * root_rate / (dc - rad0)
+        return lag, u * (1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA]))) / (rad0 - dc) + abs(lag)
+
     def slaved_root(self, seed, u, t, y, c):
         """The root of cross(nu) continued from seed (secant); NaN if none within DIR_JUMP."""
         xa, xb = seed, seed + 1e-7
@@ -340,7 +368,9 @@ class Disk:
                 aux = np.full(N_AUX, math.nan)
                 aux[X_OK] = 0.0
                 return dy, aux, nu
-            dy, aux = self.model(t, y, SLIDE, c, math.cos(nu), math.sin(nu), self.pf)
+            lag, err = self.lag(nu, u, t, y, c)
+            dy, aux = self.model(t, y, SLIDE, c, math.cos(nu + lag), math.sin(nu + lag), self.pf)
+            aux[X_NU], aux[X_LAG], aux[X_SLAVE_ERR] = nu, lag, err
             return dy, aux, nu
         if c.mode == SLIDE:
             un = math.hypot(y[Y_U1], y[Y_U2])
@@ -372,8 +402,11 @@ class Disk:
         un = math.hypot(y[Y_U1], y[Y_U2])
         return (y[Y_U1] / un, y[Y_U2] / un) if un > 0.0 else (math.cos(c.nu), math.sin(c.nu))
 
-    def slave_speed(self, aux):
-        return max(self.u_tol, SLAVE_EPS * self.p[P_MUD] * aux[X_PHI])
+    def slave_speed(self, y, aux):
+        """Where the direction is slaved: relaxation time |u|/(mu_d Phi) times the motion's rate
+        1 + |theta'| (theta' = omega_3 / cos alpha) below slave_tol; at least slip_tol."""
+        rate = 1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA]))
+        return max(self.u_tol, self.p[P_SLAVE] * self.p[P_MUD] * aux[X_PHI] / rate)
 
     # -- directions --
 
@@ -532,7 +565,7 @@ class Disk:
         if fate == "spirals_out":
             c.slow_off = True
             return -1
-        if fate == "ends" and math.isfinite(nu) and self.settle_onto(nu, y, c):
+        if fate == "ends" and math.isfinite(nu) and self.settle_onto(nu, t, y, c):
             c.slave_off = False
             return -1
         phi = self.model(t, y, SLIDE, c, *self._slip_dir(y, c))[1][X_PHI]
@@ -569,16 +602,21 @@ class Disk:
         if math.isnan(root):
             c.slave_off = True
             return -1
-        if not self.settle_onto(root, y, c):
+        if not self.settle_onto(root, t, y, c):
             c.slave_off = True    # pointing against it: passing by u = 0, it goes on sliding
         return -1
 
-    def settle_onto(self, root, y, c):
-        """SLIDE -> SLAVED along root, the cross slip removed by the plastic impulse, if that leaves
-        the slip along it; else nothing changes. Returns whether it settled."""
+    def settle_onto(self, root, t, y, c):
+        """SLIDE -> SLAVED at the quasi-static direction root, the slip across the slaved
+        direction there (root plus its lag) removed by the plastic impulse, if that leaves the slip
+        along it; else nothing changes. Returns whether it settled."""
         saved = y.copy()
-        loss = self.be.project_velocity(y, self.p, c.side, True, c.side, True, self.S, root)
-        if y[Y_U1] * math.cos(root) + y[Y_U2] * math.sin(root) > 0.0:
+        lag, err = self.lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, c)
+        if self.p[P_SLAVE] > 0.0 and not err <= self.p[P_SLAVE]:
+            return False     # the first-order slow manifold is no good here: it slides on
+        along = root + lag
+        loss = self.be.project_velocity(y, self.p, c.side, True, c.side, True, self.S, along)
+        if y[Y_U1] * math.cos(along) + y[Y_U2] * math.sin(along) > 0.0:
             y[Y_DSLIDE] += loss
             c.mode = SLAVED
             c.nu = root
@@ -592,7 +630,7 @@ class Disk:
         if un > self.u_tol:
             c.mode, c.nu, c.slave_off, c.slow_off = SLIDE, math.atan2(y[Y_U2], y[Y_U1]), False, False
             _, aux = self.model(t, y, SLIDE, c, y[Y_U1] / un, y[Y_U2] / un)
-            if un <= self.slave_speed(aux):
+            if un <= self.slave_speed(y, aux):
                 return self.try_slave(t, y, c)
             return -1
         root = self.attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), un, t, y, c)
@@ -610,8 +648,9 @@ class Disk:
         there is none, the slip vector's own direction), not one solved with component i held."""
         nu = c.nu
         if c.mode == SLAVED:
-            root = self.slaved_root(c.nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, c)
-            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root
+            u = math.hypot(y[Y_U1], y[Y_U2])
+            root = self.slaved_root(c.nu, u, t, y, c)
+            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root + self.lag(root, u, t, y, c)[0]
         was = c.stuck[i]
         c.stuck[i] = True
         if c.mode == SLAVED:
@@ -995,11 +1034,18 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             if kind == "slipslow":
                 return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slip_floor(tt, a[X_PHI], seg)
             if kind == "slave":
-                return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slave_speed(a)
+                return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slave_speed(yy, a)
             if kind == "slipstop":
-                return yy[Y_U1] * math.cos(nu_) + yy[Y_U2] * math.sin(nu_)
+                along = nu_ + a[X_LAG]
+                return yy[Y_U1] * math.cos(along) + yy[Y_U2] * math.sin(along)
             if kind == "slipfast":
-                return SLAVE_EXIT * disk.slave_speed(a) - math.hypot(yy[Y_U1], yy[Y_U2])
+                if seg.mode != SLAVED:
+                    return SLAVE_EXIT * disk.slave_speed(yy, a) - math.hypot(yy[Y_U1], yy[Y_U2])
+                # a slaved slip leaves where it is fast, or where its slaved direction's error is large
+                margin = 1.0 - math.hypot(yy[Y_U1], yy[Y_U2]) / (SLAVE_EXIT * disk.slave_speed(yy, a))
+                if p[P_SLAVE] > 0.0:
+                    margin = min(margin, 1.0 - a[X_SLAVE_ERR] / (SLAVE_EXIT * p[P_SLAVE]))
+                return margin
             if kind == "slave_lost":
                 return -dc
             if kind == "contact":

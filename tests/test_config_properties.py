@@ -105,6 +105,8 @@ def valid_configs(draw, levels_max: float = HALF_PI, ordinary_disk: bool = False
         solver["slip_tol"] = draw(st.floats(0.0, 1e-2, exclude_min=True, **FINITE))
     if draw(st.booleans()):
         solver["spin_tol"] = draw(st.floats(0.0, 1e-2, **FINITE))
+    if draw(st.booleans()):
+        solver["slave_tol"] = draw(st.floats(0.0, 0.1, **FINITE))
     if solver or draw(st.booleans()):
         cfg["solver"] = solver
     stop = {}
@@ -175,7 +177,7 @@ def _bounds(key: str) -> tuple:
 # Scalar keys: (path, lower bound, upper bound, lower open, upper open, integer)
 SCALARS = [(tuple(key.split(".")), *_bounds(key), fields.RANGES[fields.SWEEP_KEYS[key]].integer)
            for key in ("disk.radius", "disk.mass", "gravity", "mu_s", "solver.rtol", "solver.atol", "solver.dt",
-                       "solver.slip_tol", "solver.spin_tol", "stop.t_max", "stop.max_steps")]
+                       "solver.slip_tol", "solver.spin_tol", "solver.slave_tol", "stop.t_max", "stop.max_steps")]
 SCALARS.append((("chunk_size",), 1, 100_000, False, False, True))
 # Axis items: (axis, lower, upper, lower open, upper open), absolute bounds (mu_d <= mu_s and
 # k_i <= radius are the cross-field cases below)

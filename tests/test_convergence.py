@@ -226,6 +226,21 @@ def test_an_unstick_only_the_dense_output_shows_is_confirmed_by_the_integrated_s
     assert abs(res[1e-10]["q"]["t_halt"] - t12) < 1e-6 * t12
 
 
+def test_the_default_slave_tol_gives_the_counts_of_its_limit_in_a_micro_stick_scene():
+    """Harness scene 246 (seed 20261124) holds omega.a_3 against a moment that moves ~700 times the
+    friction direction's angle: its stick phases are decided by the slaved direction's error
+    (docs/model.md, 'Slow slip'). With the direction integrated wherever its relaxation time times
+    the motion's rate exceeds slave_tol, the counts are 69 stick phases from slave_tol 3e-3 (the
+    default) down to 0 (slaved only below slip_tol); 73 at 5e-3, 98 at 1e-2."""
+    rng = np.random.default_rng(20261124)
+    cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(247)][246])
+    res = {st: harness._one_run(cfg, 1e-10, knobs={} if st is None else {"slave_tol": st}) for st in (None, 1e-4, 0.0)}
+    default = res.pop(None)
+    for st, r in res.items():
+        assert r["events"] == default["events"] == [118, 69, 0], (st, r["events"], default["events"])
+        assert abs(r["q"]["t_halt"] - default["q"]["t_halt"]) < 1e-8 * r["q"]["t_halt"], st
+
+
 def _counts(cfg, rtol, spin_tol):
     c = copy.deepcopy(cfg)
     c["solver"] = {"rtol": rtol, "atol": rtol * 1e-2, "spin_tol": spin_tol}

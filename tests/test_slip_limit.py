@@ -243,3 +243,85 @@ def test_a_halted_scene_whose_levels_show_no_finite_approach_has_a_halt_time(ind
     assert abs(t_true - s["t_halt"]) <= s["t_halt_error"], (t_true, s["t_halt"], s["t_halt_error"])
     # the counts and the end are those at the halt: the steps after it do not count
     assert s["t_end"] == pytest.approx(last)
+
+
+# --- slow slip: the slaved direction (docs/model.md, 'Slow slip') ---------------------------------
+
+def _paper_edge(**contact):
+    import yaml
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "config/scenes/kessler2002.yaml").read_text())
+    cfg["contact"].update(mu_d=cfg["contact"]["mu_s"], **contact)
+    return cfg
+
+
+def test_the_slaved_directions_lag_agrees_with_the_peers():
+    """The lag of a slow slip's direction behind the quasi-static one (contact.root_lag: forward
+    differences along the motion and in the direction) against the SciPy peer's own
+    (scipy_driver.Disk.lag: central differences, plain Python) at random slow slips of the paper's
+    disk at mu_d = mu_s: the same first-order slow manifold, lag = u nu*'/(c' - rad), to 1e-5 of the
+    lag; and the error measures agree to 1e-6."""
+    from scipy_driver import Contact, Disk, numba_backend
+    from sweep.scene import load_scene
+
+    sc = load_scene(_paper_edge())
+    p = sc.params
+    n = M.N_CORE
+    disk = Disk(numba_backend(), p, n, p[M.P_UTOL], {})
+    rng = np.random.default_rng(5)
+    wk = np.zeros((L.N_WORK, L.N_WCOLS))
+    ist = np.zeros(L.N_ISTATS, dtype=np.int64)
+    checked = 0
+    for _ in range(40):
+        y = np.zeros(M.N_FULL)
+        y[M.Y_ALPHA] = rng.uniform(0.3, 1.45)
+        y[M.Y_W1:M.Y_W3 + 1] = rng.normal(0.0, 0.5, 3) + [0.0, 0.0, -1.0]
+        u = 10.0 ** rng.uniform(-6, -3)
+        cs = np.zeros(L.N_CS)
+        cs[L.CS_MODE], cs[L.CS_SIDE] = L.SLIDE, 1.0
+        cs[L.CS_SIG:L.CS_SIG + 3] = np.where(np.array(M.moment_axes_rates(y)) >= 0.0, 1.0, -1.0)
+        system = L.System(p, cs, n, wk, ist)
+        root = C.attracting_direction(rng.uniform(-math.pi, math.pi), u, 0.0, y, system)
+        if not math.isfinite(root):
+            continue
+        lag, dcross, err = C.root_lag(root, u, 0.0, y, system, np.zeros(M.N_FULL), np.zeros(M.N_AUX))
+        c = Contact(1)
+        c.mode = 1
+        c.sig = list(cs[L.CS_SIG:L.CS_SIG + 3])
+        peer_lag, peer_err = disk.lag(root, u, 0.0, y, c)
+        if not math.isfinite(err):
+            assert not math.isfinite(peer_err)
+            continue
+        assert lag == pytest.approx(peer_lag, rel=1e-5, abs=1e-14 * u), (u, root, lag, peer_lag)
+        assert err == pytest.approx(peer_err, rel=1e-6), (u, root, err, peer_err)
+        checked += 1
+    assert checked >= 20
+
+
+def test_a_slip_at_the_edge_of_the_cone_without_k3_halts():
+    """The paper's disk at mu_d = mu_s with k3 = 0 slips for most of its motion; with the slip's
+    direction integrated wherever it relaxes slowly it ran into step_limit (5e6 steps) having reached
+    only the 0.1 rad level. Slaved by the slow manifold, it halts with a finite halt time."""
+    cfg = _paper_edge(k3=0.0)
+    s = sweep.simulate(cfg).summary
+    assert s["outcome"] == "halted", s["outcome"]
+    assert s["halt_finite"] and math.isfinite(s["t_halt"]) and math.isfinite(s["t_halt_error"])
+    assert s["n_steps"] < 300_000, s["n_steps"]
+
+
+def test_the_slaved_direction_converges_as_slave_tol_goes_to_zero():
+    """The paper's disk at mu_d = mu_s to tau = 60 (0.1 rad reached): alpha at tau 20, 40, 60 at
+    slave_tol 1e-2, 3e-3 (default) and 1e-3 against 1e-4: the differences shrink at least as the
+    square of slave_tol's ratio over a decade less one (the neglected terms are second order), and
+    the default is within 1e-8 rad."""
+    cfg = _paper_edge()
+    chi = _chi(cfg)
+    cfg["stop"] = {"levels": [0.1], "t_max": 60.5 * chi}
+    times = [20.0 * chi, 40.0 * chi, 60.0 * chi]
+    alpha = {}
+    for st in (1e-2, 3e-3, 1e-3, 1e-4):
+        cfg["solver"] = {"slave_tol": st}
+        alpha[st] = sweep.simulate(cfg, sample_times=times).samples["alpha"]
+    d = {st: float(np.max(np.abs(alpha[st] - alpha[1e-4]))) for st in (1e-2, 3e-3, 1e-3)}
+    print(d)
+    assert d[3e-3] < 1e-8, d
+    assert d[1e-3] < d[1e-2] / 10.0, d

@@ -69,6 +69,7 @@ BAD_VALUES = {
     "solver.dt": [0.0, -1e-3],
     "solver.slip_tol": [0.0, 1.0],
     "solver.spin_tol": [-1e-9, 1.0, float("nan"), "off"],
+    "solver.slave_tol": [-1e-3, 0.5, float("inf"), "1e-3"],
     "outputs.kinematics": ["yes", 1],
 }
 CASES = [(f, v) for f, vals in BAD_VALUES.items() for v in vals]

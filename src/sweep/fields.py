@@ -161,6 +161,10 @@ RANGES: dict[str, Range] = {
     "solver.spin_tol": Range(0.0, 1e-2, "rate |omega.a_i| at which a slowing moment component sticks if its "
                              "motion goes on to rest and the contact moment can hold it (0: only at rest)",
                              "rad/s"),
+    "solver.slave_tol": Range(0.0, 0.1, "relaxation time of a slow slip's direction times the rate of the "
+                              "motion (dimensionless) below which the direction is solved as its slow manifold "
+                              "instead of integrated (0: only below slip_tol; results converge as it goes to 0: "
+                              "docs/model.md, 'Slow slip')"),
     # the disk's material, for the sound synthesis only (sweep.audio, sweep.plate)
     "material.E": Range(0.0, 1e13, "Young's modulus", "Pa", lo_open=True),
     "material.density": Range(0.0, 1e5, "density", "kg/m^3", lo_open=True),
@@ -176,7 +180,7 @@ SWEEP_KEYS: dict[str, str] = {
     "grid.alpha0": "initial.alpha", "grid.omega0": "initial.spin", "levels": "stop.levels",
     "solver.rtol": "solver.rtol", "solver.atol": "solver.atol", "solver.dt": "solver.dt",
     "solver.slip_tol": "solver.slip_tol", "solver.spin_tol": "solver.spin_tol",
-    "stop.t_max": "stop.t_max", "stop.max_steps": "stop.max_steps",
+    "solver.slave_tol": "solver.slave_tol", "stop.t_max": "stop.t_max", "stop.max_steps": "stop.max_steps",
 }
 # the sweep key of a scene field, to name in a message what the user wrote
 SWEEP_KEY_OF = {field: key for key, field in SWEEP_KEYS.items()}

@@ -42,8 +42,11 @@ DEFAULTS: dict[str, Any] = {
     # few ms per scene; slip_tol: slip speed (m/s) at which a slide meets its fate; spin_tol: rate
     # (rad/s) of a moment component at which it sticks if it goes on to rest and the moment can hold
     # it; neither decides what happens (docs/model.md, 'Where a slip ends', 'Sticking at spin_tol').
+    # slave_tol: the slip direction's relaxation time times the motion's rate below which it is solved
+    # as its slow manifold instead of integrated; results converge as it goes to 0 (docs/model.md,
+    # 'Slow slip').
     "solver": {"method": "adaptive", "rtol": 1.0e-10, "atol": 1.0e-12, "dt": 1.0e-3, "slip_tol": 1.0e-9,
-               "spin_tol": 1.0e-7},
+               "spin_tol": 1.0e-7, "slave_tol": 3.0e-3},
     "outputs": {"normal_force_frequency": True, "kinematics": False},
     # The disk's elastic material, used only by the sound synthesis (sweep.audio, sweep.plate), never by
     # the integrator or the summary: E (Pa), density (kg/m^3), poisson (-), damping (modal damping
@@ -159,7 +162,7 @@ def _validate(raw) -> Scene:
     so = cfg["solver"]
     if not isinstance(so["method"], str) or so["method"] not in ("adaptive", "fixed"):
         raise ConfigError("solver.method", so["method"], "one of: adaptive, fixed")
-    for k in ("rtol", "atol", "dt", "slip_tol", "spin_tol"):
+    for k in ("rtol", "atol", "dt", "slip_tol", "spin_tol", "slave_tol"):
         so[k] = fields.check(f"solver.{k}", so[k])
     out = cfg["outputs"]
     for k in out:
@@ -173,6 +176,7 @@ def _validate(raw) -> Scene:
                                     c["mu_s"], c["mu_d"], (c["k1"], c["k2"], c["k3"]))
     params[model.P_UTOL] = so["slip_tol"] * chi / d["radius"]
     params[model.P_WTOL] = so["spin_tol"] * chi
+    params[model.P_SLAVE] = so["slave_tol"]
     bmax = max_level(params)
     if st["levels"][0] > bmax:
         raise ConfigError("stop.levels", st["levels"][0],

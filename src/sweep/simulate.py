@@ -31,6 +31,9 @@ class SimulationResult:
     samples: dict | None = None
     trajectory: dict | None = None
     peaks: np.ndarray | None = field(default=None, repr=False)
+    # |theta(t_end)| / 2 pi, the precession cycles of the contact line over the run (theta, eq. 2.1,
+    # is integrated for the frequency outputs, samples or a trajectory; NaN where it is not)
+    precession_cycles: float = math.nan
 
 
 def initial_state(scene: Scene) -> tuple[np.ndarray, int]:
@@ -166,4 +169,8 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
             "tau": traj[:, 0].copy(),
             "energy": trajectory_energy(traj, sc) * escale,
         }
-    return SimulationResult(scene=sc, summary=summary, samples=samples, trajectory=tr, peaks=peaks[:, :2] * [chi, 1.0])
+    out_cfg = sc.config["outputs"]
+    theta_on = out_cfg["kinematics"] or out_cfg["normal_force_frequency"]
+    cycles = abs(float(y_end[model.Y_THETA])) / (2.0 * math.pi) if theta_on else math.nan
+    return SimulationResult(scene=sc, summary=summary, samples=samples, trajectory=tr, peaks=peaks[:, :2] * [chi, 1.0],
+                            precession_cycles=cycles)

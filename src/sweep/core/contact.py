@@ -6,11 +6,11 @@ group, `sys` (layout.System: parameters, contact state, state size, work buffer,
 Modes (docs/model.md, 'Modes, signs and sticking'):
   ROLL    no slip; friction is what rolling needs, inside the static cone |F| <= mu_s Phi.
   SLIDE   friction -mu_d Phi u/|u| (eq. 4.7), the slip integrated in Cartesian form.
-  SLAVED  a slow slip, |u| <= the slaving speed u_s = max(slip_tol, SLAVE_EPS mu_d Phi): its direction
-          nu is not integrated but solved at every evaluation as the quasi-static one, where the slip
-          acceleration is parallel to the slip (the direction rate, ~ mu_d Phi / u, is the stiff
-          mode of the sliding equations at u -> 0; slaving it is the leading order of the singular
-          perturbation in the relaxation time). Entered at a slip onset (u = 0) and from SLIDE where
+  SLAVED  a slow slip, |u| <= the slaving speed u_s (slave_speed: slave_tol mu_d Phi / (1 + |theta'|)): its direction
+          is not integrated but solved at every evaluation as the slow manifold of the direction
+          dynamics (the direction rate, ~ mu_d Phi / u, is the stiff mode of the sliding equations
+          at u -> 0): the quasi-static direction nu*, where the slip acceleration is parallel to the
+          slip, plus the lag behind it, first order in the relaxation time (slaved_slip). Entered at a slip onset (u = 0) and from SLIDE where
           |u| falls to u_s onto the attracting quasi-static direction, if there is one (try_slave);
           it hands over to SLIDE where u grows past SLAVE_EXIT u_s or the direction folds away, and
           ends in ROLL where u.s returns to 0 (located events; the velocity is continuous).
@@ -36,9 +36,9 @@ from .events import (C_CONTACT_LOST, C_FACE, C_MOMENT, C_SIDE, E_CLASS, E_COMPON
 from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
-                     W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
+                     W_AUXFLOW, W_AUXSLOPE, W_DYFLOW, W_DYSLOPE, W_DYTMP, W_YFLOW, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
                      System)
-from .model import (N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
+from .model import (N_PARAMS, P_A, P_SLAVE, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_LAG, X_NU, X_SLAVE_ERR, Y_ALPHA,
                     Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, Contact, energy_from_trig, moment_axes_rates, rhs, sign_rate)
 
 # Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
@@ -48,13 +48,11 @@ from .model import (N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTO
 BETA_FACE = 1e-6
 # Two rim-edge impacts closer than ZENO_DTAU (tau) end the scene as line contact.
 ZENO_DTAU = 1e-6
-# Slaving speed: the slip direction is slaved where its relaxation time |u|/(mu_d Phi) (in units of
-# chi) is below SLAVE_EPS, i.e. |u_hat| <= SLAVE_EPS mu_d Phi (and at least slip_tol). The slaved
-# direction then differs from the integrated one by O(SLAVE_EPS) (singular perturbation).
-SLAVE_EPS = 1e-7
 # A slaved slip returns to SLIDE only where it has grown to SLAVE_EXIT times the slaving speed: the
-# two modes' boundaries differ, so a slip near the slaving speed cannot switch at every step.
-SLAVE_EXIT = 4.0
+# two modes' boundaries differ, so a slip near the slaving speed cannot switch at every step. The
+# slaved direction's error grows as the square of the relaxation time (docs/model.md, 'Slow slip'):
+# at 4 times the slaving speed slips that never left SLAVED carried 30 times the error of those at 2.
+SLAVE_EXIT = 2.0
 # cs[CS_SLAVE_OFF] while a slide that spirals out from u = 0 slides on below slip_tol (slow_slide):
 # the hand-over and EV_SLIP_SLOW are both off until the slip is fast again (EV_SLIP_FAST)
 SLOW_OFF = 2.0
@@ -76,6 +74,10 @@ DIR_TOL = 1e-14
 # its angle update gets below DIR_TOL: the root is then found to machine precision, not lost.
 DIR_NOISE = 64.0 * 2.220446049250313e-16
 DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
+# tau: forward-difference step of d cross/d tau along the motion at a fixed direction (the lag):
+# truncation O(FLOW_DTAU) relative, round-off ~EPS |a_P| / FLOW_DTAU, both far below the lag's
+# own neglected second order
+FLOW_DTAU = 1e-7
 DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
 DIR_MAXIT = 30
 # attracting_direction's answer where the slip direction is carried into the Painleve singularity
@@ -102,9 +104,13 @@ def slip_floor(t, aux, p, cs):
 
 
 @kernel
-def slave_speed(aux, p):
-    """Slip speed (u_hat) below which the slip direction is slaved: max(slip_tol, SLAVE_EPS mu_d Phi)."""
-    return max(p[P_UTOL], SLAVE_EPS * p[P_MUD] * aux[X_PHI])
+def slave_speed(y, aux, p):
+    """Slip speed (u_hat) below which the slip direction is slaved: where its relaxation time
+    |u|/(mu_d Phi) times the rate of the motion, 1 + |theta'| (the precession rate theta' =
+    omega_3 sec alpha, eq. 2.3, in units of 1/chi), is below slave_tol (p[P_SLAVE]); at least
+    slip_tol."""
+    rate = 1.0 + abs(y[Y_W3] / aux[X_COSA])
+    return max(p[P_UTOL], p[P_SLAVE] * p[P_MUD] * aux[X_PHI] / rate)
 
 
 @kernel
@@ -213,23 +219,90 @@ def friction_along(nu, t, y, sys, dy, aux):
 
 
 @kernel
+def direction_lag(nu, u, rates, t, y, sys, dy):
+    """The lag (rad) of a slow slip's direction behind the quasi-static direction nu, first order
+    in the relaxation time: on the slow manifold of d nu/d tau = cross(nu)/u the direction is
+    nu* + delta, and with delta = k u (the lag scales with the slip, whose own rate u'/u = rad/u is
+    as fast as the direction's) u (nu*' + delta') = c' delta gives delta = u nu*'/(c' - rad)
+    (c' = d cross/d nu < 0 where nu attracts, rad = u' the slip's rate along s), with
+    nu*' = -(d cross/d tau at fixed nu)/c' (docs/model.md, 'Slow slip'). dy: the right-hand side
+    at the slip vector u s(nu) (slip_rates'), rates = (cross, rad, c') there; d cross/d tau by a
+    forward difference along that motion. 0 where nu does not attract that way (c' - rad >= 0)."""
+    cross0, rad0, dcross = rates
+    den = dcross * (dcross - rad0)
+    if not (dcross < 0.0 and dcross - rad0 < 0.0 and u > 0.0):
+        return 0.0
+    # the step along the motion, short enough that the slip speed stays positive on it
+    step = min(FLOW_DTAU, 0.5 * u / abs(rad0)) if rad0 < 0.0 else FLOW_DTAU
+    wk = sys.wk
+    yf = wk[W_YFLOW]
+    for i in range(sys.n):
+        yf[i] = y[i] + step * dy[i]
+    cross_f, _ = slip_rates(nu, u + step * rad0, t + step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW], wk[W_YSLIP])
+    return -u * ((cross_f - cross0) / step) / den
+
+
+@kernel
+def root_lag(nu, u, t, y, sys, dy, aux):
+    """(lag, c', err) of the slow slip at the quasi-static direction nu (slaved_slip's): dy, aux get
+    the right-hand side at the slip vector u s(nu)."""
+    wk = sys.wk
+    cross0, rad0 = slip_rates(nu, u, t, y, sys, dy, aux, wk[W_YSLIP])
+    return lag_and_error(nu, u, cross0, t, y, sys, dy, aux)
+
+
+@kernel
+def lag_and_error(nu, u, cross0, t, y, sys, dy, aux):
+    """(lag, c', err) at the quasi-static direction nu, dy, aux the right-hand side at the slip vector
+    u s(nu) and cross0 its cross: c' = d cross/d nu by a forward difference, the lag
+    (direction_lag) and the slaved direction's error measure (slaved_slip)."""
+    wk = sys.wk
+    rad0 = dy[Y_U1] * math.cos(nu) + dy[Y_U2] * math.sin(nu)
+    cross1, _ = slip_rates(nu + DCROSS_DNU, u, t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP])
+    dcross = (cross1 - cross0) / DCROSS_DNU
+    lag = direction_lag(nu, u, (cross0, rad0, dcross), t, y, sys, dy)
+    relax = rad0 - dcross
+    err = math.inf
+    if dcross < 0.0 and relax > 0.0:
+        err = u * (1.0 + abs(y[Y_W3] / aux[X_COSA])) / relax + abs(lag)
+    return lag, dcross, err
+
+
+@kernel
+def slaved_slip(nu0, t, y, sys, dy, aux):
+    """The slow slip's direction at the state: (nu*, lag, c', ok, err). nu* is the quasi-static
+    direction continued from nu0 (slaved_direction), the friction acts along nu* + lag
+    (direction_lag), c' = d cross/d nu there; ok is slaved_direction's aux[X_OK] (0: no root
+    near nu0). err measures how far the first-order slow manifold is from exact: the direction's
+    relaxation time |u|/|c' - rad| times the motion's rate 1 + |theta'|, plus the lag itself
+    (the neglected terms are of the order of their product and of the lag squared); inf where the
+    direction does not relax onto nu* + lag (c' - rad >= 0). dy, aux are left with the
+    right-hand side at the slip vector |u| s(nu*)."""
+    u = math.hypot(y[Y_U1], y[Y_U2])
+    nu = slaved_direction(nu0, u, t, y, sys, dy, aux, sys.wk[W_YSLIP])
+    ok = aux[X_OK]
+    cross0 = dy[Y_U2] * math.cos(nu) - dy[Y_U1] * math.sin(nu)
+    lag, dcross, err = lag_and_error(nu, u, cross0, t, y, sys, dy, aux)
+    if not ok > 0.0:
+        lag = 0.0
+    return nu, lag, dcross, ok, err
+
+
+@kernel
 def eval_rhs(t, y, sys, dy, aux):
     """d y/d tau and contact quantities (aux) for the contact state cs; counts its model calls."""
-    cs, n, wk = sys.cs, sys.n, sys.wk
+    cs, n = sys.cs, sys.n
     mode = cs[CS_MODE]
     if mode == SLAVED:
-        u = math.hypot(y[Y_U1], y[Y_U2])
-        nu = slaved_direction(cs[CS_NU], u, t, y, sys, dy, aux, wk[W_YSLIP])
-        # the sliding equations at the slip vector itself with the friction along s(nu): the slip
-        # acceleration, the friction power (mu_d Phi s.u) and the energy stay those of one
+        nu, lag, dcross, ok, err = slaved_slip(cs[CS_NU], t, y, sys, dy, aux)
+        # the sliding equations at the slip vector itself with the friction along s(nu + lag): the
+        # slip acceleration, the friction power (mu_d Phi s.u) and the energy stay those of one
         # Newton-Euler motion, so the energy books close however far u turns from s
-        # how strongly the direction is attracted: d cross/d nu by a forward difference
-        cross0 = dy[Y_U2] * math.cos(nu) - dy[Y_U1] * math.sin(nu)
-        ok = aux[X_OK]
-        cross1, _ = slip_rates(nu + DCROSS_DNU, u, t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP])
-        friction_along(nu, t, y, sys, dy, aux)
-        aux[X_DCROSS] = (cross1 - cross0) / DCROSS_DNU
+        friction_along(nu + lag, t, y, sys, dy, aux)
+        aux[X_DCROSS] = dcross
         aux[X_NU] = nu
+        aux[X_LAG] = lag
+        aux[X_SLAVE_ERR] = err
         if ok < 0.0:
             aux[X_OK] = ok
         elif ok == 0.0:
@@ -329,7 +402,7 @@ def set_slip(t, y, sys):
         cs[CS_NU] = nu
         cs[CS_SLAVE_OFF] = 0.0
         model_call(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
-        if un <= slave_speed(wk[W_AUXTMP], p):
+        if un <= slave_speed(y, wk[W_AUXTMP], p):
             return try_slave(t, y, sys)
         return -1
     cs[CS_MODE] = SLAVED
@@ -396,23 +469,29 @@ def try_slave(t, y, sys):
     # where the slip points against the direction, it is not settling onto it but passing by u = 0
     # (its direction turning towards a root along which it grows): it goes on sliding, as the
     # sliding equations carry it, past u = 0 or to slip_tol (docs/model.md)
-    if not settle_onto(root, y, sys):
+    if not settle_onto(root, t, y, sys):
         cs[CS_SLAVE_OFF] = 1.0
     return -1
 
 
 @kernel
-def settle_onto(root, y, sys):
-    """SLIDE -> SLAVED along the direction root: the slip component across it is removed by a
-    plastic impulse (O(u^2) loss), if that leaves the slip along it (u.s(root) > 0); else the state
-    is left as it was. Returns whether the slip settled."""
+def settle_onto(root, t, y, sys):
+    """SLIDE -> SLAVED at the quasi-static direction root: the slip component across the slow
+    manifold's direction there (root plus the lag, root_lag) is removed by a plastic impulse
+    (O(u^2) loss), if that leaves the slip along it and the slaved direction's error there is
+    within slave_tol (slaved_slip); else the state is left as it was. Returns whether the slip
+    settled."""
     p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     side = int(cs[CS_SIDE])
+    lag, _, err = root_lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+    if p[P_SLAVE] > 0.0 and not err <= p[P_SLAVE]:
+        return False   # the slow manifold is no good approximation here: the slip slides on
+    along = root + lag
     saved = wk[W_YSLIP]
     for i in range(n):
         saved[i] = y[i]
-    loss = project_velocity(y, p, side, True, side, True, wk[W_SCRATCH:W_SCRATCH + 7], root)
-    if y[Y_U1] * math.cos(root) + y[Y_U2] * math.sin(root) > 0.0:
+    loss = project_velocity(y, p, side, True, side, True, wk[W_SCRATCH:W_SCRATCH + 7], along)
+    if y[Y_U1] * math.cos(along) + y[Y_U2] * math.sin(along) > 0.0:
         y[Y_DSLIDE] += loss
         cs[CS_MODE] = SLAVED
         cs[CS_NU] = root
@@ -492,7 +571,7 @@ def slow_slide(t, y, sys):
     if fate == FATE_SPIRALS_OUT:
         cs[CS_SLAVE_OFF] = SLOW_OFF
         return -1
-    if fate == FATE_ENDS and not math.isnan(nu) and settle_onto(nu, y, sys):
+    if fate == FATE_ENDS and not math.isnan(nu) and settle_onto(nu, t, y, sys):
         cs[CS_SLAVE_OFF] = 0.0
         return -1
     eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
@@ -567,13 +646,12 @@ def decision_rhs(i, t, y, sys, dy, aux):
     confirm_slaved looks for it after the update) is where the direction relaxes to, not where it
     is; a secant that fails there left its last iterate, a direction set by the iteration, to
     decide the stick (docs/model.md, 'The moment a decision reads in a slaved slip')."""
-    cs, wk = sys.cs, sys.wk
+    cs = sys.cs
     slaved = cs[CS_MODE] == SLAVED
     nu = cs[CS_NU]
     if slaved:
-        nu = slaved_direction(nu, math.hypot(y[Y_U1], y[Y_U2]), t, y, sys, dy, aux, wk[W_YSLIP])
-        if aux[X_OK] == 0.0:
-            nu = math.atan2(y[Y_U2], y[Y_U1])
+        root, lag, _, ok, _ = slaved_slip(nu, t, y, sys, dy, aux)
+        nu = root + lag if ok != 0.0 else math.atan2(y[Y_U2], y[Y_U1])
     was = cs[CS_STUCK + i] if i >= 0 else 0.0
     if i >= 0:
         cs[CS_STUCK + i] = 1.0
@@ -870,22 +948,33 @@ def event_values(t, y, aux, p, cs, lev, g):
         if cs[CS_SLAVE_OFF] != SLOW_OFF:
             g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p, cs)
         if cs[CS_SLAVE_OFF] == 0.0:
-            g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(aux, p)
+            g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(y, aux, p)
         else:
             # the hand-over is off (no quasi-static direction to settle on, or the slip passed it
             # by) until the slip is fast again: SLAVE_EXIT times the slaving speed, as a slaved
             # slip's exit; a slip that reverses and later decays is handed over then
-            g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p) - math.hypot(y[Y_U1], y[Y_U2])
+            g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(y, aux, p) - math.hypot(y[Y_U1], y[Y_U2])
     else:
         # the slip along the slaved direction at this state (the RHS's): reaches 0 where the slip ends
-        g[EV_SLIP_STOP] = y[Y_U1] * math.cos(aux[X_NU]) + y[Y_U2] * math.sin(aux[X_NU])
-        g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(aux, p) - math.hypot(y[Y_U1], y[Y_U2])
+        g[EV_SLIP_STOP] = y[Y_U1] * math.cos(aux[X_NU] + aux[X_LAG]) + y[Y_U2] * math.sin(aux[X_NU] + aux[X_LAG])
+        g[EV_SLIP_FAST] = slaved_margin(y, aux, p)
         g[EV_SLAVE_LOST] = -aux[X_DCROSS]
     g[EV_CONTACT] = aux[X_PHI]
     g[EV_SIDE] = state_event_value(EV_SIDE, t, y, p, cs, lev)
     g[EV_FACE] = state_event_value(EV_FACE, t, y, p, cs, lev)
     if not math.isnan(lev):
         g[EV_LEVEL] = mode_energy_at(y, aux, p, cs) - lev   # state_event_value's, from aux
+
+
+@kernel
+def slaved_margin(y, aux, p):
+    """EV_SLIP_FAST of a slaved slip: > 0 while the slip is below SLAVE_EXIT times the slaving speed
+    and the slaved direction's error (aux[X_SLAVE_ERR]) below SLAVE_EXIT times slave_tol; each as
+    a fraction of its bound, the smaller."""
+    margin = 1.0 - math.hypot(y[Y_U1], y[Y_U2]) / (SLAVE_EXIT * slave_speed(y, aux, p))
+    if p[P_SLAVE] > 0.0:
+        margin = min(margin, 1.0 - aux[X_SLAVE_ERR] / (SLAVE_EXIT * p[P_SLAVE]))
+    return margin
 
 
 @kernel

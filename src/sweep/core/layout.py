@@ -66,7 +66,10 @@ W_AUXSLOPE = 28
 W_RATEOLD = 29    # d g_k/d tau at the step start (forward difference; roots.event_rates)
 W_RATENEW = 30    # ... at the step end
 W_DELTA = 31      # the step's (or kept segment's) increment y_new - y before rounding (energy balance)
-N_WORK = 32
+W_YFLOW = 32      # SLAVED: the state a short way along the motion (the slip direction's lag)
+W_DYFLOW = 33
+W_AUXFLOW = 34
+N_WORK = 35
 N_WCOLS = max(N_FULL, N_AUX, N_EVENTS)   # columns of the work buffer: a state, an aux or every event's value
 
 # --- settings vector: the run's inputs (float64; a scene's row of a batch), read once into RunConsts ---

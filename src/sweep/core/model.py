@@ -40,7 +40,12 @@ P_UTOL = 9
 # Rate |omega.a_i| (dimensionless, solver.spin_tol chi) at or below which a free moment component
 # that slows down sticks, when the moment can hold it (docs/model.md); 0: only at omega.a_i = 0.
 P_WTOL = 10
-N_PARAMS = 11
+# Relaxation time of the slip direction (units of chi; solver.slave_tol) below which a slow slip's
+# direction is slaved: solved as the slow manifold of the direction dynamics to first order in that
+# time instead of integrated (core.contact, docs/model.md 'Slow slip'). A numerical knob: the
+# results converge to those of the integrated direction as it goes to 0.
+P_SLAVE = 11
+N_PARAMS = 12
 
 # --- auxiliary outputs of the right-hand side ----------------------------------------------
 X_PHI, X_F1, X_F2, X_SIG1, X_SIG2, X_SIG3, X_G1, X_G2, X_G3, X_OK = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
@@ -48,8 +53,10 @@ X_DCROSS = 10   # SLAVED only (contact.eval_rhs): d cross/d nu at the slaved dir
 # sin(alpha), cos(alpha) of the state the right-hand side was evaluated at: the energy kernels of
 # the step control and the events read them (*_trig) instead of evaluating the pair again
 X_SINA, X_COSA = 11, 12
-X_NU = 13       # SLAVED only (contact.eval_rhs): the slaved slip direction at this state (rad)
-N_AUX = 14
+X_NU = 13       # SLAVED only (contact.eval_rhs): the quasi-static slip direction at this state (rad)
+X_LAG = 14      # SLAVED only: the slip direction's lag behind it (rad); the friction acts along X_NU + X_LAG
+X_SLAVE_ERR = 15  # SLAVED only: how far the slaved direction is from exact (contact.slaved_slip; inf: invalid)
+N_AUX = 16
 
 ROLL, SLIDE = 0, 1
 
@@ -82,6 +89,7 @@ def make_params(k2_shape: float, radius: float, thickness: float, gravity: float
     p[P_MUD] = mu_d
     p[P_UTOL] = 0.0
     p[P_WTOL] = 0.0
+    p[P_SLAVE] = 0.0
     return p, chi
 
 

@@ -1,0 +1,265 @@
+#!/usr/bin/env python3
+"""Slow slip near the edge of the friction cone (mu_d -> mu_s): cost against content, this tree
+against a base commit side by side (docs/model.md, 'Slow slip').
+
+    .venv/bin/python benchmarks/slow_slip.py [--base 746a2c3] [--random 30] [--seed 20261150]
+        [--parts paper,accuracy,k3,random,mechanism]
+
+Parts (each prints one table; this tree and the base run in two worker processes, the base
+extracted with `git archive` into a temporary directory with its own numba cache, as
+benchmarks/harness_cost.py does):
+
+* paper: the paper's disk (config/scenes/kessler2002.yaml) at mu_d 0.3, 0.49, 0.499, 0.5 (mu_s 0.5):
+  accepted steps (rejected), right-hand sides, located events, roll<->slip transitions, slip
+  fraction, CPU; and the steps at mu_d = mu_s over those at 0.3.
+* accuracy: the same disk at mu_d = mu_s, its level times and t_halt at the default settings
+  against the converged answer (this tree at rtol 1e-12 with slave_tol 1e-6: the direction
+  integrated wherever its relaxation time times the motion's rate exceeds 1e-6), and the change
+  under alpha0 + 1e-10 rad (the sensitivity of the dynamics, to tell it from the numerical error).
+* k3: the same scene with k3 = 0 (halts, or runs into step_limit).
+* random: random harness scenes (benchmarks/convergence.py's draw, levels 0.1 .. 0.001 rad,
+  t_max 300 s) with mu_d / mu_s drawn in [0.97, 1], and the same scenes at mu_d = 0.9 mu_s:
+  outcomes that are failures, and the total steps of the near-edge set over the 0.9 set.
+* mechanism: where the steps of the mu_d = mu_s scene go, by contact state (ROLL, SLIDE, SLAVED)
+  and slip speed |u| (m/s): steps, simulated time, mean step, and for SLIDE the median of
+  h mu_d Phi / |u| (dimensionless): a constant there means the step is held at the stability
+  bound of the explicit method by the direction's relaxation rate ~ mu_d Phi / |u|.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import convergence as cv  # noqa: E402
+from harness_cost import extract  # noqa: E402
+
+FAILURES = ("step_size_underflow", "step_limit", "numerical_error")
+MUDS = (0.3, 0.49, 0.499, 0.5)
+U_BANDS = (0.0, 1e-9, 1e-7, 1e-5, 1e-3, 1e-1, math.inf)   # m/s
+
+WORKER = r"""
+import json, math, sys, time
+import numpy as np
+from sweep.scene import load_scene
+from sweep.simulate import run_kernel, simulate
+from sweep.core import model
+BANDS = json.loads(sys.argv[1])
+for line in sys.stdin:
+    job = json.loads(line)
+    cfg = job["cfg"]
+    t0 = time.process_time()
+    if job.get("mechanism"):
+        cfg.setdefault("outputs", {})["kinematics"] = True
+        sc = load_scene(cfg)
+        out = run_kernel(sc, None, 4_000_000)
+        tr = out.trajectory
+        chi, R = sc.chi, cfg["disk"]["radius"]
+        tau = tr[:, 0]
+        h = np.diff(tau)
+        u = np.hypot(tr[1:, 1 + model.Y_U1], tr[1:, 1 + model.Y_U2]) * R / chi
+        mode = tr[1:, 2 + model.N_FULL]
+        phi = tr[1:, 1 + model.N_FULL]
+        uhat = np.hypot(tr[1:, 1 + model.Y_U1], tr[1:, 1 + model.Y_U2])
+        rows = []
+        for m in (0, 1, 2):
+            for lo, hi in zip(BANDS[:-1], BANDS[1:]):
+                sel = (mode == m) & (u >= lo) & (u < (hi if hi is not None else math.inf))
+                if not sel.any():
+                    continue
+                stab = float(np.median(h[sel] * sc.params[model.P_MUD] * phi[sel] / np.maximum(uhat[sel], 1e-300)))
+                rows.append([m, lo, hi, int(sel.sum()), float(h[sel].sum() * chi), float(h[sel].mean() * chi), stab])
+        print(json.dumps({"rows": rows, "cpu": time.process_time() - t0}), flush=True)
+        continue
+    try:
+        s = simulate(cfg).summary
+        out = {k: s[k] for k in ("outcome", "t_end", "t_halt", "t_halt_error", "n_steps", "n_rejected", "n_rhs",
+                                 "n_events", "n_transitions", "n_stick", "slip_fraction")}
+        out["levels"] = [lv["t"] for lv in s["levels"]]
+    except Exception as exc:
+        out = {"error": f"{type(exc).__name__}: {exc}"}
+    out["cpu"] = time.process_time() - t0
+    print(json.dumps(out), flush=True)
+"""
+
+
+class Side:
+    """One kernel in a worker process: this tree's src/ or a base commit's."""
+
+    def __init__(self, src: Path, cache: Path | None, knows_slave_tol: bool):
+        import os
+        import subprocess
+        env = dict(os.environ, PYTHONPATH=str(src))
+        if cache is not None:   # the base's own cache (this tree's is the one its runs use)
+            env["NUMBA_CACHE_DIR"] = str(cache)
+        bands = [b if math.isfinite(b) else None for b in U_BANDS]
+        self.proc = subprocess.Popen([sys.executable, "-c", WORKER, json.dumps(bands)], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, text=True, env=env)
+        self.knows_slave_tol = knows_slave_tol
+
+    def run(self, cfg: dict, mechanism: bool = False) -> dict:
+        cfg = copy.deepcopy(cfg)
+        if not self.knows_slave_tol:
+            cfg.get("solver", {}).pop("slave_tol", None)
+        self.proc.stdin.write(json.dumps({"cfg": cfg, "mechanism": mechanism}) + "\n")
+        self.proc.stdin.flush()
+        return json.loads(self.proc.stdout.readline())
+
+    def close(self):
+        self.proc.stdin.close()
+        self.proc.wait()
+
+
+def paper(mu_d: float, **solver) -> dict:
+    cfg = yaml.safe_load((ROOT / "config/scenes/kessler2002.yaml").read_text())
+    cfg["contact"]["mu_d"] = mu_d
+    cfg.setdefault("solver", {}).update(solver)
+    return cfg
+
+
+def part_paper(sides: dict) -> list[str]:
+    lines = ["## The paper's disk as mu_d approaches mu_s = 0.5", "",
+             "| kernel | mu_d | steps (rejected) | RHS | located events | transitions | slip fraction | CPU (s) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, side in sides.items():
+        steps = {}
+        for mu_d in MUDS:
+            r = side.run(paper(mu_d))
+            steps[mu_d] = r["n_steps"]
+            lines.append(f"| {name} | {mu_d:g} | {r['n_steps']} ({r['n_rejected']}) | {r['n_rhs']} | {r['n_events']} | "
+                         f"{r['n_transitions']} | {r['slip_fraction']:.2f} | {r['cpu']:.2f} |")
+        lines.append(f"| {name} | steps at 0.5 / at 0.3 | **{steps[0.5] / steps[0.3]:.2f}x** | | | | | |")
+    return lines
+
+
+def part_accuracy(sides: dict) -> list[str]:
+    ref = sides["this tree"].run(paper(0.5, rtol=1e-12, atol=1e-14, slave_tol=1e-6))
+    pert = copy.deepcopy(paper(0.5, rtol=1e-12, atol=1e-14, slave_tol=1e-6))
+    pert["initial"]["alpha"] += 1e-10
+    sens = sides["this tree"].run(pert)
+    ref_v = ref["levels"] + [ref["t_halt"]]
+    lines = ["## Accuracy at mu_d = mu_s (levels 0.1, 0.01, 1e-3, 1e-4 rad, then t_halt)", "",
+             f"converged (this tree, rtol 1e-12, slave_tol 1e-6, {ref['n_steps']} steps): "
+             + ", ".join(f"{v!r}" for v in ref_v) + " s", "",
+             "| run | relative difference to the converged values | largest |", "|---|---|---|"]
+    sv = sens["levels"] + [sens["t_halt"]]
+    d = [abs(a - b) / b for a, b in zip(sv, ref_v)]
+    lines.append(f"| alpha0 + 1e-10 rad (sensitivity) | {' '.join(f'{x:.1e}' for x in d)} | {max(d):.1e} |")
+    for name, side in sides.items():
+        r = side.run(paper(0.5))
+        v = r["levels"] + [r["t_halt"]]
+        d = [abs(a - b) / b for a, b in zip(v, ref_v)]
+        lines.append(f"| {name}, default settings | {' '.join(f'{x:.1e}' for x in d)} | **{max(d):.1e}** |")
+    return lines
+
+
+def part_k3(sides: dict) -> list[str]:
+    cfg = paper(0.5)
+    cfg["contact"]["k3"] = 0.0
+    lines = ["## mu_d = mu_s with k3 = 0", "", "| kernel | outcome | t_halt (s) | steps (rejected) | CPU (s) |",
+             "|---|---|---|---|---|"]
+    for name, side in sides.items():
+        r = side.run(cfg)
+        lines.append(f"| {name} | {r['outcome']} | {r['t_halt']:.4f} ± {r['t_halt_error']:.2g} | "
+                     f"{r['n_steps']} ({r['n_rejected']}) | {r['cpu']:.1f} |")
+    return lines
+
+
+def random_scenes(n: int, seed: int) -> list[tuple[dict, dict]]:
+    """(near-edge, 0.9 mu_s) pairs of harness scenes, mu_d / mu_s in [0.97, 1] for the first."""
+    rng = np.random.default_rng([seed, 97])
+    pairs = []
+    for _ in range(n):
+        cfg = cv._valid_levels(cv.draw_scene(rng))
+        edge = copy.deepcopy(cfg)
+        edge["contact"]["mu_d"] = cfg["contact"]["mu_s"] * rng.uniform(0.97, 1.0)
+        low = copy.deepcopy(cfg)
+        low["contact"]["mu_d"] = 0.9 * cfg["contact"]["mu_s"]
+        pairs.append((edge, low))
+    return pairs
+
+
+def part_random(sides: dict, n: int, seed: int) -> list[str]:
+    pairs = random_scenes(n, seed)
+    lines = [f"## {n} random harness scenes (seed {seed}) with mu_d / mu_s in [0.97, 1], and the same at 0.9", "",
+             "| kernel | failures near the edge | failures at 0.9 | steps near the edge | steps at 0.9 | ratio | CPU near the edge (s) |",
+             "|---|---|---|---|---|---|---|"]
+    for name, side in sides.items():
+        fail_e, fail_l, st_e, st_l, cpu_e = [], [], 0, 0, 0.0
+        for i, (edge, low) in enumerate(pairs):
+            re, rl = side.run(edge), side.run(low)
+            if "error" in re or re["outcome"] in FAILURES:
+                fail_e.append(f"{i}:{re.get('outcome', re.get('error'))}")
+            if "error" in rl or rl["outcome"] in FAILURES:
+                fail_l.append(f"{i}:{rl.get('outcome', rl.get('error'))}")
+            st_e += re.get("n_steps", 0) + re.get("n_rejected", 0)
+            st_l += rl.get("n_steps", 0) + rl.get("n_rejected", 0)
+            cpu_e += re["cpu"]
+        lines.append(f"| {name} | {len(fail_e)} {fail_e[:4]} | {len(fail_l)} {fail_l[:4]} | {st_e} | {st_l} | "
+                     f"**{st_e / max(st_l, 1):.2f}** | {cpu_e:.1f} |")
+    lines.append("")
+    lines.append("(steps: accepted + rejected)")
+    return lines
+
+
+def part_mechanism(sides: dict) -> list[str]:
+    names = {0: "ROLL", 1: "SLIDE", 2: "SLAVED"}
+    lines = ["## Where the steps go at mu_d = mu_s (default settings)", "",
+             "| kernel | contact state | |u| (m/s) | steps | time (s) | mean step (s) | median h mu_d Phi / |u| |",
+             "|---|---|---|---|---|---|---|"]
+    for name, side in sides.items():
+        r = side.run(paper(0.5), mechanism=True)
+        for m, lo, hi, k, tt, hm, stab in r["rows"]:
+            hi_t = "inf" if hi is None else f"{hi:g}"
+            st = f"{stab:.2g}" if m != 0 else "–"
+            lines.append(f"| {name} | {names[int(m)]} | [{lo:g}, {hi_t}) | {k} | {tt:.3f} | {hm:.2g} | {st} |")
+    return lines
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--base", default="746a2c3", help="the commit to compare with (default: before slow slip)")
+    ap.add_argument("--random", type=int, default=30, help="random scene pairs in part 'random'")
+    ap.add_argument("--seed", type=int, default=20261150)
+    ap.add_argument("--parts", default="paper,accuracy,k3,random,mechanism")
+    a = ap.parse_args(argv)
+    parts = a.parts.split(",")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        sides = {"this tree": Side(ROOT / "src", None, True)}
+        if a.base:
+            sides[f"base {a.base}"] = Side(extract(a.base, tmp), tmp / "cache-base", False)
+        out = []
+        try:
+            if "paper" in parts:
+                out += part_paper(sides) + [""]
+            if "accuracy" in parts:
+                out += part_accuracy(sides) + [""]
+            if "k3" in parts:
+                out += part_k3(sides) + [""]
+            if "random" in parts:
+                out += part_random(sides, a.random, a.seed) + [""]
+            if "mechanism" in parts:
+                out += part_mechanism(sides) + [""]
+        finally:
+            for side in sides.values():
+                side.close()
+    text = "\n".join(out)
+    print(text)
+    (HERE / "out").mkdir(exist_ok=True)
+    (HERE / "out" / "slow_slip.md").write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
