@@ -24,6 +24,9 @@ benchmarks/harness_cost.py does):
   and slip speed |u| (m/s): steps, simulated time, mean step, and for SLIDE the median of
   h mu_d Phi / |u| (dimensionless): a constant there means the step is held at the stability
   bound of the explicit method by the direction's relaxation rate ~ mu_d Phi / |u|.
+* sweep: the default sweep's scenes (config/config.yaml: this tree's grid, mu_d = mu_s included, on
+  this kernel; the base's grid on the base kernel), each run once, CPU summed: what the sweep's
+  integration costs (the sweep also reruns each scene for its error bars, alike on both sides).
 """
 from __future__ import annotations
 
@@ -212,6 +215,47 @@ def part_random(sides: dict, n: int, seed: int) -> list[str]:
     return lines
 
 
+def grid_scenes(config_text: str) -> list[dict]:
+    """Every scene of a sweep config's tensor grid (sweep.grid), its solver settings as the sweep's."""
+    import itertools
+
+    from sweep import grid
+
+    with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as fh:
+        fh.write(config_text)
+    sw = grid.load_sweep([(fh.name, "config")])
+    Path(fh.name).unlink()
+    axes = [sw.settings["grid"][a] for a in grid.AXES]
+    return [grid.scene(sw.settings, point) for point in itertools.product(*axes)]
+
+
+def part_sweep(sides: dict, base: str | None) -> list[str]:
+    """The default sweep's scenes: this tree's config/config.yaml (mu_d = mu_s included) on this
+    kernel against the base's config on the base kernel, one run of each scene, alternating."""
+    import subprocess
+    this = grid_scenes((ROOT / "config/config.yaml").read_text())
+    lines = ["## The default sweep's scenes (one run each, CPU summed)", "",
+             "| kernel | config | scenes | steps + rejected | CPU (s) | failures |", "|---|---|---|---|---|---|"]
+    runs = {"this tree": ("config/config.yaml of this tree", this)}
+    if base:
+        text = subprocess.run(["git", "-C", str(ROOT), "show", f"{base}:config/config.yaml"], check=True,
+                              capture_output=True, text=True).stdout
+        runs[f"base {base}"] = (f"config/config.yaml of {base}", grid_scenes(text))
+    totals = {}
+    for name, (label, scenes) in runs.items():
+        steps, cpu, fails = 0, 0.0, 0
+        for cfg in scenes:
+            r = sides[name].run(cfg)
+            steps += r.get("n_steps", 0) + r.get("n_rejected", 0)
+            cpu += r["cpu"]
+            fails += "error" in r or r["outcome"] in FAILURES
+        totals[name] = cpu
+        lines.append(f"| {name} | {label} | {len(scenes)} | {steps} | {cpu:.1f} | {fails} |")
+    if base:
+        lines.append(f"| this tree / base | | | | **{totals['this tree'] / totals[f'base {base}']:.2f}x** | |")
+    return lines
+
+
 def part_mechanism(sides: dict) -> list[str]:
     names = {0: "ROLL", 1: "SLIDE", 2: "SLAVED"}
     lines = ["## Where the steps go at mu_d = mu_s (default settings)", "",
@@ -231,7 +275,7 @@ def main(argv=None) -> int:
     ap.add_argument("--base", default="746a2c3", help="the commit to compare with (default: before slow slip)")
     ap.add_argument("--random", type=int, default=30, help="random scene pairs in part 'random'")
     ap.add_argument("--seed", type=int, default=20261150)
-    ap.add_argument("--parts", default="paper,accuracy,k3,random,mechanism")
+    ap.add_argument("--parts", default="paper,accuracy,k3,random,mechanism,sweep")
     a = ap.parse_args(argv)
     parts = a.parts.split(",")
     with tempfile.TemporaryDirectory() as tmp:
@@ -251,6 +295,8 @@ def main(argv=None) -> int:
                 out += part_random(sides, a.random, a.seed) + [""]
             if "mechanism" in parts:
                 out += part_mechanism(sides) + [""]
+            if "sweep" in parts:
+                out += part_sweep(sides, a.base) + [""]
         finally:
             for side in sides.values():
                 side.close()

@@ -648,15 +648,21 @@ def decision_rhs(i, t, y, sys, dy, aux):
     decide the stick (docs/model.md, 'The moment a decision reads in a slaved slip')."""
     cs = sys.cs
     slaved = cs[CS_MODE] == SLAVED
-    nu = cs[CS_NU]
+    root, lag, dcross, ok, err = cs[CS_NU], 0.0, 0.0, 1.0, 0.0
     if slaved:
-        root, lag, _, ok, _ = slaved_slip(nu, t, y, sys, dy, aux)
-        nu = root + lag if ok != 0.0 else math.atan2(y[Y_U2], y[Y_U1])
+        root, lag, dcross, ok, err = slaved_slip(root, t, y, sys, dy, aux)
+        if ok == 0.0:
+            root, lag = math.atan2(y[Y_U2], y[Y_U1]), 0.0
     was = cs[CS_STUCK + i] if i >= 0 else 0.0
     if i >= 0:
         cs[CS_STUCK + i] = 1.0
     if slaved:
-        friction_along(nu, t, y, sys, dy, aux)
+        friction_along(root + lag, t, y, sys, dy, aux)
+        # the slaved slip's own quantities, as eval_rhs leaves them (the event functions read them)
+        aux[X_DCROSS] = dcross
+        aux[X_NU] = root
+        aux[X_LAG] = lag
+        aux[X_SLAVE_ERR] = err
     else:
         eval_rhs(t, y, sys, dy, aux)
     if i >= 0:
