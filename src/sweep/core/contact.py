@@ -36,7 +36,7 @@ from .events import (C_CONTACT_LOST, C_FACE, C_MOMENT, C_SIDE, E_CLASS, E_COMPON
 from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
-                     W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
+                     W_AUXSLOPE, W_DYSLOPE, W_DYTMP, W_GBUF, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
                      System)
 from .model import (N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_NU, Y_ALPHA,
                     Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, Contact, energy_from_trig, moment_axes_rates, rhs, sign_rate)
@@ -999,12 +999,23 @@ def count_transition(rolling, cs, istats):
 
 @kernel
 def settle_event(t, y, sys, g_before, own):
-    """What every discrete update owes the state: a slide at or below slip_tol meets its fate
-    (slow_slide); the moment
+    """What every discrete update owes the state: a slip that it left at or past EV_SLIP_FAST's
+    surface (a slaved slip at SLAVE_EXIT times the slaving speed) is fast (slip_event: SLIDE, the
+    hand-over re-armed); a slide at or below slip_tol meets its fate (slow_slide); the moment
     components that the update moved are released (release_moved: g_before, omega.a_i before it)
     and every sign made consistent (settle_signs, leaving component own); a rolling state left
     outside the static cone starts to slip. Returns the outcome that ends the scene, else -1."""
     p, cs, wk = sys.p, sys.cs, sys.wk
+    if cs[CS_MODE] != ROLL:
+        # the stop at spin_tol (stick_at_spin_tol) moves the slip by O(spin_tol): it can carry a
+        # slaved slip past its exit, whose event, g going from > 0 to <= 0, can then no longer
+        # happen, and the slip was held on the quasi-static direction while it grew 1e6-fold
+        # (docs/model.md, 'Restarts on a surface'). The slip's event function, read as the
+        # decisions read the forces (decision_rhs).
+        decision_rhs(-1, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+        event_values(t, y, wk[W_AUXTMP], p, cs, math.nan, wk[W_GBUF])
+        if wk[W_GBUF, EV_SLIP_FAST] <= 0.0:
+            slip_event(EV_SLIP_FAST, t, y, sys)
     if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF:
         eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
         if math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, wk[W_AUXTMP], p, cs):
