@@ -390,6 +390,19 @@ def test_a_slaved_slip_carried_past_its_exit_by_a_stop_at_spin_tol_slides():
     assert all(abs(s["t_halt"] - t_ref) < 1e-9 * t_ref for s in runs.values()), {k: s["t_halt"] for k, s in runs.items()}
 
 
+@pytest.mark.slow
+def test_the_peer_lays_the_foil_disk_flat_at_the_kernels_time():
+    """The SciPy peer, with the contact rules written independently (a restart that leaves an event
+    function <= 0 fires that event at once), lays issue 50's foil disk flat at the kernel's time:
+    8.399603547969 s against 8.399603547982 s at rtol 1e-12, with the same 880 transitions."""
+    cfg = copy.deepcopy(FOIL_DISK)
+    cfg["solver"] = {"rtol": 1e-12, "atol": 1e-14}
+    s = sweep.simulate(cfg).summary
+    outcome, t_end = _peer_end(FOIL_DISK)
+    assert outcome == s["outcome"] == "halted"
+    assert abs(t_end - s["t_halt"]) < 1e-9 * s["t_halt"], (t_end, s["t_halt"])
+
+
 def test_the_peers_minimum_over_a_short_step_late_in_a_run_is_the_minimum():
     """The SciPy peer's dip checks minimise over a step in the step's own coordinate: SciPy's
     bounded Brent stops at sqrt(eps) |x| + xatol/3, which in absolute time (tau ~ 124, a step of
