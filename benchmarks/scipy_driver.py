@@ -41,7 +41,9 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   omega.a_i = 0 before it turns back (Disk.reaches_rest) and the moment can hold it there, and the
   rate left is stopped by the least (kinetic-energy) change of the velocity that keeps the contact
   and the stuck components at rest (loss booked to k_i), else it stays free;
-* after every discrete update (the driver's 'settle'): a slide at or below slip_tol meets its fate; a
+* after every discrete update (the driver's 'settle'): a slip at or past 'slipfast' (a slaved slip
+  at SLAVE_EXIT x u_s, which a stop at spin_tol can carry there) slides, the hand-over re-armed; a
+  slide at or below slip_tol meets its fate; a
   component whose omega.a_i an impulse moved takes the sign of its new omega.a_i (a stuck one is
   released, a finite moment cannot hold it through an impulse, unless the move is within spin_tol;
   a free one left past its switching surface by no more than spin_tol is at rest and gets the stick
@@ -660,6 +662,21 @@ class Disk:
         c.stuck[i] = was
         return aux[X_SIG1 + i]
 
+    def slip_fast(self, t, y, c):
+        """Is the slip at or past the 'slipfast' surface (a slaved slip at SLAVE_EXIT x u_s; a slide
+        with the hand-over off, fast again)? Phi as a decision reads it (needed_sigma's friction
+        direction, no component held)."""
+        if not (c.mode == SLAVED or (c.mode == SLIDE and (c.slave_off or c.slow_off))):
+            return False
+        un = math.hypot(y[Y_U1], y[Y_U2])
+        if c.mode == SLAVED:
+            root = self.slaved_root(c.nu, un, t, y, c)
+            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root
+            _, aux = self.model(t, y, SLIDE, c, math.cos(nu), math.sin(nu), self.pf)
+        else:
+            _, aux, _ = self.rhs(t, y, c, c.nu)
+        return SLAVE_EXIT * self.slave_speed(aux) - un <= 0.0
+
     def stick_test(self, i, t, y, c, force=False):
         """At omega.a_i = 0: stick if the moment can hold it, else pass with the needed sign.
         force: the sign just taken failed at once, the other opposes the motion: stick."""
@@ -750,9 +767,15 @@ class Disk:
         y[Y_W1], y[Y_W2], y[Y_W3] = q[0], q[1], q[2]
         if c.mode != ROLL:
             y[Y_U1], y[Y_U2] = q[3], q[4]
-        # the moment must hold it at the state the stop leaves as well (where later decisions read it)
+        # the moment must hold it at the state the stop leaves as well (where later decisions read
+        # it), in the mode they read it in (a slaved slip that the stop carries past its exit slides)
         c.stuck[i] = True
-        if abs(self.needed_sigma(i, t, y, c)) >= 1.0:
+        mode = c.mode
+        if mode == SLAVED and self.slip_fast(t, y, c):
+            c.mode = SLIDE
+        holds = abs(self.needed_sigma(i, t, y, c)) < 1.0
+        c.mode = mode
+        if not holds:
             y[:] = saved
             c.stuck[i] = False
             return False
@@ -765,6 +788,8 @@ class Disk:
     def settle(self, t, y, c, g_before, leaving=()):
         """After a discrete update: bring the contact state in line with the state (see the module
         docstring). `leaving`: components just released at an un-stick (on their surface, leaving)."""
+        if self.slip_fast(t, y, c):
+            c.mode, c.slave_off, c.slow_off = SLIDE, False, False
         if c.mode == SLIDE and not c.slow_off and \
                 math.hypot(y[Y_U1], y[Y_U2]) <= self.slip_floor(t, self.model(t, y, SLIDE, c, *self._slip_dir(y, c))[1][X_PHI], c):
             code = self.slow_slide(t, y, c)

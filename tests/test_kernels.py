@@ -806,6 +806,41 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
     assert values[1] == pytest.approx(expected, rel=1e-12, abs=1e-24)
 
 
+def test_an_update_that_leaves_a_slaved_slip_past_its_exit_hands_it_to_slide(setup):
+    """contact.settle_event: EV_SLIP_FAST (|u| rising to SLAVE_EXIT times the slaving speed) is a
+    crossing from > 0 to <= 0, so a slaved slip that a discrete update leaves at or past it (the
+    stop at spin_tol moves the slip by O(spin_tol)) could never leave SLAVED; the update hands it
+    to SLIDE, with the hand-over re-armed. Just short of the surface it stays slaved."""
+    p, y0, cs0 = setup
+    n = M.N_CORE
+    wk, ist = _work()
+    sl = cs0.copy()
+    sl[L.CS_MODE] = L.SLAVED
+    root = C.attracting_direction(0.3, 1e-9, 0.0, y0, _sys(p, sl, n, wk, ist))
+    assert math.isfinite(root)
+    sl[L.CS_NU] = root
+    # the exit speed at the state (the slaving speed reads Phi, which the slip's size hardly moves)
+    y = y0.copy()
+    y[M.Y_U1], y[M.Y_U2] = 1e-9 * math.cos(root), 1e-9 * math.sin(root)
+    dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
+    C.eval_rhs(0.0, y, _sys(p, sl.copy(), n, wk, ist), dy, aux)
+    u_exit = C.SLAVE_EXIT * C.slave_speed(aux, p)
+    for factor, mode in ((1.001, L.SLIDE), (0.999, L.SLAVED)):
+        y = y0.copy()
+        # the slip a little off the slaved direction, as the integrated slip vector is
+        y[M.Y_U1], y[M.Y_U2] = factor * u_exit * math.cos(root + 0.01), factor * u_exit * math.sin(root + 0.01)
+        cs = sl.copy()
+        C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
+        g = np.zeros(L.N_WCOLS)
+        C.event_values(0.0, y, aux, p, cs, math.nan, g)
+        assert (g[C.EV_SLIP_FAST] <= 0.0) == (mode == L.SLIDE), (factor, g[C.EV_SLIP_FAST])
+        code = C.settle_event(0.0, y, _sys(p, cs, n, wk, ist), M.moment_axes_rates(y), -1)
+        assert code == -1
+        assert cs[L.CS_MODE] == mode, factor
+        assert cs[L.CS_SLAVE_OFF] == 0.0
+        assert math.hypot(y[M.Y_U1], y[M.Y_U2]) == pytest.approx(factor * u_exit, rel=1e-15)
+
+
 def test_an_impulse_releases_a_stuck_component_only_beyond_spin_tol(setup):
     """contact.release_moved: a held omega.a_i moved by an impulse by more than spin_tol is free,
     with the sign of its new rate; a move within spin_tol (the round-off of a tiny impulse) leaves

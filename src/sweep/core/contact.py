@@ -36,7 +36,7 @@ from .events import (C_CONTACT_LOST, C_FACE, C_MOMENT, C_SIDE, E_CLASS, E_COMPON
 from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
-                     W_AUXFLOW, W_AUXSLOPE, W_DYFLOW, W_DYSLOPE, W_DYTMP, W_YFLOW, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
+                     W_AUXFLOW, W_AUXSLOPE, W_DYFLOW, W_DYSLOPE, W_DYTMP, W_GBUF, W_YFLOW, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
                      System)
 from .model import (N_PARAMS, P_A, P_SLAVE, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_LAG, X_NU, X_SLAVE_ERR, Y_ALPHA,
                     Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, Contact, energy_from_trig, moment_axes_rates, rhs, sign_rate)
@@ -736,6 +736,36 @@ def spin_rest_time(i, t, y, sys):
 
 
 @kernel
+def slip_fast_reached(t, y, sys):
+    """Is the slip at or past EV_SLIP_FAST's surface (a slaved slip at SLAVE_EXIT times the slaving
+    speed; a slide whose hand-over is off, fast again)? Its event function at the state, with the
+    forces that the decisions read (decision_rhs). An impulse of a discrete update (the stop at
+    spin_tol moves the slip by O(spin_tol)) can carry the slip there, where the event, g going
+    from > 0 to <= 0, can no longer happen (docs/model.md, 'Restarts on a surface')."""
+    p, cs, wk = sys.p, sys.cs, sys.wk
+    if cs[CS_MODE] == ROLL:
+        return False
+    decision_rhs(-1, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+    event_values(t, y, wk[W_AUXTMP], p, cs, math.nan, wk[W_GBUF])
+    return wk[W_GBUF, EV_SLIP_FAST] <= 0.0
+
+
+@kernel
+def holding_sigma(i, t, y, sys, dy, aux):
+    """needed_sigma of component i at y in the mode the slip has there after the update: a slaved
+    slip at or past its exit (slip_fast_reached) slides (settle_event hands it over), and the
+    friction along its own direction, not the quasi-static one, is what the moment must hold
+    against. The right-hand side goes to dy, aux; cs is left as it was."""
+    cs = sys.cs
+    mode = cs[CS_MODE]
+    if mode == SLAVED and slip_fast_reached(t, y, sys):
+        cs[CS_MODE] = SLIDE
+    need = needed_sigma(i, t, y, sys, dy, aux)
+    cs[CS_MODE] = mode
+    return need
+
+
+@kernel
 def spin_sticks(i, t, y, sys):
     """Would free component i, slowing through |omega.a_i| = spin_tol at t, stick: does its motion
     reach rest (spin_rest_time: s later), and can the moment hold it there (|sigma needed| < 1 at
@@ -819,8 +849,9 @@ def stick_at_spin_tol(i, t, y, sys):
     cs[CS_STUCK + i] = 1.0
     loss = stop_axis_rate(y, p, cs, i, wk[W_SCRATCH:W_SCRATCH + 7])
     # the stop changes the velocity (and, sliding, the slip): the moment must hold the component at
-    # the state it leaves too, where every later decision (settle_signs) reads it; else no stick
-    if abs(needed_sigma(i, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])) < 1.0:
+    # the state it leaves too, where every later decision (settle_signs) reads it, in the mode it
+    # reads it in (a slaved slip that the stop carries past its exit slides); else no stick
+    if abs(holding_sigma(i, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])) < 1.0:
         y[Y_DK1 + i] += loss
         istats[I_STICK] += 1
         return True
@@ -1094,12 +1125,15 @@ def count_transition(rolling, cs, istats):
 
 @kernel
 def settle_event(t, y, sys, g_before, own):
-    """What every discrete update owes the state: a slide at or below slip_tol meets its fate
-    (slow_slide); the moment
+    """What every discrete update owes the state: a slip that it left at or past EV_SLIP_FAST's
+    surface (a slaved slip at SLAVE_EXIT times the slaving speed) is fast (slip_event: SLIDE, the
+    hand-over re-armed); a slide at or below slip_tol meets its fate (slow_slide); the moment
     components that the update moved are released (release_moved: g_before, omega.a_i before it)
     and every sign made consistent (settle_signs, leaving component own); a rolling state left
     outside the static cone starts to slip. Returns the outcome that ends the scene, else -1."""
     p, cs, wk = sys.p, sys.cs, sys.wk
+    if slip_fast_reached(t, y, sys):
+        slip_event(EV_SLIP_FAST, t, y, sys)
     if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF:
         eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
         if math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, wk[W_AUXTMP], p, cs):
