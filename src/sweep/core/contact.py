@@ -1126,8 +1126,9 @@ def count_transition(rolling, cs, istats):
 @kernel
 def settle_event(t, y, sys, g_before, own):
     """What every discrete update owes the state: a slip that it left at or past EV_SLIP_FAST's
-    surface (a slaved slip at SLAVE_EXIT times the slaving speed) is fast (slip_event: SLIDE, the
-    hand-over re-armed); a slide at or below slip_tol meets its fate (slow_slide); the moment
+    surface (a slaved slip at SLAVE_EXIT times the slaving speed, or its direction's error measure
+    at SLAVE_EXIT times slave_tol: slaved_margin) is fast (slip_event: SLIDE, the hand-over
+    re-armed); a slide at or below slip_tol meets its fate (slow_slide); the moment
     components that the update moved are released (release_moved: g_before, omega.a_i before it)
     and every sign made consistent (settle_signs, leaving component own); a rolling state left
     outside the static cone starts to slip. Returns the outcome that ends the scene, else -1."""
