@@ -36,7 +36,14 @@ def test_json_output_and_samples_match_the_api(tmp_path):
     out = json.loads(proc.stdout)
     assert SUMMARY_KEYS <= set(out)
     assert set(out["levels"][0]) == {"inclination", "t", "precession_hz", "precession_hz_error", "precession_window",
-                                     "precession_cycles", "ringing_hz", "ringing_ratio", "normal_force_hz"}
+                                     "precession_cycles", "ringing_hz", "ringing_ratio", "normal_force_hz",
+                                     "normal_force_hz_per_ringing"}
+    # every value's unit: top level, per level, dissipation, samples
+    units = out["units"]
+    assert units["t_halt"] == "s" and units["levels.precession_hz"] == "Hz" and units["dissipation.k2"] == "J"
+    assert units["samples.omega"] == "rad s-1" and units["outcome"] == ""
+    assert {k for k in out if k not in ("levels", "dissipation", "samples", "units")} <= set(units)
+    assert {f"levels.{k}" for k in out["levels"][0]} <= set(units)
     assert set(out["dissipation"]) == {"sliding", "k1", "k2", "k3", "impact"}
     s = out["samples"]
     assert s["t"] == [0.0, 0.5, 1.25]
