@@ -1,5 +1,6 @@
 """The single-scene command line (`python -m sweep scene ...`)."""
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -212,3 +213,28 @@ def test_values_carry_the_digits_their_error_allows():
     assert with_error(1.0421, 0.022) == "1.042 +- 0.022"
     assert with_error(14.8422, float("nan")) == "14.8422"
     assert with_error(float("nan"), 0.1, "s") == "nan s"
+
+
+def test_a_long_scene_shows_a_ticking_elapsed_time_on_a_terminal():
+    """The ticker (a process of its own: the kernel holds the interpreter's lock) shows the elapsed
+    time every second after `after_s`, then one closing line; on a pipe it shows nothing."""
+    import os
+    import pty
+    import time
+
+    from sweep.cli import ticker
+    master, slave = pty.openpty()
+    with open(slave, "w", closefd=True) as term:
+        with ticker("scene: integrating", after_s=1.0, stream=term):
+            time.sleep(2.6)     # the GIL held as by the numba kernel would not matter: another process ticks
+        os.set_blocking(master, False)
+        text = os.read(master, 65536).decode()
+    os.close(master)
+    assert "scene: integrating | 0:01" in text and "scene: integrating | 0:02" in text, text
+    assert re.search(r"scene: integrating: done in 0:0[345]\s*$", text), text
+    r, w = os.pipe()
+    with open(w, "w") as pipe:
+        with ticker("x", after_s=0.0, stream=pipe):
+            time.sleep(0.2)
+    assert os.read(r, 100) == b""
+    os.close(r)

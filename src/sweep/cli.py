@@ -119,15 +119,15 @@ def _print_human(s: dict) -> None:
         if lv["precession_hz"] == lv["precession_hz"]:
             prec += sides.get(lv["precession_window"], "")
         count = _counting(lv["normal_force_hz_per_ringing"])
-        counts.add(count[:2])
+        counts.add(count)
         fhat = f"{lv['normal_force_hz']:.4g}" + (f"  {count}" if count else "")
         print(f"                 {lv['inclination']:<18.3g} {lv['t']:<14.6f} {prec:<31} "
               f"{lv['ringing_hz']:<14.4g} {fhat}")
-    if "x2" in counts:
+    if counts - {"", "x1"}:
         print("                 (f_hat = 2/T counts every maximum of the normal force: x2 where the force has two "
-              "per oscillation, x1 one)")
-    print(f"max normal-force frequency {s['normal_force_hz_max']:.4g} Hz (the largest f_hat of the run, counted as "
-          "at the levels)" if s["normal_force_hz_max"] == s["normal_force_hz_max"] else
+              "per oscillation, x1 one; otherwise f_hat / ringing)")
+    print(f"max normal-force frequency {s['normal_force_hz_max']:.4g} Hz (the largest f_hat of the run: it counts "
+          "maxima as at the levels, x1 or x2)" if s["normal_force_hz_max"] == s["normal_force_hz_max"] else
           "max normal-force frequency nan Hz")
     print(f"slip fraction    {s['slip_fraction']:.4f}   transitions {s['n_transitions']}   stick episodes {s['n_stick']}   impacts {s['n_impacts']}")
     print(f"energy           {s['energy_initial']:.6g} J -> {s['energy_final']:.6g} J")
@@ -243,11 +243,29 @@ def check_outputs(args) -> None:
         check_output_folder("--plot", args.plot)
 
 
+# The ticker runs in a process of its own: the integration is one numba call that holds the
+# interpreter's lock, so a thread of this process could not print while it runs. It stops when
+# told (SIGTERM), on Ctrl-C (which reaches the whole foreground group) and when its parent is gone.
+_TICKER = """
+import os, signal, sys, time
+signal.signal(signal.SIGINT, lambda *a: os._exit(0))
+signal.signal(signal.SIGTERM, lambda *a: os._exit(0))
+t0, label, after, parent = float(sys.argv[1]), sys.argv[2], float(sys.argv[3]), os.getppid()
+time.sleep(after)
+while os.getppid() == parent:
+    s = int(round(time.monotonic() - t0))
+    sys.stderr.write(f"\\r\\033[K{label} | {s // 60}:{s % 60:02d}")
+    sys.stderr.flush()
+    time.sleep(1.0)
+"""
+
+
 @contextlib.contextmanager
 def ticker(label: str, after_s: float = 2.0, stream=None):
     """While the block runs longer than `after_s`, a status line on a terminal (`stream`, default
     stderr, so stdout stays the summary) with the elapsed time, and a last line when it ends."""
-    import threading
+    import signal
+    import subprocess
     import time
 
     stream = stream or sys.stderr
@@ -255,27 +273,17 @@ def ticker(label: str, after_s: float = 2.0, stream=None):
         yield
         return
     t0 = time.monotonic()
-    stop = threading.Event()
-    shown = threading.Event()
-
-    def tick():
-        if stop.wait(after_s):
-            return
-        while True:
-            shown.set()
-            print(f"\r\033[K{label} | {_clock(time.monotonic() - t0)}", end="", file=stream, flush=True)
-            if stop.wait(1.0):
-                return
-
-    thread = threading.Thread(target=tick, daemon=True)
-    thread.start()
+    stream.flush()
+    proc = subprocess.Popen([sys.executable, "-S", "-c", _TICKER, repr(t0), label, repr(after_s)],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=stream)
     try:
         yield
     finally:
-        stop.set()
-        thread.join(timeout=5)
-        if shown.is_set():
-            print(f"\r\033[K{label}: done in {_clock(time.monotonic() - t0)}", file=stream, flush=True)
+        proc.send_signal(signal.SIGTERM)
+        proc.wait()
+        took = time.monotonic() - t0
+        if took >= after_s:
+            print(f"\r\033[K{label}: done in {_clock(took)}", file=stream, flush=True)
 
 
 def _clock(seconds: float) -> str:
