@@ -642,8 +642,28 @@ def running_run(results: Path) -> dict | None:
     except (OSError, ValueError, KeyError, TypeError):
         return None
     if host == socket.gethostname() and not _alive(pid, run.get("process_start")):
-        return None
+        # the front door is gone (kill -9): its Snakemake, in a session of its own, may run on
+        sm = run.get("snakemake_pid")
+        if sm is None or not _alive(int(sm), run.get("snakemake_start")):
+            return None
+        run["pid"], run["command"] = sm, f"Snakemake, left running by: {run.get('command')}"
     return run
+
+
+def note_snakemake(results: Path, pid: int) -> None:
+    """Add the pid of the run's Snakemake to its lock (written atomically), so that the lock
+    holds while Snakemake runs even if the front door is killed."""
+    path = results / RUN_LOCK
+    try:
+        run = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return
+    if run.get("pid") != os.getpid():
+        return
+    run.update(snakemake_pid=pid, snakemake_start=_process_start(pid))
+    tmp = path.with_name(f"{RUN_LOCK}.tmp{os.getpid()}")
+    tmp.write_text(json.dumps(run), encoding="utf-8")
+    os.replace(tmp, path)
 
 
 def take_run_lock(results: Path, command: str) -> dict | None:
@@ -687,7 +707,7 @@ def already_running(name: str, run: dict, shown: str, what: str = "nothing was d
     since = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(started))
     return (f"sweep {name}: already running since {since} ({_clock(max(time.time() - started, 0.0))} ago; "
             f"pid {run.get('pid')} on {run.get('host')}: {run.get('command')}), writing {shown}/; {what}. "
-            f"Wait for it, or stop it (Ctrl-C in its terminal, or kill -INT {run.get('pid')})")
+            f"Wait for it, or stop it: kill -INT {run.get('pid')} (or Ctrl-C in its terminal)")
 
 
 def validate(argv: list[str], cwd: Path) -> tuple[list[str], Path, grid.Sweep | None] | int:
@@ -793,6 +813,7 @@ def _run(argv, cwd, t_origin, sm_argv, workdir, sweep, resume) -> int:
                                 stdin=subprocess.DEVNULL, start_new_session=True, cwd=PROJECT_ROOT,
                                 text=True, errors="replace", bufsize=1)
         state["proc"] = proc
+        note_snakemake(results, proc.pid)
     except _Stop:
         status.say(f"sweep {name}: interrupted before the sweep started; nothing was computed. Run again: {resume}")
         return 128 + state["signal"]
@@ -858,6 +879,14 @@ def _run(argv, cwd, t_origin, sm_argv, workdir, sweep, resume) -> int:
             status.say(f"sweep {name}: done in {elapsed}: {done} scenes ({done - progress.kept_at_start} computed "
                        f"now); {shown}/cube.nc, {shown}/figures/; Snakemake's output: {shown}/logs/sweep.log")
         return 0
+    if any("LockException" in line for line in tail):
+        # a Snakemake not started by this front door (or whose front door was killed before it
+        # recorded it) writes the same files
+        prefix = f"{command_prefix()} sweep"
+        status.say(f"sweep {name}: another Snakemake run holds the lock on {shown_path(workdir, cwd)}/ for the same "
+                   f"files (started outside run.py); nothing was computed. If none runs (ps -ef | grep snakemake), "
+                   f"remove its lock: {prefix} --unlock{resume[len(prefix):]}")
+        return 2
     status.clear()
     print("\n".join(tail), flush=True)
     status.say(f"sweep {name}: failed (Snakemake exit status {code}) after {elapsed}; "

@@ -143,7 +143,8 @@ OUTPUTS: tuple[Output, ...] = (
     Output("ringing_ratio", "float", "1", "ringing frequency / precession frequency at the level (normal-force "
            "oscillations per precession cycle)", lambda s, j: _finite(s.lev[j, L_RINGING]), where="levels"),
     Output("normal_force_hz", "float", "Hz", "paper's normal-force frequency f_hat = 2/T, T spanning the three "
-           "counted normal-force maxima before the level (1 % hysteresis)",
+           "counted normal-force maxima before the level (1 % hysteresis); it counts every maximum, so it is twice "
+           "ringing_hz where the force has two per oscillation",
            lambda s, j: _finite(s.lev[j, L_FHAT] / s.scene.chi), where="levels", numerical_error=True),
     Output("normal_force_hz_per_ringing", "float", "1", "normal_force_hz / ringing_hz at the level: about 2 "
            "where f_hat counts the two maxima the normal force has per oscillation, about 1 where it counts one "
