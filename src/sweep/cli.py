@@ -115,6 +115,10 @@ def _print_human(s: dict) -> None:
     sides = {-1.0: " (cycle before)", 1.0: " (cycle after)"}
     counts = set()
     for lv in s["levels"]:
+        if s["lay_flat"] and lv["t"] == s["t_end"]:   # sweep.reasons: level_crossed_lying_flat
+            print(f"                 {lv['inclination']:<18.3g} {lv['t']:<14.6f} (the moment the disk lay flat: "
+                  "the face impact took this level's energy; no frequencies)")
+            continue
         prec = with_error(lv["precession_hz"], lv["precession_hz_error"])
         if lv["precession_hz"] == lv["precession_hz"]:
             prec += sides.get(lv["precession_window"], "")

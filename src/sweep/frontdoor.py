@@ -114,10 +114,9 @@ COMPILE_ESTIMATE = "usually 1-4 min on a 2-core machine, by how busy it is"
 # 9 s), measured on a busy 2-core machine (tiny sweep: 2 s, 9-10 s; default: 8 s, 8-10 s); the
 # run's own durations replace them as soon as one has finished.
 GATHER_S, GATHER_S_PER_CHUNK = 0.5, 0.4
-# the rule of the chunk jobs: their durations (start-up, warm-up, scenes, the chunk file) give the
-# scenes' ETA once one has finished; before that the scenes' own rate leaves the jobs' start-up
-# and writing out (measured: ~10 s per job on a busy 2-core machine against 4 s of scenes), so the
-# ETA it gives is a lower bound and says so
+# the rule of the chunk jobs: until one has finished, the scenes' rate leaves out the jobs' start-up
+# and writing out (measured: ~10 s per job on a busy 2-core machine against ~4 s of scenes in a
+# default chunk), so the ETA it gives is a lower bound and says so
 CHUNK_RULE = "simulate_chunk"
 NOTEBOOK_S = 9.0
 SIGNAL_GRACE_S = 60.0            # after the forwarded SIGINT, before SIGKILL
@@ -371,7 +370,6 @@ class Progress:
         self.plan: dict[str, int] | None = None
         self.total = 0
         self.kept_at_start = 0
-        self.kept_chunks: set[str] = set()                 # chunk files present when the plan was read
         self.first_seen: tuple[float, int] | None = None   # (time, done) when scenes started to come in
         self.last_seen: tuple[float, int] | None = None    # (time, done) at the latest increase
         self.finished: set[str] = set()
@@ -442,7 +440,6 @@ class Progress:
             if self.plan is None:
                 return None
             self.finished = self.chunks_present()
-            self.kept_chunks = set(self.finished)
             self.kept_at_start = sum(self.plan[c] for c in self.finished)
         n = 0
         for cid, size in self.plan.items():
@@ -485,24 +482,19 @@ class Progress:
 
     def eta(self, done: int, now: float) -> tuple[float, bool] | None:
         """(seconds until the run ends, whether that is a lower bound), or None while there is no
-        rate yet. The scenes left: at the job time per scene of the chunk jobs finished in this
-        run (start-up, warm-up and writing included), `jobs` at a time; before one has finished,
-        at the rate the scenes come in, which leaves those out: a lower bound. Then the gather
-        and the figures (GATHER_S + GATHER_S_PER_CHUNK per chunk file, NOTEBOOK_S per notebook,
-        or what this run's finished ones took; the notebooks `jobs` at a time)."""
+        rate yet. The scenes left at the rate seen so far (from the first scene that came in);
+        until a chunk job has finished, that rate has not met a job's start-up and writing out
+        (~10 s per job on a busy 2-core machine against ~4 s of scenes in a default chunk), so the
+        ETA is a lower bound and says so. Then the gather and the figures (GATHER_S +
+        GATHER_S_PER_CHUNK per chunk file, NOTEBOOK_S per notebook, or what this run's finished
+        ones took; the notebooks `jobs` at a time)."""
         left, bound = 0.0, False
         if done < self.total:
-            took = self.done_jobs.get(CHUNK_RULE)
-            if took and self.plan:
-                per_scene = sum(took) / (len(took) * self.total / len(self.plan))   # job s per scene
-                chunks_left = max(len(self.plan) - len(self.finished), 1)
-                left += (self.total - done) * per_scene / min(self.jobs, chunks_left)
-            else:
-                first, last = self.first_seen, self.last_seen
-                if first is None or not (last[0] > first[0] and last[1] > first[1]):
-                    return None
-                left += (self.total - done) / ((last[1] - first[1]) / (last[0] - first[0]))
-                bound = True
+            first, last = self.first_seen, self.last_seen
+            if first is None or not (last[0] > first[0] and last[1] > first[1]):
+                return None
+            left += (self.total - done) / ((last[1] - first[1]) / (last[0] - first[0]))
+            bound = not self.done_jobs.get(CHUNK_RULE)
         left += self._left("gather", GATHER_S + GATHER_S_PER_CHUNK * len(self.plan or ()), now)[1]
         n_nb, work = self._left("notebook", NOTEBOOK_S, now)
         if n_nb:
