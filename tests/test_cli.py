@@ -220,6 +220,7 @@ def test_a_long_scene_shows_a_ticking_elapsed_time_on_a_terminal():
     time every second after `after_s`, then one closing line; on a pipe it shows nothing."""
     import os
     import pty
+    import select
     import time
 
     from sweep.cli import ticker
@@ -227,8 +228,12 @@ def test_a_long_scene_shows_a_ticking_elapsed_time_on_a_terminal():
     with open(slave, "w", closefd=True) as term:
         with ticker("scene: integrating", after_s=1.0, stream=term):
             time.sleep(2.6)     # the GIL held as by the numba kernel would not matter: another process ticks
-        os.set_blocking(master, False)
-        text = os.read(master, 65536).decode()
+        text = ""
+        while "done in" not in text:   # a terminal hands its bytes over in pieces
+            ready, _, _ = select.select([master], [], [], 5.0)
+            if not ready:
+                break
+            text += os.read(master, 65536).decode()
     os.close(master)
     assert "scene: integrating | 0:01" in text and "scene: integrating | 0:02" in text, text
     assert re.search(r"scene: integrating: done in 0:0[345]\s*$", text), text

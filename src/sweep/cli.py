@@ -255,12 +255,15 @@ import os, signal, sys, time
 signal.signal(signal.SIGINT, lambda *a: os._exit(0))
 signal.signal(signal.SIGTERM, lambda *a: os._exit(0))
 t0, label, after, parent = float(sys.argv[1]), sys.argv[2], float(sys.argv[3]), os.getppid()
-time.sleep(after)
-while os.getppid() == parent:
+tick = t0 + after
+while True:
+    time.sleep(max(0.0, tick - time.monotonic()))   # on the second of the clock, whatever the start-up took
+    if os.getppid() != parent:
+        break
     s = int(round(time.monotonic() - t0))
     sys.stderr.write(f"\\r\\033[K{label} | {s // 60}:{s % 60:02d}")
     sys.stderr.flush()
-    time.sleep(1.0)
+    tick += 1.0
 """
 
 
