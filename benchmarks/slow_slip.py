@@ -24,6 +24,9 @@ benchmarks/harness_cost.py does):
   and slip speed |u| (m/s): steps, simulated time, mean step, and for SLIDE the median of
   h mu_d Phi / |u| (dimensionless): a constant there means the step is held at the stability
   bound of the explicit method by the direction's relaxation rate ~ mu_d Phi / |u|.
+* bands: tries per unit of content (precession cycles + transitions, stick phases, impacts) of the
+  convergence harness's scenes (--bands of the main draw, a fifth as many near the edge) at rtol
+  1e-10, by mu_d / mu_s band: median, p99, max and the median against that of mu_d / mu_s < 0.9.
 * sweep: the default sweep's scenes (config/config.yaml: this tree's grid, mu_d = mu_s included, on
   this kernel; the base's grid on the base kernel), each run once, CPU summed: what the sweep's
   integration costs (the sweep also reruns each scene for its error bars, alike on both sides).
@@ -84,6 +87,19 @@ for line in sys.stdin:
                 rows.append([m, lo, hi, int(sel.sum()), float(h[sel].sum() * chi), float(h[sel].mean() * chi), stab])
         print(json.dumps({"rows": rows, "cpu": time.process_time() - t0}), flush=True)
         continue
+    if job.get("anatomy"):
+        from sweep.core import layout as L
+        from sweep import outcomes
+        sc = load_scene(cfg)
+        tau = np.array(job["anatomy"], dtype=float)
+        out = run_kernel(sc, tau[tau * sc.chi < cfg["stop"]["t_max"]])
+        ist = out.istats
+        print(json.dumps({"outcome": outcomes.NAMES[int(ist[L.I_OUTCOME])],
+                          "tries": int(ist[L.I_STEPS] + ist[L.I_REJECTED]),
+                          "cycles": abs(float(out.y_end[model.Y_THETA])) / (2.0 * math.pi),
+                          "events": int(ist[L.I_TRANS] + ist[L.I_STICK] + ist[L.I_IMPACTS]),
+                          "cpu": time.process_time() - t0}), flush=True)
+        continue
     try:
         s = simulate(cfg).summary
         out = {k: s[k] for k in ("outcome", "t_end", "t_halt", "t_halt_error", "n_steps", "n_rejected", "n_rhs",
@@ -110,11 +126,11 @@ class Side:
                                      stdout=subprocess.PIPE, text=True, env=env)
         self.knows_slave_tol = knows_slave_tol
 
-    def run(self, cfg: dict, mechanism: bool = False) -> dict:
+    def run(self, cfg: dict, mechanism: bool = False, anatomy: list | None = None) -> dict:
         cfg = copy.deepcopy(cfg)
         if not self.knows_slave_tol:
             cfg.get("solver", {}).pop("slave_tol", None)
-        self.proc.stdin.write(json.dumps({"cfg": cfg, "mechanism": mechanism}) + "\n")
+        self.proc.stdin.write(json.dumps({"cfg": cfg, "mechanism": mechanism, "anatomy": anatomy}) + "\n")
         self.proc.stdin.flush()
         return json.loads(self.proc.stdout.readline())
 
@@ -256,6 +272,41 @@ def part_sweep(sides: dict, base: str | None) -> list[str]:
     return lines
 
 
+def part_bands(sides: dict, n: int, seed: int) -> list[str]:
+    """Tries per unit of content (precession cycles + transitions, stick phases, impacts) of the
+    convergence harness's scenes at its default settings (rtol 1e-10; n of the main draw and n/5
+    of the near-edge band), by mu_d / mu_s band, on each kernel."""
+    scenes = [cv._valid_levels(cv.draw(seed, i)) for i in range(n)]
+    scenes += [cv._valid_levels(cv.draw(seed, cv.EDGE_BASE + j)) for j in range(n // 5)]
+    for c in scenes:
+        c["solver"] = {"rtol": cv.DEFAULT_RTOL, "atol": cv.DEFAULT_RTOL * cv.ATOL_RATIO}
+    lines = [f"## Tries per unit of content by mu_d / mu_s (harness seed {seed}: {n} scenes + {n // 5} near the edge, "
+             "rtol 1e-10)", "", "| kernel | band | scenes | median | p99 | max | median / [0, 0.9)'s | failures | tries |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for name, side in sides.items():
+        rows = []
+        for c in scenes:
+            r = side.run(c, anatomy=list(cv.SAMPLE_TAU))
+            ratio = c["contact"]["mu_d"] / c["contact"]["mu_s"]
+            rows.append((ratio, r["tries"] / max(r["cycles"] + r["events"], 1.0), r["tries"], r["outcome"]))
+        base = None
+        for lo, hi in cv.BANDS:
+            sel = [x for x in rows if lo <= x[0] < hi or x[0] == hi == 1.0]
+            if not sel:
+                continue
+            v = np.array([x[1] for x in sel])
+            med = float(np.median(v))
+            base = med if base is None else base
+            fails = sum(x[3] in FAILURES for x in sel)
+            lines.append(f"| {name} | [{lo:g}, {hi:g}{']' if hi == 1.0 else ')'} | {len(sel)} | {med:.1f} | "
+                         f"{np.percentile(v, 99):.1f} | {v.max():.1f} | {med / base:.2f} | {fails} | {sum(x[2] for x in sel)} |")
+        v = np.array([x[1] for x in rows])
+        lines.append(f"| {name} | all | {len(rows)} | {np.median(v):.1f} | {np.percentile(v, 99):.1f} | {v.max():.1f} | "
+                     f"p99 / median {np.percentile(v, 99) / np.median(v):.1f} | "
+                     f"{sum(x[3] in FAILURES for x in rows)} | {sum(x[2] for x in rows)} |")
+    return lines
+
+
 def part_mechanism(sides: dict) -> list[str]:
     names = {0: "ROLL", 1: "SLIDE", 2: "SLAVED"}
     lines = ["## Where the steps go at mu_d = mu_s (default settings)", "",
@@ -275,7 +326,8 @@ def main(argv=None) -> int:
     ap.add_argument("--base", default="746a2c3", help="the commit to compare with (default: before slow slip)")
     ap.add_argument("--random", type=int, default=30, help="random scene pairs in part 'random'")
     ap.add_argument("--seed", type=int, default=20261150)
-    ap.add_argument("--parts", default="paper,accuracy,k3,random,mechanism,sweep")
+    ap.add_argument("--parts", default="paper,accuracy,k3,random,mechanism,sweep,bands")
+    ap.add_argument("--bands", type=int, default=150, help="harness scenes of the main draw in part 'bands'")
     a = ap.parse_args(argv)
     parts = a.parts.split(",")
     with tempfile.TemporaryDirectory() as tmp:
@@ -297,6 +349,8 @@ def main(argv=None) -> int:
                 out += part_mechanism(sides) + [""]
             if "sweep" in parts:
                 out += part_sweep(sides, a.base) + [""]
+            if "bands" in parts:
+                out += part_bands(sides, a.bands, a.seed) + [""]
         finally:
             for side in sides.values():
                 side.close()

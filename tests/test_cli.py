@@ -1,5 +1,6 @@
 """The single-scene command line (`python -m sweep scene ...`)."""
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -36,7 +37,14 @@ def test_json_output_and_samples_match_the_api(tmp_path):
     out = json.loads(proc.stdout)
     assert SUMMARY_KEYS <= set(out)
     assert set(out["levels"][0]) == {"inclination", "t", "precession_hz", "precession_hz_error", "precession_window",
-                                     "precession_cycles", "ringing_hz", "ringing_ratio", "normal_force_hz"}
+                                     "precession_cycles", "ringing_hz", "ringing_ratio", "normal_force_hz",
+                                     "normal_force_hz_per_ringing"}
+    # every value's unit: top level, per level, dissipation, samples
+    units = out["units"]
+    assert units["t_halt"] == "s" and units["levels.precession_hz"] == "Hz" and units["dissipation.k2"] == "J"
+    assert units["samples.omega"] == "rad s-1" and units["outcome"] == ""
+    assert {k for k in out if k not in ("levels", "dissipation", "samples", "units")} <= set(units)
+    assert {f"levels.{k}" for k in out["levels"][0]} <= set(units)
     assert set(out["dissipation"]) == {"sliding", "k1", "k2", "k3", "impact"}
     s = out["samples"]
     assert s["t"] == [0.0, 0.5, 1.25]
@@ -113,3 +121,125 @@ def test_paper_figures_are_against_time_in_seconds(tmp_path, monkeypatch):
     finally:
         for fig in figures.values():
             plt.close(fig)
+
+
+# ------------------------------------------------------------------ issue 51: the first hour, round 3
+
+def test_output_paths_are_checked_before_any_work(tmp_path):
+    """An unusable output path: one line naming the option, exit 2, no summary (no work), nothing
+    created."""
+    scene = short_scene(tmp_path)
+    (tmp_path / "afile").write_text("x")
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    cases = [("--plot", str(tmp_path / "afile"), "exists and is not a folder"),
+             ("--plot", str(tmp_path / "no" / "figs"), "no such folder"),
+             ("--audio", str(tmp_path / "no" / "x.wav"), "no such folder"),
+             ("--spectrogram", str(tmp_path / "s.wav"), "ending in .png"),
+             ("--trajectory", str(tmp_path), "is a folder")]
+    for opt, path, problem in cases:
+        proc = run("scene", str(scene), opt, path)
+        assert proc.returncode == 2, (opt, path, proc.stderr)
+        assert proc.stdout == "" and proc.stderr.count("\n") == 1, proc.stderr
+        assert proc.stderr.startswith(f"error: {opt} = {path!r} is invalid: ") and problem in proc.stderr, proc.stderr
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before
+
+
+def test_the_summary_comes_before_the_media(tmp_path):
+    """The summary is printed (and flushed) before the figures are written, so a figure that
+    fails cannot lose it."""
+    scene = short_scene(tmp_path)
+    proc = subprocess.run([sys.executable, "-m", "sweep", "scene", str(scene), "--plot", str(tmp_path / "figs")],
+                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stdout
+    assert proc.stdout.index("outcome ") < proc.stdout.index("wrote ")
+
+
+def test_a_numerical_failure_exits_3_with_its_reason(tmp_path):
+    scene = short_scene(tmp_path, stop={"max_steps": 10})
+    proc = run("scene", str(scene))
+    assert proc.returncode == 3, proc.stderr
+    assert proc.stdout.startswith("outcome          step_limit")
+    assert proc.stderr.startswith(f"error: {scene}: the integration failed at t = ") and "step_limit" in proc.stderr
+    assert "stop.max_steps" in proc.stderr and proc.stderr.count("\n") == 1
+    proc = run("scene", str(scene), "--json")
+    assert proc.returncode == 3 and json.loads(proc.stdout)["outcome"] == "step_limit"
+
+
+def test_a_start_lying_flat_or_below_the_deepest_level_is_refused(tmp_path):
+    """Within round-off of flat (the face on the table) and at or below the deepest level (every
+    level 'reached' at t = 0): refused before any work, naming the field."""
+    flat = short_scene(tmp_path, initial={"alpha": 1.5707963})
+    proc = run("scene", str(flat))
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.startswith(f"error: {flat}: initial.alpha = 1.5707963 is invalid: the disk starts lying flat")
+    assert "allowed 0 < |alpha| < pi/2 - 1e-6" in proc.stderr
+    low = short_scene(tmp_path, initial={"alpha": 1.5, "omega": [0.0, 0.0, 0.0]})
+    proc = run("scene", str(low))
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.startswith(f"error: {low}: initial = ") and "at or below the deepest level 0.1 rad" in proc.stderr
+    # the same start with a deeper level runs
+    from sweep.scene import check_start, load_scene
+    cfg = yaml.safe_load(low.read_text())
+    cfg["stop"]["levels"] = [0.01]
+    check_start(load_scene(cfg))
+
+
+def test_every_invalid_field_of_a_scene_file_at_once(tmp_path):
+    p = tmp_path / "two.yaml"
+    p.write_text("contact: {mu_s: 0.5, mu_d: 0.9}\nsolver: {rtol: 1.0}\nstop: {t_mx: 3}\ndisk: {shape: cube}\n")
+    proc = run("scene", str(p))
+    assert proc.returncode == 2 and proc.stdout == ""
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 4, proc.stderr
+    assert all(line.startswith(f"error: {p}: ") for line in lines)
+    assert [line.split(": ")[2].split(" ")[0] for line in lines] == ["stop.t_mx", "disk.shape", "contact.mu_d",
+                                                                      "solver.rtol"]
+    from sweep.errors import ConfigError, ConfigErrors
+    from sweep.scene import load_scene
+    with pytest.raises(ConfigErrors) as err:
+        load_scene({"disk": {"radius": -1.0}, "gravity": 0.0})
+    assert [e.field for e in err.value.errors] == ["disk.radius", "gravity"]
+    assert isinstance(err.value, ConfigError) and err.value.field == "disk.radius"   # a ConfigError too
+    # a relative bound is checked only against a valid field: one error for the bad radius, not k1's too
+    with pytest.raises(ConfigErrors) as err:
+        load_scene({"disk": {"radius": -1.0}, "contact": {"k1": 0.5}, "gravity": 0.0})
+    assert [e.field for e in err.value.errors] == ["disk.radius", "gravity"]
+
+
+def test_values_carry_the_digits_their_error_allows():
+    from sweep.cli import with_error
+    assert with_error(11.972606, 0.272, "s") == "11.97 +- 0.27 s"
+    assert with_error(764.3, 12.0, "Hz") == "764 +- 12 Hz"
+    assert with_error(1.0421, 0.022) == "1.042 +- 0.022"
+    assert with_error(14.8422, float("nan")) == "14.8422"
+    assert with_error(float("nan"), 0.1, "s") == "nan s"
+
+
+def test_a_long_scene_shows_a_ticking_elapsed_time_on_a_terminal():
+    """The ticker (a process of its own: the kernel holds the interpreter's lock) shows the elapsed
+    time every second after `after_s`, then one closing line; on a pipe it shows nothing."""
+    import os
+    import pty
+    import select
+    import time
+
+    from sweep.cli import ticker
+    master, slave = pty.openpty()
+    with open(slave, "w", closefd=True) as term:
+        with ticker("scene: integrating", after_s=1.0, stream=term):
+            time.sleep(2.6)     # the GIL held as by the numba kernel would not matter: another process ticks
+        text = ""
+        while "done in" not in text:   # a terminal hands its bytes over in pieces
+            ready, _, _ = select.select([master], [], [], 5.0)
+            if not ready:
+                break
+            text += os.read(master, 65536).decode()
+    os.close(master)
+    assert "scene: integrating | 0:01" in text and "scene: integrating | 0:02" in text, text
+    assert re.search(r"scene: integrating: done in 0:0[345]\s*$", text), text
+    r, w = os.pipe()
+    with open(w, "w") as pipe:
+        with ticker("x", after_s=0.0, stream=pipe):
+            time.sleep(0.2)
+    assert os.read(r, 100) == b""
+    os.close(r)

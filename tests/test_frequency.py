@@ -270,7 +270,8 @@ def test_a_level_near_the_end_gets_the_cycle_before_it_within_its_error():
     assert abs(lv["precession_hz"] - full["precession_hz"]) <= lv["precession_hz_error"] + full["precession_hz_error"]
     assert lv["precession_hz_error"] < 0.05 * lv["precession_hz"]
     from sweep import reasons
-    assert reasons.level_flags(cut, lv) == {"precession_hz_flag": 0, "ringing_hz_flag": reasons.NO_WHOLE_CYCLE_WINDOW,
+    assert reasons.level_flags(cut, lv) == {"t_level_flag": 0, "precession_hz_flag": 0,
+                                            "ringing_hz_flag": reasons.NO_WHOLE_CYCLE_WINDOW,
                                             "normal_force_hz_flag": reasons.level_flags(cut, lv)["normal_force_hz_flag"]}
 
 

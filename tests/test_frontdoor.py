@@ -493,8 +493,9 @@ def test_progress_names_its_phase_and_its_eta_covers_gather_and_figures(tmp_path
     p.line("tiny", t0 + 10)
     log.write_text(f"x INFO chunk {'a' * 16}: 2/3 ...\n")
     line = p.line("tiny", t0 + 20)
+    # (before a chunk job has finished: a lower bound, the jobs' start-up and writing left out)
     eta = 2 * 10 + frontdoor.GATHER_S + 2 * frontdoor.GATHER_S_PER_CHUNK + 4 * frontdoor.NOTEBOOK_S / 2
-    assert f"0.10 scenes/s | ETA {frontdoor._clock(eta)}" in line, line
+    assert f"0.10 scenes/s | ETA at least {frontdoor._clock(eta)}" in line, line
     # every scene done: the gather runs, then the figures; a finished job's time replaces the estimate
     for cid in plan:
         (results / "chunks" / f"{cid}.nc").write_bytes(b"")
@@ -511,6 +512,34 @@ def test_progress_names_its_phase_and_its_eta_covers_gather_and_figures(tmp_path
     line = p.line("tiny", t0 + 41)
     # 3 notebooks left at the 8 s the first took, 2 at a time: (max(8 - 8, 1) + 8 + 8) / 2
     assert line.startswith("sweep tiny: figures 1/4 | ETA 0:08 | "), line
+
+
+def test_the_eta_is_a_lower_bound_until_a_chunk_job_has_finished(tmp_path):
+    """Before a chunk job has finished, the scenes' rate has not met a job's start-up and writing
+    out: the line says `ETA at least`; after, the plain ETA at the rate seen so far."""
+    results = tmp_path / "results" / "s"
+    (results / "chunks").mkdir(parents=True)
+    (results / "logs" / "chunks").mkdir(parents=True)
+    t0 = time.time()
+    plan = {c * 16: 4 for c in "abcd"}          # 16 scenes in 4 chunks of 4
+    (results / "plan.json").write_text(json.dumps({"name": "s", "scenes": 16, "chunks": plan}))
+    p = frontdoor.Progress(results, t0 - 1, jobs=2, t_origin=t0)
+    for line in ("Job stats:", "job count", "simulate_chunk 4", "gather 1", "notebook 4", "total 9", ""):
+        p.feed(line + "\n", now=t0)
+    for jid in ("1", "2"):
+        p.feed("localrule simulate_chunk:\n", now=t0)
+        p.feed(f"    jobid: {jid}\n", now=t0)
+    log = results / "logs" / "chunks" / f"{'a' * 16}.log"
+    log.write_text(f"x INFO chunk {'a' * 16}: 1/4 ...\n")
+    p.line("s", t0 + 6)
+    log.write_text(f"x INFO chunk {'a' * 16}: 4/4 ...\n")
+    line = p.line("s", t0 + 9)             # 3 scenes in 3 s: 12 left, 12 s at least
+    after = frontdoor.GATHER_S + 4 * frontdoor.GATHER_S_PER_CHUNK + 4 * frontdoor.NOTEBOOK_S / 2
+    assert f"| ETA at least {frontdoor._clock(12 + after)} |" in line, line
+    (results / "chunks" / f"{'a' * 16}.nc").write_bytes(b"")
+    p.feed("Finished jobid: 1 (Rule: simulate_chunk)\n", now=t0 + 14)
+    line = p.line("s", t0 + 14)
+    assert f"| ETA {frontdoor._clock(12 + after)} |" in line, line
 
 
 def test_compile_shows_a_ticking_elapsed_time_and_the_estimate(monkeypatch, capsys):
@@ -582,3 +611,45 @@ def test_tiny_sweep_through_the_front_door(tmp_path):
                                               err_msg=name)
     for nb in grid.NOTEBOOKS:
         assert (wd / "results" / "tiny" / "figures" / f"{nb}.png").read_bytes()[:4] == b"\x89PNG"
+
+
+# ------------------------------------------------------------------ one run per config (issue 51)
+
+def test_a_second_run_of_a_running_config_is_refused_in_one_line(tmp_path, capsys):
+    """While a run of a config holds results/<name>/.running (a live process), a second run of
+    the same config, or its --unlock, says which run and since when, exits 2 and touches
+    nothing; a lock whose process is gone is taken over and released at the end."""
+    wd = copy_workflow(tmp_path / "wf")
+    results = wd / "results" / "tiny"
+    argv = ["--directory", str(wd), "--configfile", str(wd / "config" / "tiny.yaml")]
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        results.mkdir(parents=True)
+        lock = {"pid": holder.pid, "host": __import__("socket").gethostname(), "started": time.time() - 75,
+                "command": "python3 run.py sweep --configfile config/tiny.yaml",
+                "process_start": frontdoor._process_start(holder.pid)}
+        (results / frontdoor.RUN_LOCK).write_text(json.dumps(lock))
+        for extra in ([], ["--unlock"]):
+            assert frontdoor.run(argv + extra) == 2
+            err = capsys.readouterr().err
+            assert err.count("\n") == 1 and err.startswith("sweep tiny: already running since "), err
+            assert re.search(rf"\(1:[12]\d ago; pid {holder.pid} on ", err) and "python3 run.py sweep --configfile config/tiny.yaml" in err
+            assert ("--unlock now would let two runs write the same files: not done" in err) == bool(extra)
+            assert sorted(p.name for p in results.iterdir()) == [frontdoor.RUN_LOCK]
+        assert not (wd / ".snakemake").exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    # its process gone: the lock is stale, taken over by this process and released by it
+    assert frontdoor.running_run(results) is None
+    assert frontdoor.take_run_lock(results, "python3 run.py sweep") is None
+    assert json.loads((results / frontdoor.RUN_LOCK).read_text())["pid"] == os.getpid()
+    assert frontdoor.running_run(results)["command"] == "python3 run.py sweep"
+    frontdoor.release_run_lock(results)
+    assert not (results / frontdoor.RUN_LOCK).exists()
+
+
+def test_help_is_the_front_doors_own(capsys):
+    assert frontdoor.run(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: python3 run.py sweep ") and "--help-snakemake" in out and "__main__" not in out

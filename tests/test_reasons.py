@@ -22,8 +22,11 @@ simulate_module = importlib.import_module("sweep.simulate")
 NAN = math.nan
 
 
-def summary(levels, t_end=20.0, lay_flat=False, t_halt=21.0, approach=2.0, ramp=1.0, ramp_err=0.01):
-    return {"t_end": t_end, "lay_flat": lay_flat, "t_halt": t_halt, "approach_exponent": approach,
+def summary(levels, t_end=20.0, lay_flat=False, t_halt=21.0, approach=2.0, ramp=1.0, ramp_err=0.01, t_halt_error=None):
+    if t_halt_error is None:   # as sweep.outputs gives it: no extrapolation error for a disk that lay flat
+        t_halt_error = NAN if lay_flat or t_halt != t_halt else 0.5
+    return {"t_end": t_end, "lay_flat": lay_flat, "t_halt": t_halt, "t_halt_error": t_halt_error,
+            "approach_exponent": approach,
             "ramp_exponent": ramp, "ramp_exponent_error": ramp_err,
             "levels": [{"inclination": 0.1 ** (j + 1), "t": t, "precession_hz": p, "ringing_hz": r,
                         "ringing_ratio": r / p if p == p and r == r else NAN, "normal_force_hz": f}
@@ -44,6 +47,10 @@ def test_each_level_reason():
     flat = summary([(5.0, 10.0, 8.0, 20.0), (9.5, NAN, NAN, NAN), (11.0, NAN, NAN, NAN)], t_end=11.0, lay_flat=True)
     assert [R.level_flags(flat, lv)["precession_hz_flag"] for lv in flat["levels"]] == [
         R.VALUE, R.NO_WHOLE_CYCLE_WINDOW, R.LEVEL_CROSSED_LYING_FLAT]
+    # t_level has a value at every reached level; its flag marks the one that is the moment it lay flat
+    assert [R.level_flags(flat, lv)["t_level_flag"] for lv in flat["levels"]] == [
+        R.VALUE, R.VALUE, R.LEVEL_CROSSED_LYING_FLAT]
+    assert [g["t_level_flag"] for g in got] == [R.VALUE, R.VALUE, R.VALUE, R.LEVEL_NOT_REACHED]
     # the same level time without lying flat is a level reached by the motion
     assert R.level_flags(dict(flat, lay_flat=False), flat["levels"][2])["precession_hz_flag"] == R.NO_WHOLE_CYCLE_WINDOW
     # a one-sided precession value (no centred window): it has a value, the ringing has none for that reason
@@ -59,13 +66,16 @@ def test_each_fit_reason():
     four = [(5.0, 10.0, 8.0, 20.0), (12.0, 30.0, 24.0, 60.0), (15.0, 90.0, 70.0, 180.0), (16.0, 300.0, 240.0, 600.0)]
     assert set(R.fit_flags(summary(four)).values()) == {R.VALUE}
     two = summary(four[:2] + [(NAN,) * 4] * 2, t_halt=NAN, approach=NAN, ramp=NAN, ramp_err=NAN)
-    assert R.fit_flags(two) == {"t_halt_flag": R.FEWER_THAN_THREE_LEVELS, "approach_exponent_flag": R.FEWER_THAN_THREE_LEVELS,
+    assert R.fit_flags(two) == {"t_halt_flag": R.FEWER_THAN_THREE_LEVELS, "t_halt_error_flag": R.FEWER_THAN_THREE_LEVELS,
+                                "approach_exponent_flag": R.FEWER_THAN_THREE_LEVELS,
                                 "ramp_exponent_flag": R.NO_HALT_TIME, "ramp_exponent_error_flag": R.NO_HALT_TIME}
     no_halt = summary(four, t_halt=NAN, approach=NAN, ramp=NAN, ramp_err=NAN)
     assert R.fit_flags(no_halt)["t_halt_flag"] == R.NO_FINITE_HALT
     assert R.fit_flags(no_halt)["approach_exponent_flag"] == R.NO_FINITE_HALT
     flat = summary(four, lay_flat=True, approach=NAN, ramp=NAN, ramp_err=NAN)
-    assert R.fit_flags(flat) == {"t_halt_flag": R.VALUE, "approach_exponent_flag": R.HALT_LOCATED_LYING_FLAT,
+    # lying flat: the halt is a located time, without an extrapolation error
+    assert R.fit_flags(flat) == {"t_halt_flag": R.VALUE, "t_halt_error_flag": R.HALT_LOCATED_LYING_FLAT,
+                                 "approach_exponent_flag": R.HALT_LOCATED_LYING_FLAT,
                                  "ramp_exponent_flag": R.FEWER_THAN_TWO_FREQUENCIES,
                                  "ramp_exponent_error_flag": R.FEWER_THAN_TWO_FREQUENCIES}
     assert R.fit_flags(summary(four, ramp_err=NAN))["ramp_exponent_error_flag"] == R.FEWER_THAN_THREE_FREQUENCIES
@@ -199,5 +209,7 @@ def test_chunk_and_cube_carry_the_flags(tmp_path):
             assert set(np.unique(f.values)) <= set(codes)
             for name in explained:
                 assert ds[name].attrs["ancillary_variables"] == flag
-                np.testing.assert_array_equal(f.values == R.VALUE, np.isfinite(ds[name].values), err_msg=name)
+                # t_level's flag also marks values: the level times that are the moment the disk lay flat
+                has_value = (f.values == R.VALUE) | ((f.values == R.LEVEL_CROSSED_LYING_FLAT) & (flag == "t_level_flag"))
+                np.testing.assert_array_equal(has_value, np.isfinite(ds[name].values), err_msg=name)
         assert (ds.outcome.values == outcomes.T_MAX).sum() == 1

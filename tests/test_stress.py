@@ -137,8 +137,10 @@ def test_stress_scene(name, mods, allowed):
         if reached[i] and not (s["lay_flat"] and lv["t"] == s["t_end"]):
             bad += [f"levels[{i}].{k}" for k, v in lv.items() if not math.isfinite(v)]
     if s["halt_finite"]:
-        fit = ("t_halt", "t_halt_error") if s["lay_flat"] else ("t_halt", "t_halt_error", "approach_exponent")
+        fit = ("t_halt",) if s["lay_flat"] else ("t_halt", "t_halt_error", "approach_exponent")
         bad += [k for k in fit if not math.isfinite(s[k])]
+        if s["lay_flat"]:   # a located halt: no extrapolation error (not the location tolerance)
+            assert math.isnan(s["t_halt_error"]), s["t_halt_error"]
     assert not bad, f"non-finite outputs: {bad}"
     t = r.samples["t"]
     live = t <= s["t_end"]

@@ -72,5 +72,44 @@ class ConfigError(ValueError):
             self.args = (self.line(),)
         return self
 
+    def lines(self) -> list[str]:
+        """The message, one line per invalid field (here: one)."""
+        return [self.line()]
+
     def __str__(self) -> str:
         return self.line()
+
+
+class ConfigErrors(ConfigError):
+    """Several invalid fields of one input (a scene file), all reported at once: `errors`, one
+    ConfigError per field, in the order found. It is a ConfigError (its field, value and allowed
+    range those of the first), so a caller that handles one handles all; `lines()` gives each
+    field's line."""
+
+    def __init__(self, errors):
+        self.errors = list(errors)
+        first = self.errors[0]
+        super().__init__(first.field, first.value, first.allowed, problem=first.problem, source=first.source)
+        self.args = ("\n".join(self.lines()),)
+
+    def lines(self) -> list[str]:
+        return [e.line() for e in self.errors]
+
+    def with_source(self, source: str | None) -> "ConfigErrors":
+        for e in self.errors:
+            e.with_source(source)
+        super().with_source(source)
+        self.args = ("\n".join(self.lines()),)
+        return self
+
+    def __str__(self) -> str:
+        return "\n".join(self.lines())
+
+
+def raise_all(errors) -> None:
+    """Raise the errors collected (one: itself; several: ConfigErrors), if any."""
+    errors = list(errors)
+    if len(errors) == 1:
+        raise errors[0]
+    if errors:
+        raise ConfigErrors(errors)

@@ -23,8 +23,14 @@
   `--rerun-incomplete` always (a chunk job is idempotent and writes atomically), so the resume
   command is the command that was interrupted.
 
-Options that only inform or maintain (`-n`, `--unlock`, `--lint`, `--list...`, `--help`, ...)
-run Snakemake with its own output, as does `--verbose`/`--debug` (after the same validation).
+* one run per config at a time: a run holds `results/<name>/.running` (its pid, start time and
+  command); a second run of the same config (or its `--unlock`) is refused in one line naming
+  the first, with exit status 2, before anything is touched; a lock whose process is gone is
+  taken over.
+
+`-h`/`--help` prints the front door's own help (HELP); `--help-snakemake` Snakemake's. Options
+that only inform or maintain (`-n`, `--unlock`, `--lint`, `--list...`, ...) run Snakemake with
+its own output, as does `--verbose`/`--debug` (after the same validation).
 """
 from __future__ import annotations
 
@@ -54,7 +60,32 @@ DEFAULT_JOBS = "2"
 PATH_OPTIONS = {"--configfile": "+", "--configfiles": "+", "--snakefile": 1, "-s": 1, "--directory": 1,
                 "-d": 1, "--profile": 1}
 # options after which nothing is validated: Snakemake answers without reading the workflow
-HELP_OPTIONS = {"-h", "--help", "--version", "-v"}
+HELP_OPTIONS = {"-h", "--help", "--version", "-v", "--help-snakemake"}
+HELP = """usage: python3 run.py sweep [--configfile FILE.yaml] [--config KEY=VALUE ...] [-j N | --profile DIR]
+                           [SNAKEMAKE OPTION ...]
+
+Sweep the parameters of Euler's disk: check the config (every invalid field, one line each, exit
+status 2, nothing created), compile the numba kernels once, run the scenes in chunks with
+Snakemake, gather results/<name>/cube.nc and draw results/<name>/figures/*.png. One progress
+line (phase, scenes done/total, scenes/s, ETA, Snakemake's jobs, elapsed time); Snakemake's own
+output goes to results/<name>/logs/sweep.log.
+
+options:
+  -h, --help            this help
+  --configfile FILE     the sweep config (default config/config.yaml; config/tiny.yaml is the
+                        8-scene CI grid); results go to results/<name>/, <name> from the file's
+                        `name:` or its stem. Every key, unit, range: docs/pipeline.md
+  --config KEY=VALUE    override keys of the config (Snakemake's syntax)
+  -j N, --cores N       jobs at once (default 2)
+  --profile DIR         a Snakemake profile, e.g. workflow/profiles/slurm (a SLURM cluster)
+  -n, --dry-run         list the jobs a run would do, without running them (Snakemake's output)
+  --unlock              remove the lock of a run that was killed (kill -9, a crash); refused
+                        while a run of the same config is running
+  --help-snakemake      Snakemake's own help: any of its options can be given here
+
+A rerun computes only what is missing. Ctrl-C stops a run and prints the command that resumes
+it. Exit status: 0 done (or nothing to do); 2 an invalid config, or the same config already
+running (nothing touched); 128 + the signal after Ctrl-C / SIGTERM; else Snakemake's."""
 # Snakemake options after which its own console output is what the user wants
 RAW_OPTIONS = {
     "-n", "--dry-run", "--dryrun", "--unlock", "--lint", "-l", "--list", "--list-rules",
@@ -83,6 +114,10 @@ COMPILE_ESTIMATE = "usually 1-4 min on a 2-core machine, by how busy it is"
 # 9 s), measured on a busy 2-core machine (tiny sweep: 2 s, 9-10 s; default: 8 s, 8-10 s); the
 # run's own durations replace them as soon as one has finished.
 GATHER_S, GATHER_S_PER_CHUNK = 0.5, 0.4
+# the rule of the chunk jobs: until one has finished, the scenes' rate leaves out the jobs' start-up
+# and writing out (measured: ~10 s per job on a busy 2-core machine against ~4 s of scenes in a
+# default chunk), so the ETA it gives is a lower bound and says so
+CHUNK_RULE = "simulate_chunk"
 NOTEBOOK_S = 9.0
 SIGNAL_GRACE_S = 60.0            # after the forwarded SIGINT, before SIGKILL
 
@@ -445,21 +480,26 @@ class Progress:
             return "figures"
         return "gather" if self.counts.get("gather", 0) else "finish"
 
-    def eta(self, done: int, now: float) -> float | None:
-        """Seconds until the run ends: the scenes left at the rate seen so far, then the gather
-        and the figures (GATHER_S + GATHER_S_PER_CHUNK per chunk file, NOTEBOOK_S per notebook,
-        or what this run's finished ones took; the notebooks `jobs` at a time). None while there is no rate yet."""
-        left = 0.0
+    def eta(self, done: int, now: float) -> tuple[float, bool] | None:
+        """(seconds until the run ends, whether that is a lower bound), or None while there is no
+        rate yet. The scenes left at the rate seen so far (from the first scene that came in);
+        until a chunk job has finished, that rate has not met a job's start-up and writing out
+        (~10 s per job on a busy 2-core machine against ~4 s of scenes in a default chunk), so the
+        ETA is a lower bound and says so. Then the gather and the figures (GATHER_S +
+        GATHER_S_PER_CHUNK per chunk file, NOTEBOOK_S per notebook, or what this run's finished
+        ones took; the notebooks `jobs` at a time)."""
+        left, bound = 0.0, False
         if done < self.total:
             first, last = self.first_seen, self.last_seen
             if first is None or not (last[0] > first[0] and last[1] > first[1]):
                 return None
             left += (self.total - done) / ((last[1] - first[1]) / (last[0] - first[0]))
+            bound = not self.done_jobs.get(CHUNK_RULE)
         left += self._left("gather", GATHER_S + GATHER_S_PER_CHUNK * len(self.plan or ()), now)[1]
         n_nb, work = self._left("notebook", NOTEBOOK_S, now)
         if n_nb:
             left += work / min(self.jobs, n_nb)
-        return left
+        return left, bound
 
     def line(self, name: str, now: float) -> str:
         done = self.done()
@@ -485,7 +525,7 @@ class Progress:
                 parts.append(f"{(last[1] - first[1]) / (last[0] - first[0]):.2f} scenes/s")
             eta = self.eta(done, now)
             if eta is not None:
-                parts.append(f"ETA {_clock(eta)}")
+                parts.append(f"ETA {'at least ' if eta[1] else ''}{_clock(eta[0])}")
             if self.steps:
                 parts.append(f"jobs {self.steps[0]}/{self.steps[1]}")
         parts.append(_clock(now - self.t_origin))
@@ -560,6 +600,108 @@ def _end_group(pgid: int, wait_s: float = 5.0) -> None:
         time.sleep(0.05)
 
 
+RUN_LOCK = ".running"   # results/<name>/.running: the run of that config in progress (JSON)
+
+
+def _process_start(pid: int) -> str | None:
+    """The start time of process `pid` in clock ticks since boot (/proc/<pid>/stat, field 22), to
+    tell a live run from a new process that reuses its pid; None where /proc has no such entry."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat.rsplit(")", 1)[1].split()[19]
+
+
+def _alive(pid: int, start: str | None) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return start is None or _process_start(pid) in (None, start)
+
+
+def running_run(results: Path) -> dict | None:
+    """The run of this config in progress, from its lock `results/RUN_LOCK` ({pid, host, started
+    (epoch s), command}), or None: no lock, or a lock whose process is gone on this host."""
+    import socket
+
+    try:
+        run = json.loads((results / RUN_LOCK).read_text(encoding="utf-8"))
+        pid, host = int(run["pid"]), str(run["host"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if host == socket.gethostname() and not _alive(pid, run.get("process_start")):
+        # the front door is gone (kill -9): its Snakemake, in a session of its own, may run on
+        sm = run.get("snakemake_pid")
+        if sm is None or not _alive(int(sm), run.get("snakemake_start")):
+            return None
+        run["pid"], run["command"] = sm, f"Snakemake, left running by: {run.get('command')}"
+    return run
+
+
+def note_snakemake(results: Path, pid: int) -> None:
+    """Add the pid of the run's Snakemake to its lock (written atomically), so that the lock
+    holds while Snakemake runs even if the front door is killed."""
+    path = results / RUN_LOCK
+    try:
+        run = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return
+    if run.get("pid") != os.getpid():
+        return
+    run.update(snakemake_pid=pid, snakemake_start=_process_start(pid))
+    tmp = path.with_name(f"{RUN_LOCK}.tmp{os.getpid()}")
+    tmp.write_text(json.dumps(run), encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def take_run_lock(results: Path, command: str) -> dict | None:
+    """Make this process the run of `results`' config: write results/RUN_LOCK (atomically, O_EXCL)
+    unless a live run holds it. Returns that run (nothing written) or None (the lock is ours; a
+    stale one, its process gone, is replaced)."""
+    import socket
+
+    mine = {"pid": os.getpid(), "host": socket.gethostname(), "started": time.time(), "command": command,
+            "process_start": _process_start(os.getpid())}
+    path = results / RUN_LOCK
+    for _ in range(3):
+        other = running_run(results)
+        if other is not None and other.get("pid") != os.getpid():
+            return other
+        results.mkdir(parents=True, exist_ok=True)
+        if other is None:
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()   # a stale lock (its process is gone)
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            continue            # another run took it between the check and here
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(mine, f)
+        return None
+    return running_run(results) or {"pid": "?", "host": "?", "started": time.time(), "command": "?"}
+
+
+def release_run_lock(results: Path) -> None:
+    """Remove results/RUN_LOCK if this process holds it."""
+    run = running_run(results)
+    if run is not None and run.get("pid") == os.getpid():
+        with contextlib.suppress(FileNotFoundError):
+            (results / RUN_LOCK).unlink()
+
+
+def already_running(name: str, run: dict, shown: str, what: str = "nothing was done") -> str:
+    """The one line for a second run of config `name` while `run` (running_run) runs."""
+    started = float(run.get("started", 0.0))
+    since = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(started))
+    return (f"sweep {name}: already running since {since} ({_clock(max(time.time() - started, 0.0))} ago; "
+            f"pid {run.get('pid')} on {run.get('host')}: {run.get('command')}), writing {shown}/; {what}. "
+            f"Wait for it, or stop it: kill -INT {run.get('pid')} (or Ctrl-C in its terminal)")
+
+
 def validate(argv: list[str], cwd: Path) -> tuple[list[str], Path, grid.Sweep | None] | int:
     """The Snakemake arguments (paths made absolute), its working directory and the validated
     sweep of a run; or, for an invalid config, the exit status 2 after one line per invalid
@@ -585,10 +727,24 @@ def validate(argv: list[str], cwd: Path) -> tuple[list[str], Path, grid.Sweep | 
 def run(argv: list[str]) -> int:
     cwd = Path.cwd()
     t_origin = time.time()
+    if any(a in ("-h", "--help") for a in argv):
+        print(HELP)
+        return 0
+    if "--help-snakemake" in argv:
+        argv = ["--help"]
     checked = validate(argv, cwd)
     if isinstance(checked, int):
         return checked
     sm_argv, workdir, sweep = checked
+    resume = " ".join([command_prefix(), "sweep", *map(shlex.quote, argv)])
+    if sweep is not None:
+        results = workdir / "results" / sweep.name
+        other = running_run(results)
+        if other is not None and (not is_raw(argv) or "--unlock" in argv):
+            what = ("--unlock now would let two runs write the same files: not done" if "--unlock" in argv
+                    else "nothing was done")
+            print(already_running(sweep.name, other, shown_path(results, cwd), what), file=sys.stderr)
+            return 2
     if sweep is None or is_raw(argv):
         cmd = [sys.executable, "-m", "snakemake", *snakemake_argv(sm_argv, progress=False)]
         try:
@@ -597,7 +753,20 @@ def run(argv: list[str]) -> int:
             return 130
 
     name = sweep.name
-    resume = " ".join([command_prefix(), "sweep", *map(shlex.quote, argv)])
+    results = workdir / "results" / name
+    other = take_run_lock(results, resume)
+    if other is not None:   # started in the moment since the check above
+        print(already_running(name, other, shown_path(results, cwd)), file=sys.stderr)
+        return 2
+    try:
+        return _run(argv, cwd, t_origin, sm_argv, workdir, sweep, resume)
+    finally:
+        release_run_lock(results)
+
+
+def _run(argv, cwd, t_origin, sm_argv, workdir, sweep, resume) -> int:
+    """A run of a valid sweep that holds its config's lock (run)."""
+    name = sweep.name
     status = StatusLine(sys.stdout, heartbeat=30.0)
     state: dict = {"signal": None, "proc": None}
 
@@ -636,6 +805,7 @@ def run(argv: list[str]) -> int:
                                 stdin=subprocess.DEVNULL, start_new_session=True, cwd=PROJECT_ROOT,
                                 text=True, errors="replace", bufsize=1)
         state["proc"] = proc
+        note_snakemake(results, proc.pid)
     except _Stop:
         status.say(f"sweep {name}: interrupted before the sweep started; nothing was computed. Run again: {resume}")
         return 128 + state["signal"]
@@ -701,6 +871,14 @@ def run(argv: list[str]) -> int:
             status.say(f"sweep {name}: done in {elapsed}: {done} scenes ({done - progress.kept_at_start} computed "
                        f"now); {shown}/cube.nc, {shown}/figures/; Snakemake's output: {shown}/logs/sweep.log")
         return 0
+    if any("LockException" in line for line in tail):
+        # a Snakemake not started by this front door (or whose front door was killed before it
+        # recorded it) writes the same files
+        prefix = f"{command_prefix()} sweep"
+        status.say(f"sweep {name}: another Snakemake run holds the lock on {shown_path(workdir, cwd)}/ for the same "
+                   f"files (started outside run.py); nothing was computed. If none runs (ps -ef | grep snakemake), "
+                   f"remove its lock: {prefix} --unlock{resume[len(prefix):]}")
+        return 2
     status.clear()
     print("\n".join(tail), flush=True)
     status.say(f"sweep {name}: failed (Snakemake exit status {code}) after {elapsed}; "

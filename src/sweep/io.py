@@ -628,6 +628,22 @@ def figure_caption(ds, reduced: str = "median over the axes not shown") -> str:
     return f"sweep '{name}': {n} scenes ({shape})" + (f"; {reduced}" if reduced else "")
 
 
+def panel_title(ax, text: str) -> None:
+    """Set a panel's title, wrapped to lines that fit over the panel (its width less the room of a
+    colour bar beside it), so the titles of side-by-side panels neither overlap nor get cut."""
+    import textwrap
+
+    from matplotlib.font_manager import FontProperties
+
+    import matplotlib as mpl
+
+    size = FontProperties(size=mpl.rcParams["axes.titlesize"]).get_size_in_points()
+    width_pt = ax.get_position().width * ax.figure.get_figwidth() * 72.0
+    # 0.45 em: a mean character of DejaVu Sans; 0.8: the room a colour bar and the labels take
+    chars = max(16, int(0.8 * width_pt / (0.45 * size)))
+    ax.set_title("\n".join(textwrap.wrap(text, chars)))
+
+
 def _text_colour(rgba) -> str:
     """Black on light cells, white on dark ones (relative luminance of the cell colour)."""
     r, g, b = rgba[:3]

@@ -31,5 +31,14 @@ NAMES = {
 }
 CODES = {name: code for code, name in NAMES.items()}
 
+# The ends the numerics made, not the physics: the scene's result stops where they stopped it
+# (`python3 run.py scene` exits 3 with this reason; a sweep records the code)
+NUMERICAL_FAILURES = {
+    STEP_LIMIT: "the step budget stop.max_steps was used up before the smallest level (raise it)",
+    STEP_SIZE_UNDERFLOW: "the error control asked for a step below the round-off of the time (a state the "
+                         "integrator cannot advance from)",
+    NUMERICAL_ERROR: "a NaN or infinity appeared in the state, or a slaved slip direction did not converge",
+}
+
 FLAG_VALUES = sorted(NAMES)
 FLAG_MEANINGS = " ".join(NAMES[c] for c in FLAG_VALUES)

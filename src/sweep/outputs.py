@@ -86,6 +86,14 @@ def _precession_hz(s: Source, j: int) -> float:
     return _finite(abs(rate) / s.scene.chi / (2.0 * math.pi))
 
 
+def _fhat_per_ringing(s: Source, j: int) -> float:
+    # f_hat = 2/T counts every maximum of the normal force that passes its hysteresis, so it is the
+    # ringing frequency where the force has one maximum per oscillation and twice it where it has
+    # two of comparable height (docs/model.md, 'Frequencies at the levels'): the ratio says which
+    ringing = s.lev[j, L_RINGING] * _precession_hz(s, j)
+    return _finite(s.lev[j, L_FHAT] / s.scene.chi / ringing) if ringing > 0.0 else math.nan
+
+
 OUTPUTS: tuple[Output, ...] = (
     Output("outcome", "text", "", "why the integration ended (its name)",
            lambda s, j: outcomes.NAMES[int(s.istats[I_OUTCOME])], cube=None),
@@ -95,8 +103,12 @@ OUTPUTS: tuple[Output, ...] = (
            lambda s, j: float(s.fstats[F_TEND]) * s.scene.chi),
     Output("t_halt", "float", "s", "halt time (finite-time singularity) estimated from the final ramp",
            _fit(D_THALT), numerical_error=True),
+    # a disk that lay flat halted at a located event: no extrapolation, so no extrapolation error
+    # (the kernel's fit gives it the location tolerance, ~1e-14 s, which no one should read as an
+    # error bar); its numerical error is t_halt_numerical_error (outputs.error_estimate)
     Output("t_halt_error", "float", "s", "uncertainty of the extrapolation to the halt: t_halt minus the last "
-           "level time used (event-location tolerance for a disk that lies flat)", _fit(D_THALT_ERR)),
+           "level time used (NaN where the disk lay flat: that halt is located, not extrapolated)",
+           lambda s, j: math.nan if s.istats[I_FLAT] else _finite(s.fits[D_THALT_ERR])),
     Output("lay_flat", "bool", "1", "whether the disk lay flat (face contact): its halt is that located time",
            lambda s, j: bool(s.istats[I_FLAT]), cube=None),
     Output("halt_finite", "bool", "1", "whether the halt time was found finite",
@@ -131,8 +143,12 @@ OUTPUTS: tuple[Output, ...] = (
     Output("ringing_ratio", "float", "1", "ringing frequency / precession frequency at the level (normal-force "
            "oscillations per precession cycle)", lambda s, j: _finite(s.lev[j, L_RINGING]), where="levels"),
     Output("normal_force_hz", "float", "Hz", "paper's normal-force frequency f_hat = 2/T, T spanning the three "
-           "counted normal-force maxima before the level (1 % hysteresis)",
+           "counted normal-force maxima before the level (1 % hysteresis); it counts every maximum, so it is twice "
+           "ringing_hz where the force has two per oscillation",
            lambda s, j: _finite(s.lev[j, L_FHAT] / s.scene.chi), where="levels", numerical_error=True),
+    Output("normal_force_hz_per_ringing", "float", "1", "normal_force_hz / ringing_hz at the level: about 2 "
+           "where f_hat counts the two maxima the normal force has per oscillation, about 1 where it counts one "
+           "(NaN where either is missing)", _fhat_per_ringing, where="levels", cube=None),
     Output("normal_force_hz_max", "float", "Hz", "largest normal-force frequency f_hat over the run",
            lambda s, j: float(s.fstats[F_NFMAX]) / s.scene.chi if s.fstats[F_NFMAX] > 0.0 else math.nan, cube=None),
     # the discrete sequence can hinge on a near-tangent crossing (a slip demand or a spin that only

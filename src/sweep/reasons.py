@@ -1,7 +1,7 @@
 """Why a value is missing: a reason code for every NaN of the frequencies and the fits.
 
 The cube's variables `precession_hz`, `ringing_hz` (and `ringing_ratio`), `normal_force_hz`,
-`t_halt` (and `t_halt_error`), `approach_exponent`, `ramp_exponent` and `ramp_exponent_error`
+`t_halt`, `t_halt_error`, `approach_exponent`, `ramp_exponent` and `ramp_exponent_error`
 are NaN where the scene gave them no value. Each has a companion `<name>_flag` (CF
 `flag_values`/`flag_meanings`, int8): 0 where there is a value, else the reason. The reasons are
 derived here from what a scene's summary holds (the level times, the frequencies, the outcome,
@@ -11,9 +11,11 @@ asked. Where the summary cannot tell two of the core's reasons apart, one code n
 (`no_whole_cycle_window`, `too_few_maxima`; docs/pipeline.md says which, and what the core would
 have to report to separate them).
 
-Other NaNs of the cube: `t_level` is NaN exactly where the level was not reached (`outcome` says
-why the scene ended first); every other variable is NaN only where the scene produced no result
-at all (an exception: outcome numerical_error, t_end NaN).
+`t_level` is NaN exactly where the level was not reached (`outcome` says why the scene ended
+first); its `t_level_flag` also marks the level times that are the moment the disk lay flat
+(`level_crossed_lying_flat`), not a crossing of the level by the energy. Every other variable
+is NaN only where the scene produced no result at all (an exception: outcome numerical_error,
+t_end NaN).
 """
 from __future__ import annotations
 
@@ -67,7 +69,8 @@ REASONS: dict[int, tuple[str, str]] = {
     HALT_LOCATED_LYING_FLAT: (
         "halt_located_lying_flat",
         "the disk lay flat: its halt time is the located moment of face contact, not extrapolated, so there "
-        "is no fitted approach exponent"),
+        "is no fitted approach exponent and no extrapolation error (t_halt_error); the located time's own "
+        "error is numerical (t_halt_numerical_error, with outputs.error_estimate)"),
     NO_HALT_TIME: ("no_halt_time", "there is no halt time (see t_halt_flag), which the ramp fit needs"),
     FEWER_THAN_TWO_FREQUENCIES: (
         "fewer_than_two_frequencies",
@@ -79,6 +82,10 @@ REASONS: dict[int, tuple[str, str]] = {
 
 # flag variable -> (the variables it explains, the codes it can take, long_name)
 FLAGS: dict[str, tuple[tuple[str, ...], tuple[int, ...], str]] = {
+    # t_level has a value wherever the level was reached; its flag says what kind of time it is
+    "t_level_flag": (("t_level",), (VALUE, NO_RESULT, LEVEL_NOT_REACHED, LEVEL_CROSSED_LYING_FLAT),
+                     "what t_level holds: 0 the time the energy-equivalent inclination reached the level; 3 the "
+                     "moment the disk lay flat (the face impact took the level's energy); else why it is missing"),
     "precession_hz_flag": (("precession_hz", "precession_hz_error", "precession_window", "precession_cycles"), (VALUE, NO_RESULT, LEVEL_NOT_REACHED, LEVEL_CROSSED_LYING_FLAT,
                                                 NO_WHOLE_CYCLE_WINDOW),
                            "why precession_hz is missing (0: it has a value)"),
@@ -89,8 +96,11 @@ FLAGS: dict[str, tuple[tuple[str, ...], tuple[int, ...], str]] = {
     "normal_force_hz_flag": (("normal_force_hz",), (VALUE, NO_RESULT, LEVEL_NOT_REACHED, LEVEL_CROSSED_LYING_FLAT,
                                                     TOO_FEW_MAXIMA),
                              "why normal_force_hz is missing (0: it has a value)"),
-    "t_halt_flag": (("t_halt", "t_halt_error"), (VALUE, NO_RESULT, FEWER_THAN_THREE_LEVELS, NO_FINITE_HALT),
-                    "why t_halt and t_halt_error are missing (0: they have values)"),
+    "t_halt_flag": (("t_halt",), (VALUE, NO_RESULT, FEWER_THAN_THREE_LEVELS, NO_FINITE_HALT),
+                    "why t_halt is missing (0: it has a value)"),
+    "t_halt_error_flag": (("t_halt_error",), (VALUE, NO_RESULT, FEWER_THAN_THREE_LEVELS, NO_FINITE_HALT,
+                                              HALT_LOCATED_LYING_FLAT),
+                          "why t_halt_error is missing (0: it has a value)"),
     "approach_exponent_flag": (("approach_exponent",), (VALUE, NO_RESULT, FEWER_THAN_THREE_LEVELS, NO_FINITE_HALT,
                                                         HALT_LOCATED_LYING_FLAT),
                                "why approach_exponent is missing (0: it has a value)"),
@@ -100,7 +110,7 @@ FLAGS: dict[str, tuple[tuple[str, ...], tuple[int, ...], str]] = {
                                                             FEWER_THAN_TWO_FREQUENCIES, FEWER_THAN_THREE_FREQUENCIES),
                                  "why ramp_exponent_error is missing (0: it has a value)"),
 }
-PER_LEVEL = ("precession_hz_flag", "ringing_hz_flag", "normal_force_hz_flag")
+PER_LEVEL = ("t_level_flag", "precession_hz_flag", "ringing_hz_flag", "normal_force_hz_flag")
 
 
 def _nan(x) -> bool:
@@ -129,7 +139,7 @@ def level_flags(summary: Mapping, lv: Mapping) -> dict[str, int]:
     one_sided = lv.get("precession_window") in (-1.0, 1.0)
     ring = VALUE if not _nan(lv.get("ringing_hz")) else (prec or (NO_WHOLE_CYCLE_WINDOW if one_sided else NO_RINGING_TONE))
     nf = VALUE if not _nan(lv.get("normal_force_hz")) else (base or TOO_FEW_MAXIMA)
-    return {"precession_hz_flag": prec, "ringing_hz_flag": ring, "normal_force_hz_flag": nf}
+    return {"t_level_flag": base, "precession_hz_flag": prec, "ringing_hz_flag": ring, "normal_force_hz_flag": nf}
 
 
 def fit_flags(summary: Mapping) -> dict[str, int]:
@@ -153,7 +163,10 @@ def fit_flags(summary: Mapping) -> dict[str, int]:
         ramp_err = VALUE
     else:
         ramp_err = ramp or FEWER_THAN_THREE_FREQUENCIES
-    return {"t_halt_flag": halt, "approach_exponent_flag": approach, "ramp_exponent_flag": ramp,
+    halt_error = VALUE if not _nan(summary.get("t_halt_error")) else (
+        halt or (HALT_LOCATED_LYING_FLAT if summary.get("lay_flat") else NO_FINITE_HALT))
+    return {"t_halt_flag": halt, "t_halt_error_flag": halt_error, "approach_exponent_flag": approach,
+            "ramp_exponent_flag": ramp,
             "ramp_exponent_error_flag": ramp_err}
 
 

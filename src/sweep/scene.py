@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,7 +27,8 @@ import numpy as np
 
 from . import fields, yamlio
 from .core import model
-from .errors import ConfigError
+from .core.contact import BETA_FACE
+from .errors import ConfigError, raise_all
 
 DEFAULTS: dict[str, Any] = {
     "disk": {"radius": 0.03755, "thickness": 0.0128, "mass": 0.4387, "shape": "solid"},
@@ -58,26 +60,52 @@ DEFAULTS: dict[str, Any] = {
 SHAPES = {"solid": 1.0, "shell": 2.0}   # k^2 of eq. (2.4)
 
 
-def _merge(path: str, user, default):
+def _merge(path: str, user, default, errors: list):
+    """The user's mapping over the defaults; every unknown key and every section that is not a
+    mapping is added to `errors` (the section then takes its defaults, so its fields are not
+    reported again)."""
     if isinstance(default, dict):
         if user is None:
             user = {}
         if not isinstance(user, dict):
-            raise ConfigError(path or "scene", user, "a mapping")
-        unknown = sorted(set(user) - set(default), key=str)
-        if unknown:
-            where = f"{path}.{unknown[0]}" if path else str(unknown[0])
-            raise ConfigError(where, user[unknown[0]], f"keys: {', '.join(sorted(default))}",
-                              problem="no such key")
-        return {k: (_merge(f"{path}.{k}" if path else k, user[k], d) if k in user else copy.deepcopy(d))
+            errors.append(ConfigError(path or "scene", user, "a mapping"))
+            user = {}
+        for key in sorted(set(user) - set(default), key=str):
+            where = f"{path}.{key}" if path else str(key)
+            errors.append(ConfigError(where, user[key], f"keys: {', '.join(sorted(default))}",
+                                      problem="no such key"))
+        return {k: (_merge(f"{path}.{k}" if path else k, user[k], d, errors) if k in user else copy.deepcopy(d))
                 for k, d in default.items()}
     return user   # an explicit null stays null and is rejected by the field's validator
 
 
-def _vector(path: str, v, n: int) -> list[float]:
-    if not isinstance(v, (list, tuple)) or len(v) != n:
-        raise ConfigError(path, v, f"a list of {n} numbers, each {fields.RANGES[path].allowed()}")
-    return [fields.check(path, x, f"{path}[{i}]") for i, x in enumerate(v)]
+class _Checks:
+    """The field checks of one scene, every failure kept (`errors`) so that all are reported at
+    once; a failed check gives None, which later checks skip."""
+
+    def __init__(self, errors: list):
+        self.errors = errors
+
+    def field(self, field: str, v, name: str | None = None, values: dict | None = None):
+        known = None if values is None else {k: x for k, x in values.items() if x is not None}
+        try:
+            return fields.check(field, v, name, known)
+        except ConfigError as err:
+            self.errors.append(err)
+            return None
+
+    def vector(self, path: str, v, n: int):
+        if not isinstance(v, (list, tuple)) or len(v) != n:
+            self.errors.append(ConfigError(path, v, f"a list of {n} numbers, each {fields.RANGES[path].allowed()}"))
+            return None
+        out = [self.field(path, x, f"{path}[{i}]") for i, x in enumerate(v)]
+        return None if any(x is None for x in out) else out
+
+    def choice(self, field: str, v, allowed: tuple[str, ...]):
+        if not isinstance(v, str) or v not in allowed:
+            self.errors.append(ConfigError(field, v, f"one of: {', '.join(allowed)}"))
+            return None
+        return v
 
 
 @dataclass(frozen=True)
@@ -129,58 +157,153 @@ def load_scene(src) -> Scene:
 
 
 def _validate(raw) -> Scene:
-    cfg = _merge("", raw, DEFAULTS)
+    errors: list[ConfigError] = []
+    cfg = _merge("", raw, DEFAULTS, errors)
+    ok = _Checks(errors)
 
     d = cfg["disk"]
     for k in ("radius", "mass"):
-        d[k] = fields.check(f"disk.{k}", d[k])
-    d["thickness"] = fields.check("disk.thickness", d["thickness"], values={"disk.radius": d["radius"]})
-    if not isinstance(d["shape"], str) or d["shape"] not in SHAPES:
-        raise ConfigError("disk.shape", d["shape"], "one of: solid, shell")
+        d[k] = ok.field(f"disk.{k}", d[k])
+    d["thickness"] = ok.field("disk.thickness", d["thickness"], values={"disk.radius": d["radius"]})
+    d["shape"] = ok.choice("disk.shape", d["shape"], tuple(SHAPES))
     c = cfg["contact"]
-    c["mu_s"] = fields.check("contact.mu_s", c["mu_s"])
+    c["mu_s"] = ok.field("contact.mu_s", c["mu_s"])
     known = {"disk.radius": d["radius"], "contact.mu_s": c["mu_s"]}
     for k in ("mu_d", "k1", "k2", "k3"):
-        c[k] = fields.check(f"contact.{k}", c[k], values=known)
-    cfg["gravity"] = fields.check("gravity", cfg["gravity"])
+        c[k] = ok.field(f"contact.{k}", c[k], values=known)
+    cfg["gravity"] = ok.field("gravity", cfg["gravity"])
     ini = cfg["initial"]
-    ini["alpha"] = fields.check("initial.alpha", ini["alpha"])
-    ini["omega"] = _vector("initial.omega", ini["omega"], 3)
-    ini["slip"] = _vector("initial.slip", ini["slip"], 2)
-    ini["theta"] = fields.check("initial.theta", ini["theta"])
-    ini["psi"] = fields.check("initial.psi", ini["psi"])
+    ini["alpha"] = ok.field("initial.alpha", ini["alpha"])
+    ini["omega"] = ok.vector("initial.omega", ini["omega"], 3)
+    ini["slip"] = ok.vector("initial.slip", ini["slip"], 2)
+    ini["theta"] = ok.field("initial.theta", ini["theta"])
+    ini["psi"] = ok.field("initial.psi", ini["psi"])
     st = cfg["stop"]
     lv = st["levels"]
     if not isinstance(lv, (list, tuple)) or not lv:
-        raise ConfigError("stop.levels", lv, "a non-empty list, each " + fields.RANGES["stop.levels"].allowed())
-    lv = [fields.check("stop.levels", x, f"stop.levels[{i}]") for i, x in enumerate(lv)]
-    if len(set(lv)) != len(lv):
-        raise ConfigError("stop.levels", lv, "distinct values (a level is listed twice)")
-    st["levels"] = sorted(lv, reverse=True)
-    st["t_max"] = fields.check("stop.t_max", st["t_max"])
-    st["max_steps"] = fields.check("stop.max_steps", st["max_steps"])
+        errors.append(ConfigError("stop.levels", lv, "a non-empty list, each " + fields.RANGES["stop.levels"].allowed()))
+        st["levels"] = None
+    else:
+        lv = [ok.field("stop.levels", x, f"stop.levels[{i}]") for i, x in enumerate(lv)]
+        if any(x is None for x in lv):
+            st["levels"] = None
+        elif len(set(lv)) != len(lv):
+            errors.append(ConfigError("stop.levels", lv, "distinct values (a level is listed twice)"))
+            st["levels"] = None
+        else:
+            st["levels"] = sorted(lv, reverse=True)
+    st["t_max"] = ok.field("stop.t_max", st["t_max"])
+    st["max_steps"] = ok.field("stop.max_steps", st["max_steps"])
     so = cfg["solver"]
-    if not isinstance(so["method"], str) or so["method"] not in ("adaptive", "fixed"):
-        raise ConfigError("solver.method", so["method"], "one of: adaptive, fixed")
+    so["method"] = ok.choice("solver.method", so["method"], ("adaptive", "fixed"))
     for k in ("rtol", "atol", "dt", "slip_tol", "spin_tol", "slave_tol"):
-        so[k] = fields.check(f"solver.{k}", so[k])
+        so[k] = ok.field(f"solver.{k}", so[k])
     out = cfg["outputs"]
     for k in out:
         if not isinstance(out[k], bool):
-            raise ConfigError(f"outputs.{k}", out[k], "true or false")
+            errors.append(ConfigError(f"outputs.{k}", out[k], "true or false"))
     mat = cfg["material"]   # sound synthesis only: not passed to the kernel
     for k in ("E", "density", "poisson", "damping"):
-        mat[k] = fields.check(f"material.{k}", mat[k])
+        mat[k] = ok.field(f"material.{k}", mat[k])
 
+    # the checks that need the disk's model parameters: where the fields they read are valid
+    needed = [d["radius"], d["thickness"], d["shape"], cfg["gravity"], c["mu_s"], c["mu_d"], c["k1"], c["k2"],
+              c["k3"], so["slip_tol"], so["spin_tol"], so["slave_tol"]]
+    if errors and any(x is None for x in needed):
+        raise_all(errors)
     params, chi = model.make_params(SHAPES[d["shape"]], d["radius"], d["thickness"], cfg["gravity"],
                                     c["mu_s"], c["mu_d"], (c["k1"], c["k2"], c["k3"]))
     params[model.P_UTOL] = so["slip_tol"] * chi / d["radius"]
     params[model.P_WTOL] = so["spin_tol"] * chi
     params[model.P_SLAVE] = so["slave_tol"]
-    bmax = max_level(params)
-    if st["levels"][0] > bmax:
-        raise ConfigError("stop.levels", st["levels"][0],
-                          f"inclinations in (0, {bmax:.4f}) rad for this disk (the energy-equivalent "
-                          "inclination is defined only where steady centre-fixed rolling exists)")
+    if st["levels"] is not None:
+        bmax = max_level(params)
+        if st["levels"][0] > bmax:
+            errors.append(ConfigError("stop.levels", st["levels"][0],
+                                      f"inclinations in (0, {bmax:.4f}) rad for this disk (the energy-equivalent "
+                                      "inclination is defined only where steady centre-fixed rolling exists)"))
+            st["levels"] = None
+    if ini["alpha"] is not None:
+        err = flat_start_error(ini["alpha"])
+        if err is not None:
+            errors.append(err)
+            ini["alpha"] = None
+    raise_all(errors)
     energy_scale = d["mass"] * d["radius"] ** 2 / chi**2
     return Scene(config=cfg, params=params, chi=chi, energy_scale=energy_scale)
+
+
+def flat_start_error(alpha: float) -> ConfigError | None:
+    """The error for a start that lies flat already: pi/2 - |alpha| at or below the face
+    inclination BETA_FACE (1e-6 rad), where the face touches the table (core.contact)."""
+    beta = 0.5 * math.pi - abs(alpha)
+    if beta > BETA_FACE:
+        return None
+    return ConfigError("initial.alpha", alpha,
+                       f"0 < |alpha| < pi/2 - {fields.number_text(BETA_FACE)} = {0.5 * math.pi - BETA_FACE:.7f} rad (at "
+                       f"{fields.number_text(BETA_FACE)} rad "
+                       "from flat the disk's face reaches the table: the model's halt)",
+                       problem=f"the disk starts lying flat (pi/2 - |alpha| = {beta:.3g} rad)")
+
+
+def initial_state(scene: Scene) -> tuple[np.ndarray, int]:
+    """Dimensionless initial state and mode (SLIDE if the initial slip is non-zero; the kernel
+    makes a slip at or below slip_tol a slaved one)."""
+    cfg = scene.config
+    chi, R = scene.chi, cfg["disk"]["radius"]
+    y0 = np.zeros(model.N_FULL)
+    ini = cfg["initial"]
+    y0[model.Y_ALPHA] = ini["alpha"]
+    y0[model.Y_W1:model.Y_W3 + 1] = np.asarray(ini["omega"]) * chi
+    slip = np.asarray(ini["slip"]) * chi / R
+    mode = model.SLIDE if np.any(slip != 0.0) else model.ROLL
+    y0[model.Y_U1:model.Y_U2 + 1] = slip
+    y0[model.Y_THETA] = ini["theta"]
+    y0[model.Y_PSI] = ini["psi"]
+    return y0, mode
+
+
+def equivalent_inclination(scene: Scene, energy: float) -> float:
+    """The energy-equivalent inclination (rad) of a dimensionless energy: E_ss^-1(energy) on
+    (0, max_level], by bisection to 1e-12 relative (E_ss increases there); max_level where the
+    energy exceeds E_ss there."""
+    lo, hi = 0.0, max_level(scene.params)
+    if energy >= model.steady_rolling_energy(hi, scene.params):
+        return hi
+    while hi - lo > 1e-12 * hi:
+        mid = 0.5 * (lo + hi)
+        if model.steady_rolling_energy(mid, scene.params) < energy:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def check_start(scene: Scene) -> Scene:
+    """`scene`, or ConfigError where its start's energy is at or below the deepest level's: every
+    level would be 'reached' at t = 0 and nothing measured (the energy-equivalent inclination only
+    falls). Checked for a scene file (`run.py scene`), not by load_scene: in a sweep, where the
+    grid's corners can combine a flat tilt with a slow spin, such a point runs and its level times
+    say 0."""
+    err = start_below_levels_error(scene)
+    if err is not None:
+        raise err
+    return scene
+
+
+def start_below_levels_error(scene: Scene) -> ConfigError | None:
+    """The error of check_start, None for a start above the deepest level."""
+    y0, mode = initial_state(scene)
+    side = 1 if y0[model.Y_ALPHA] > 0 else -1
+    e0 = model.energy(y0, scene.params, side, mode)
+    deepest = float(scene.levels[-1])
+    if e0 > model.steady_rolling_energy(deepest, scene.params):
+        return None
+    beta = equivalent_inclination(scene, e0)
+    ini = scene.config["initial"]
+    start = {"alpha": ini["alpha"], "omega": ini["omega"], "slip": ini["slip"]}
+    return ConfigError("initial", start,
+                       f"a start above the deepest level, stop.levels = {deepest!r} rad (more tilt from flat, "
+                       "more spin, or a deeper level)",
+                       problem=f"its energy-equivalent inclination {beta:.3g} rad is at or below the deepest level "
+                       f"{deepest!r} rad: every level would be reached at t = 0")
