@@ -57,7 +57,7 @@ AGREE_ALL = 1e-3
 # default run (slip_tol 1e-9 m/s, spin_tol 1e-7 rad/s): the answers must not move (docs/model.md,
 # 'Where a slip ends'; 'Sticking at spin_tol')
 KNOB_RUNS = [("slip_tol 1e-11", {"slip_tol": 1e-11}), ("slip_tol 1e-13", {"slip_tol": 1e-13}),
-             ("spin_tol 1e-9", {"spin_tol": 1e-9}), ("slave_tol 1e-4", {"slave_tol": 1e-4})]
+             ("spin_tol 1e-9", {"spin_tol": 1e-9}), ("slave_tol 1e-6", {"slave_tol": 1e-6})]
 # The near-edge band: scenes drawn as the others, with mu_d / mu_s in [EDGE_LO, 1] (a quarter of them
 # exactly mu_d = mu_s), numbered from EDGE_BASE in a draw of their own (--edge N), so the main
 # draw's scenes keep their indices

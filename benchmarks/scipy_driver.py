@@ -567,7 +567,7 @@ class Disk:
         if fate == "spirals_out":
             c.slow_off = True
             return -1
-        if fate == "ends" and math.isfinite(nu) and self.settle_onto(nu, t, y, c) == "settled":
+        if fate == "ends" and math.isfinite(nu) and self.settle_onto(nu, t, y, c):
             c.slave_off = False
             return -1
         phi = self.model(t, y, SLIDE, c, *self._slip_dir(y, c))[1][X_PHI]
@@ -604,45 +604,27 @@ class Disk:
         if math.isnan(root):
             c.slave_off = True
             return -1
-        settled = self.settle_onto(root, t, y, c, strict=True)
-        if settled == "against":
+        if not self.settle_onto(root, t, y, c):
             c.slave_off = True    # pointing against it: passing by u = 0, it goes on sliding
-        elif settled == "unrelaxed":
-            c.slave_off, c.floor = "retry", u / 2.0    # tried again where twice slower
         return -1
 
-    def unrelaxed(self, root, t, y, c, err_bound=1.0):
-        """Is the slip's own direction more than slave_tol rad off the slaved direction at root
-        (root plus its lag), or that direction's error above err_bound x slave_tol? (slave_tol > 0
-        only; the hand-over's bound 1, a slaved slip's after an update SLAVE_EXIT.)"""
-        lag, err = self.lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, c)
-        off = abs(math.remainder(math.atan2(y[Y_U2], y[Y_U1]) - root - lag, 2.0 * math.pi))
-        st = self.p[P_SLAVE]
-        return st > 0.0 and not (err <= err_bound * st and off <= st), off
-
-    def settle_onto(self, root, t, y, c, strict=False):
+    def settle_onto(self, root, t, y, c):
         """SLIDE -> SLAVED at the quasi-static direction root, the slip across the slaved
         direction there (root plus its lag) removed by the plastic impulse, if that leaves the slip
-        along it; else nothing changes. strict (the hand-over at the slaving speed): only where the
-        slip's direction is within slave_tol rad of the slaved one and that one's error within
-        slave_tol. Returns 'settled', 'against' or 'unrelaxed'."""
+        along it; else nothing changes. Returns whether it settled."""
         saved = y.copy()
         lag, err = self.lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, c)
-        if strict and self.p[P_SLAVE] > 0.0:
-            bad, off = self.unrelaxed(root, t, y, c)
-            if off >= 0.5 * math.pi:
-                return "against"
-            if bad:
-                return "unrelaxed"
+        if self.p[P_SLAVE] > 0.0 and not err <= self.p[P_SLAVE]:
+            return False     # the first-order slow manifold is no good here: it slides on
         along = root + lag
         loss = self.be.project_velocity(y, self.p, c.side, True, c.side, True, self.S, along)
         if y[Y_U1] * math.cos(along) + y[Y_U2] * math.sin(along) > 0.0:
             y[Y_DSLIDE] += loss
             c.mode = SLAVED
             c.nu = root
-            return "settled"
+            return True
         y[:] = saved
-        return "against"
+        return False
 
     def set_slip(self, t, y, c):
         """Contact state for a given slip vector (start, or after an impact while slipping)."""
@@ -689,15 +671,11 @@ class Disk:
         un = math.hypot(y[Y_U1], y[Y_U2])
         if c.mode == SLAVED:
             root = self.slaved_root(c.nu, un, t, y, c)
-            lag, err = (0.0, math.inf) if math.isnan(root) else self.lag(root, un, t, y, c)
-            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root + lag
+            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root
             _, aux = self.model(t, y, SLIDE, c, math.cos(nu), math.sin(nu), self.pf)
-            margin = 1.0 - un / (SLAVE_EXIT * self.slave_speed(y, aux))
-            if self.p[P_SLAVE] > 0.0:
-                margin = min(margin, 1.0 - err / (SLAVE_EXIT * self.p[P_SLAVE]))
-            return margin <= 0.0
-        _, aux, _ = self.rhs(t, y, c, c.nu)
-        return SLAVE_EXIT * self.slave_speed(y, aux) - un <= 0.0
+        else:
+            _, aux, _ = self.rhs(t, y, c, c.nu)
+        return SLAVE_EXIT * self.slave_speed(aux) - un <= 0.0
 
     def stick_test(self, i, t, y, c, force=False):
         """At omega.a_i = 0: stick if the moment can hold it, else pass with the needed sign.
@@ -1006,13 +984,6 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 stats["fold_by_failure"] += 1
                 continue
             c.nu = nu
-            u_now = math.hypot(y[Y_U1], y[Y_U2])
-            if u_now > u_tol and disk.unrelaxed(nu, t, y, c, SLAVE_EXIT)[0]:
-                # an update left the slip's direction off the slaved one of the new contact state:
-                # it slides, the hand-over tried again twice slower (contact.unslave_unrelaxed)
-                c.mode, c.slave_off, c.floor = SLIDE, "retry", u_now / 2.0
-                stats["unslaved_after_update"] = stats.get("unslaved_after_update", 0) + 1
-                continue
         if aux[X_OK] < 0.0:
             finish(outcomes.PAINLEVE, t)
             break
@@ -1066,7 +1037,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             active.append({ROLL: "cone", SLIDE: "slipslow", SLAVED: "slipstop"}[seg.mode])
         if seg.mode == SLAVED:
             active += ["slipfast", "slave_lost"]
-        if seg.mode == SLIDE and (not seg.slave_off or seg.slave_off == "retry"):
+        if seg.mode == SLIDE and not seg.slave_off:
             active.append("slave")
         if seg.mode == SLIDE and (seg.slave_off or seg.slow_off):
             active.append("slipfast")      # fast again: the hand-over is re-armed
@@ -1088,8 +1059,6 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             if kind == "slipslow":
                 return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slip_floor(tt, a[X_PHI], seg)
             if kind == "slave":
-                if seg.slave_off == "retry":
-                    return math.hypot(yy[Y_U1], yy[Y_U2]) - min(seg.floor, disk.slave_speed(yy, a))
                 return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slave_speed(yy, a)
             if kind == "slipstop":
                 along = nu_ + a[X_LAG]

@@ -61,13 +61,6 @@ SLOW_OFF = 2.0
 # u = 0; its fate is read again at cs[CS_FLOOR], BELOW_STEP times slower each time
 BELOW = 3.0
 BELOW_STEP = 16.0
-# cs[CS_SLAVE_OFF] while a slide whose direction has not yet relaxed onto the slow manifold (or whose
-# slaved direction would not be accurate) is followed further: the hand-over is tried again where
-# |u| has fallen to cs[CS_FLOOR], RETRY_STEP times slower (try_slave)
-RETRY = 4.0
-RETRY_STEP = 2.0
-# settle_onto's answers
-SETTLED, AGAINST, UNRELAXED = 0, 1, 2
 # tau: the differences of d/dtau(omega.a_i) along the motion for its second and third derivatives
 # (spin_rest_time): truncation O(SPIN_DIFF^2) and O(SPIN_DIFF), round-off EPS |g1| / SPIN_DIFF^2.
 SPIN_DIFF = 1e-3
@@ -475,44 +468,25 @@ def try_slave(t, y, sys):
         return -1
     # where the slip points against the direction, it is not settling onto it but passing by u = 0
     # (its direction turning towards a root along which it grows): it goes on sliding, as the
-    # sliding equations carry it, past u = 0 or to slip_tol (docs/model.md); where its direction
-    # is still relaxing towards it, the hand-over is tried again RETRY_STEP times slower
-    settled = settle_onto(root, t, y, sys, True)
-    if settled == AGAINST:
+    # sliding equations carry it, past u = 0 or to slip_tol (docs/model.md)
+    if not settle_onto(root, t, y, sys):
         cs[CS_SLAVE_OFF] = 1.0
-    elif settled == UNRELAXED:
-        cs[CS_SLAVE_OFF] = RETRY
-        cs[CS_FLOOR] = u / RETRY_STEP
     return -1
 
 
 @kernel
-def angle_apart(a, b):
-    """|a - b| as an angle on the circle, in [0, pi] (rad)."""
-    d = (a - b) / (2.0 * math.pi)
-    return 2.0 * math.pi * abs(d - math.floor(d + 0.5))
-
-
-@kernel
-def settle_onto(root, t, y, sys, strict):
+def settle_onto(root, t, y, sys):
     """SLIDE -> SLAVED at the quasi-static direction root: the slip component across the slow
     manifold's direction there (root plus the lag, root_lag) is removed by a plastic impulse
-    (O(u^2) loss), if that leaves the slip along it; else the state is left as it was. strict (the
-    hand-over at the slaving speed): only where the slaved direction's error there is within
-    slave_tol (slaved_slip) and the slip's own direction within slave_tol rad of it (a direction
-    still relaxing towards it has a transient of its own that the impulse would cut short: an error
-    of the order of the relaxation time). Returns SETTLED, AGAINST (the slip points against the
-    direction) or UNRELAXED (strict, and not yet)."""
+    (O(u^2) loss), if that leaves the slip along it and the slaved direction's error there is
+    within slave_tol (slaved_slip); else the state is left as it was. Returns whether the slip
+    settled."""
     p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     side = int(cs[CS_SIDE])
     lag, _, err = root_lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+    if p[P_SLAVE] > 0.0 and not err <= p[P_SLAVE]:
+        return False   # the slow manifold is no good approximation here: the slip slides on
     along = root + lag
-    if strict and p[P_SLAVE] > 0.0:
-        off = angle_apart(math.atan2(y[Y_U2], y[Y_U1]), along)
-        if off >= 0.5 * math.pi:
-            return AGAINST
-        if not (err <= p[P_SLAVE] and off <= p[P_SLAVE]):
-            return UNRELAXED
     saved = wk[W_YSLIP]
     for i in range(n):
         saved[i] = y[i]
@@ -521,10 +495,10 @@ def settle_onto(root, t, y, sys, strict):
         y[Y_DSLIDE] += loss
         cs[CS_MODE] = SLAVED
         cs[CS_NU] = root
-        return SETTLED
+        return True
     for i in range(n):
         y[i] = saved[i]
-    return AGAINST
+    return False
 
 
 # What a slide whose speed has fallen to slip_tol does next (slip_fate): it reaches u = 0 and ends,
@@ -597,7 +571,7 @@ def slow_slide(t, y, sys):
     if fate == FATE_SPIRALS_OUT:
         cs[CS_SLAVE_OFF] = SLOW_OFF
         return -1
-    if fate == FATE_ENDS and not math.isnan(nu) and settle_onto(nu, t, y, sys, False) == SETTLED:
+    if fate == FATE_ENDS and not math.isnan(nu) and settle_onto(nu, t, y, sys):
         cs[CS_SLAVE_OFF] = 0.0
         return -1
     eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
@@ -636,36 +610,18 @@ def confirm_slaved(t, y, sys):
     cs, wk = sys.cs, sys.wk
     u = math.hypot(y[Y_U1], y[Y_U2])
     nu = slaved_direction(cs[CS_NU], u, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP])
-    if wk[W_AUXTMP, X_OK] == 0.0:
-        nu = attracting_direction(cs[CS_NU], u, t, y, sys)
-        if nu == JAMMED:
-            return oc.PAINLEVE
-        if math.isnan(nu):
-            cs[CS_MODE] = SLIDE
-            cs[CS_SLAVE_OFF] = 1.0
-            return -1
-    cs[CS_NU] = nu
-    unslave_unrelaxed(t, y, sys)
-    return -1
-
-
-@kernel
-def unslave_unrelaxed(t, y, sys):
-    """A slaved slip whose own direction an update left more than slave_tol rad off the slaved
-    direction of the new contact state (a stick or release changes the slip dynamics, and the
-    direction has a transient towards the new one), or where that direction's error is past its
-    exit bound SLAVE_EXIT slave_tol (slaved_margin), slides (SLIDE, the hand-over tried again RETRY_STEP times slower: settle_onto). At
-    slip_tol or below, and with slave_tol 0, it stays slaved."""
-    p, cs, wk = sys.p, sys.cs, sys.wk
-    u = math.hypot(y[Y_U1], y[Y_U2])
-    if not (p[P_SLAVE] > 0.0 and u > p[P_UTOL]):
-        return
-    lag, _, err = root_lag(cs[CS_NU], u, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
-    off = angle_apart(math.atan2(y[Y_U2], y[Y_U1]), cs[CS_NU] + lag)
-    if not (err <= SLAVE_EXIT * p[P_SLAVE] and off <= p[P_SLAVE]):
+    if wk[W_AUXTMP, X_OK] != 0.0:
+        cs[CS_NU] = nu
+        return -1
+    root = attracting_direction(cs[CS_NU], u, t, y, sys)
+    if root == JAMMED:
+        return oc.PAINLEVE
+    if math.isnan(root):
         cs[CS_MODE] = SLIDE
-        cs[CS_SLAVE_OFF] = RETRY
-        cs[CS_FLOOR] = u / RETRY_STEP
+        cs[CS_SLAVE_OFF] = 1.0
+        return -1
+    cs[CS_NU] = root
+    return -1
 
 
 @kernel
@@ -1030,11 +986,6 @@ def event_values(t, y, aux, p, cs, lev, g):
             g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p, cs)
         if cs[CS_SLAVE_OFF] == 0.0:
             g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(y, aux, p)
-        elif cs[CS_SLAVE_OFF] == RETRY:
-            # the hand-over tried again where the slip has slowed RETRY_STEP times more, or re-armed
-            # where it is fast again
-            g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - min(cs[CS_FLOOR], slave_speed(y, aux, p))
-            g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(y, aux, p) - math.hypot(y[Y_U1], y[Y_U2])
         else:
             # the hand-over is off (no quasi-static direction to settle on, or the slip passed it
             # by) until the slip is fast again: SLAVE_EXIT times the slaving speed, as a slaved
