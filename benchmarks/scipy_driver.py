@@ -671,11 +671,15 @@ class Disk:
         un = math.hypot(y[Y_U1], y[Y_U2])
         if c.mode == SLAVED:
             root = self.slaved_root(c.nu, un, t, y, c)
-            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root
+            lag, err = (0.0, math.inf) if math.isnan(root) else self.lag(root, un, t, y, c)
+            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root + lag
             _, aux = self.model(t, y, SLIDE, c, math.cos(nu), math.sin(nu), self.pf)
-        else:
-            _, aux, _ = self.rhs(t, y, c, c.nu)
-        return SLAVE_EXIT * self.slave_speed(aux) - un <= 0.0
+            margin = 1.0 - un / (SLAVE_EXIT * self.slave_speed(y, aux))
+            if self.p[P_SLAVE] > 0.0:
+                margin = min(margin, 1.0 - err / (SLAVE_EXIT * self.p[P_SLAVE]))
+            return margin <= 0.0
+        _, aux, _ = self.rhs(t, y, c, c.nu)
+        return SLAVE_EXIT * self.slave_speed(y, aux) - un <= 0.0
 
     def stick_test(self, i, t, y, c, force=False):
         """At omega.a_i = 0: stick if the moment can hold it, else pass with the needed sign.

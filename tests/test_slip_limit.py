@@ -299,29 +299,32 @@ def test_the_slaved_directions_lag_agrees_with_the_peers():
 
 def test_a_slip_at_the_edge_of_the_cone_without_k3_halts():
     """The paper's disk at mu_d = mu_s with k3 = 0 slips for most of its motion; with the slip's
-    direction integrated wherever it relaxes slowly it ran into step_limit (5e6 steps) having reached
-    only the 0.1 rad level. Slaved by the slow manifold, it halts with a finite halt time."""
+    direction integrated wherever it relaxes slowly it runs into step_limit (5e6 steps) before the
+    0.01 rad level, as it does at the default slave_tol 1e-4 (docs/model.md, 'Slow slip'). Slaved by
+    the slow manifold from slave_tol 1e-3, it halts with a finite halt time."""
     cfg = _paper_edge(k3=0.0)
+    cfg["solver"] = {"slave_tol": 1e-3}
     s = sweep.simulate(cfg).summary
     assert s["outcome"] == "halted", s["outcome"]
     assert s["halt_finite"] and math.isfinite(s["t_halt"]) and math.isfinite(s["t_halt_error"])
-    assert s["n_steps"] < 300_000, s["n_steps"]
+    assert s["n_steps"] < 1_000_000, s["n_steps"]
 
 
 def test_the_slaved_direction_converges_as_slave_tol_goes_to_zero():
     """The paper's disk at mu_d = mu_s to tau = 60 (0.1 rad reached): alpha at tau 20, 40, 60 at
-    slave_tol 1e-2, 3e-3 (default) and 1e-3 against 1e-4: the differences shrink at least as the
-    square of slave_tol's ratio over a decade less one (the neglected terms are second order), and
-    the default is within 1e-8 rad."""
+    slave_tol 1e-2, 1e-3 and 1e-4 (the default) against 1e-6: the differences shrink by more than
+    10 per decade down to the integration error, and the default is within 1e-9 rad (measured:
+    1.1e-8, 1.5e-11, 3.9e-12)."""
     cfg = _paper_edge()
     chi = _chi(cfg)
     cfg["stop"] = {"levels": [0.1], "t_max": 60.5 * chi}
     times = [20.0 * chi, 40.0 * chi, 60.0 * chi]
     alpha = {}
-    for st in (1e-2, 3e-3, 1e-3, 1e-4):
+    for st in (1e-2, 1e-3, 1e-4, 1e-6):
         cfg["solver"] = {"slave_tol": st}
         alpha[st] = sweep.simulate(cfg, sample_times=times).samples["alpha"]
-    d = {st: float(np.max(np.abs(alpha[st] - alpha[1e-4]))) for st in (1e-2, 3e-3, 1e-3)}
+    d = {st: float(np.max(np.abs(alpha[st] - alpha[1e-6]))) for st in (1e-2, 1e-3, 1e-4)}
     print(d)
-    assert d[3e-3] < 1e-8, d
-    assert d[1e-3] < d[1e-2] / 10.0, d
+    assert d[1e-4] < 1e-9, d
+    # (down to the integration's own error at rtol 1e-10, ~1e-11 rad here)
+    assert d[1e-3] < d[1e-2] / 10.0 and d[1e-4] < max(d[1e-3] / 10.0, 1e-11), d
