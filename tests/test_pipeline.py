@@ -150,7 +150,8 @@ def test_stored_notebooks_have_no_outputs():
         for cell in nb.cells:
             if cell.cell_type == "code":
                 assert not cell.outputs and cell.execution_count is None, path.name
-    assert {p.stem for p in (ROOT / "workflow" / "notebooks").glob("*.ipynb")} == set(grid.NOTEBOOKS)
+    assert {p.stem for p in (ROOT / "workflow" / "notebooks").glob("*.ipynb")} == set(grid.NOTEBOOKS
+                                                                                    + grid.ADAPTIVE_NOTEBOOKS)
 
 
 @pytest.mark.parametrize("mutate, fragment", [

@@ -399,6 +399,59 @@ def git_commit(path: str | Path) -> str:
     return head + ("-dirty" if dirty else "") if head else "unknown"
 
 
+def variable_encoding(kind: str, chunksizes: Sequence[int]) -> dict:
+    """The cube's netCDF encoding of a variable of `kind` (sweep.outputs.Var.kind): int32 with
+    fill -1 for counts (decoded with NaN for missing), int8 for outcome codes and flags, float64
+    with NaN fill; zlib with shuffle, in `chunksizes`."""
+    if kind == "int":
+        enc = {"dtype": "int32", "_FillValue": np.int32(INT_FILL)}
+    elif kind in ("outcome", "flag"):
+        enc = {"dtype": "int8", "_FillValue": None}
+    elif kind == "bool":
+        enc = {"_FillValue": None}
+    else:
+        enc = {"dtype": "float64", "_FillValue": np.nan}
+    enc.update(zlib=True, complevel=COMPLEVEL, shuffle=True, chunksizes=tuple(chunksizes))
+    return enc
+
+
+def cube_coords(settings: Mapping) -> dict:
+    """The cube's coordinates: the six axes (the values of `settings["grid"]`) and `level`."""
+    coords = {a: (a, np.array(settings["grid"][a], dtype=np.float64), _coord_attrs(a)) for a in _grid.AXES}
+    coords["level"] = ("level", np.array(settings["levels"], dtype=np.float64), dict(LEVEL_ATTRS))
+    return coords
+
+
+def cube_attrs(settings: Mapping, name: str | None, history: str, repo_path: str | Path | None) -> dict:
+    """The cube's global attributes: CF conventions, title, history (`history`, after the time),
+    provenance (version, git commit, config and its SHA-256, solver, core fingerprint)."""
+    from . import __version__
+
+    config_json = _grid.canonical_json(settings)
+    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    attrs = {
+        "Conventions": "CF-1.10",
+        "title": "Euler's disk (Kessler & O'Reilly 2002) parameter sweep" + (f" '{name}'" if name else ""),
+        "sweep_name": name or "",
+        "history": f"{created}: {history}",
+        "source": f"sweep {__version__}: rigid-disk model of Kessler & O'Reilly (2002), "
+                  "numba hybrid integrator",
+        "sweep_version": __version__,
+        "git_commit": git_commit(repo_path) if repo_path is not None else "unknown",
+        "config_json": config_json,
+        "config_sha256": _grid.sha256_hex(config_json),
+        "solver": _grid.canonical_json(settings["solver"]),
+        "sweep_core_sha256": _grid.core_fingerprint(),
+        "stop": _grid.canonical_json(settings["stop"]),
+        "created": created,
+    }
+    if settings.get("outputs", {}).get("error_estimate", False):  # the rerun's settings behind *_numerical_error
+        ref = _grid.error_reference(_grid.scene_settings(settings))
+        attrs["error_estimate_solver"] = _grid.canonical_json(ref["solver"])
+        attrs["error_estimate_stop"] = _grid.canonical_json(ref["stop"])
+    return attrs
+
+
 def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str | Path,
            repo_path: str | Path | None = None, history: str = "", name: str | None = None) -> Path:
     """Gather verified chunk files into the cube at `out_path` (atomic write), lazily with dask.
@@ -408,8 +461,6 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
     once; a damaged chunk file raises (after quarantining it) instead of being gathered.
     """
     import xarray as xr
-
-    from . import __version__
 
     paths = [Path(p) for p in chunk_paths]
     plan = _grid.plan_chunks(settings)
@@ -453,44 +504,13 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             cs = csizes if var.per_level else csizes[:-1]
             arr = arr.rechunk(cs)
             dims = axes + (("level",) if var.per_level else ())
-            if var.kind == "int":  # decoded with NaN for missing; stored as int32 with a fill value
-                enc = {"dtype": "int32", "_FillValue": np.int32(INT_FILL)}
-            elif var.kind in ("outcome", "flag"):
-                enc = {"dtype": "int8", "_FillValue": None}
-            elif var.kind == "bool":
-                enc = {"_FillValue": None}
-            else:
-                enc = {"dtype": "float64", "_FillValue": np.nan}
-            enc.update(zlib=True, complevel=COMPLEVEL, shuffle=True, chunksizes=cs)
             data_vars[var.name] = (dims, arr, _var_attrs(var))
-            encoding[var.name] = enc
-        coords = {a: (a, np.array(settings["grid"][a], dtype=np.float64), _coord_attrs(a)) for a in axes}
-        coords["level"] = ("level", np.array(settings["levels"], dtype=np.float64), dict(LEVEL_ATTRS))
+            encoding[var.name] = variable_encoding(var.kind, cs)
+        coords = cube_coords(settings)
         for c in coords:
             encoding[c] = {"_FillValue": None}
-        config_json = _grid.canonical_json(settings)
-        created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-        attrs = {
-            "Conventions": "CF-1.10",
-            "title": "Euler's disk (Kessler & O'Reilly 2002) parameter sweep" + (f" '{name}'" if name else ""),
-            "sweep_name": name or "",
-            "history": f"{created}: gathered {len(paths)} chunk files ({n} scenes) into this cube"
-                       + (f"; {history}" if history else ""),
-            "source": f"sweep {__version__}: rigid-disk model of Kessler & O'Reilly (2002), "
-                      "numba hybrid integrator",
-            "sweep_version": __version__,
-            "git_commit": git_commit(repo_path) if repo_path is not None else "unknown",
-            "config_json": config_json,
-            "config_sha256": _grid.sha256_hex(config_json),
-            "solver": _grid.canonical_json(settings["solver"]),
-            "sweep_core_sha256": _grid.core_fingerprint(),
-            "stop": _grid.canonical_json(settings["stop"]),
-            "created": created,
-        }
-        if error_estimate:  # the rerun's settings behind every *_numerical_error variable
-            ref = _grid.error_reference(_grid.scene_settings(settings))
-            attrs["error_estimate_solver"] = _grid.canonical_json(ref["solver"])
-            attrs["error_estimate_stop"] = _grid.canonical_json(ref["stop"])
+        attrs = cube_attrs(settings, name, f"gathered {len(paths)} chunk files ({n} scenes) into this cube"
+                           + (f"; {history}" if history else ""), repo_path)
         cube = xr.Dataset(data_vars, coords=coords, attrs=attrs)
         log.info("gathering %d chunk files, %d scenes, grid %s x %d levels into %s (netCDF chunks %s)",
                  len(paths), n, dict(zip(axes, shape)), n_levels, out_path, csizes)
@@ -590,13 +610,18 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
     return figure
 
 
-def write_plan(path: str | Path, name: str, chunks: Mapping[str, _grid.Chunk]) -> Path:
+def write_plan(path: str | Path, name: str, chunks: Mapping[str, _grid.Chunk], adaptive: Mapping | None = None) -> Path:
     """Write the chunk plan of a run ({name, scenes, chunks: {id: number of scenes}}) as JSON,
-    atomically; `sweep.frontdoor` reads it to show scenes done / total."""
+    atomically; `sweep.frontdoor` reads it to show scenes done / total. An adaptive map has no
+    chunks up front: `adaptive` (sweep.adaptive.plan_info) says where its rounds are, and
+    `scenes` is its budget."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps({"name": name, "scenes": sum(len(c.points) for c in chunks.values()),
-                       "chunks": {cid: len(c.points) for cid, c in chunks.items()}})
+    plan = {"name": name, "scenes": sum(len(c.points) for c in chunks.values()),
+            "chunks": {cid: len(c.points) for cid, c in chunks.items()}}
+    if adaptive is not None:
+        plan.update(scenes=int(adaptive["budget"]), adaptive=dict(adaptive))
+    text = json.dumps(plan)
     tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
         tmp.write_text(text, encoding="utf-8")

@@ -11,7 +11,7 @@ rule notebook:
     log:
         f"{RESULTS}/logs/notebooks/{{notebook}}.log",
     wildcard_constraints:
-        notebook="|".join(sweep_grid.NOTEBOOKS),
+        notebook="|".join(sweep_grid.NOTEBOOKS + sweep_grid.ADAPTIVE_NOTEBOOKS),
     threads: 1
     resources:
         mem_mb=2000,
