@@ -426,7 +426,7 @@ def map_figure(cube_path: str | Path, figure: str | Path, max_maps: int = 4) -> 
             yy, xx = np.nonzero(sub.computed.values == 1)
             rough = sub.rough.values == 1
             for a in (ax, ax2):
-                a.scatter(x[xx], y[yy], s=2, c="k", marker=".", linewidths=0, label="computed")
+                a.scatter(x[xx], y[yy], s=7, c="k", marker="o", linewidths=0, label="computed")
                 if rough.any():
                     a.contourf(x, y, rough.astype(float), levels=[0.5, 1.5], colors="none", hatches=["////"])
                     a.contour(x, y, rough.astype(float), levels=[0.5], colors="r", linewidths=0.8)
