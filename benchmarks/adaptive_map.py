@@ -97,6 +97,8 @@ def adaptive_fields(lat, st, truth: adaptive.MapState) -> refine.Fields:
     f = refine.Fields.empty(lat, {k: v.shape[1] for k, v in truth.fields.values.items()}, truth.fields.log)
     for k in range(lat.rounds + 1):
         plan = refine.plan_round(lat, f, st, k)
+        print(f"    round {k}: {len(plan.nodes)} scenes; cells flagged {plan.flagged}, refined {plan.refined}, "
+              f"left for the budget {plan.skipped}, rough {plan.rough}")
         if not len(plan.nodes):
             continue
         idx = refine._flat(lat, plan.nodes)

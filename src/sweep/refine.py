@@ -43,10 +43,15 @@ FAILED = frozenset({outcomes.STEP_LIMIT, outcomes.STEP_SIZE_UNDERFLOW, outcomes.
 # stride / error of the parent's), at least KAPPA: second-order interpolation errs 1/4 of the
 # surplus at most in the limit, KAPPA = 1/2 is that with a factor 2 of margin.
 KAPPA = 0.5
-# A cell is rough when its error fell by less than 1/ROUGH_RATIO over each of the last two halvings
-# (a smooth function's falls 4x per halving).
+# A cell is rough when its error fell by less than 1/ROUGH_RATIO over the last halving, or per
+# halving over the last two (its grandparent's error over its own below 1/ROUGH_RATIO^2 = 4); a
+# smooth function's falls 4x per halving, 16x over two.
 ROUGH_RATIO = 0.5
 SPACINGS = ("linear", "log")
+# A round before the last spends at most this share of the budget left on cells flagged for their
+# error (outcome boundaries and failures first, without this cap).
+ERROR_SHARE = 0.5
+ROUGH_ONE_HALVING = True
 
 
 def is_lattice_size(n: int) -> bool:
@@ -165,6 +170,8 @@ class Fields:
 
     def set(self, lat: Lattice, nodes: np.ndarray, rnd: int, outcome: np.ndarray, values: Mapping[str, np.ndarray]):
         idx = _flat(lat, nodes)
+        if not idx.size:
+            return
         self.computed[idx] = True
         self.round[idx] = rnd
         self.outcome[idx] = outcome
@@ -322,8 +329,8 @@ def cell_states(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.nda
                 surs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """For the cells of `level` at `lower`: disagree (corner outcomes differ), failed (a corner
     failed), error (driving error in tolerances, times KAPPA: the bar), ratio (error / the
-    parent's, NaN at level 0), rough (the error fell by less than 1/ROUGH_RATIO over this and
-    the parent's halving)."""
+    parent's, NaN at level 0), rough (over the last two halvings the error fell by less than
+    1/ROUGH_RATIO^2, and the cell would be refined for it)."""
     cidx = _corner_idx(lat, lower, lat.stride(level))
     oc = f.outcome[cidx]
     disagree = (oc != oc[:, :1]).any(axis=1)
@@ -336,12 +343,14 @@ def cell_states(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.nda
         ep = driving_error(lat, f, st, level - 1, pl, surs)
         with np.errstate(all="ignore"):
             ratio = e / ep
+        if ROUGH_ONE_HALVING:
+            with np.errstate(all="ignore"):
+                rough = (ratio > ROUGH_RATIO) & (KAPPA * e > 1.0)
         if level >= 2:
             gl = parent_lower(lat, level - 1, pl)
             eg = driving_error(lat, f, st, level - 2, gl, surs)
             with np.errstate(all="ignore"):
-                ratio_p = ep / eg
-            rough = (ratio > ROUGH_RATIO) & (ratio_p > ROUGH_RATIO) & (KAPPA * e > 1.0)
+                rough |= (e > ROUGH_RATIO ** 2 * eg) & (KAPPA * e > 1.0)
     return {"disagree": disagree, "failed": failed, "error": KAPPA * e, "ratio": ratio, "rough": rough}
 
 
@@ -373,6 +382,9 @@ def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
     # outcome boundaries and failures first, then the largest errors; ties by position
     order = sorted(np.nonzero(want)[0], key=lambda i: (0 if by_outcome[i] else 1, -err[i], tuple(low[i])))
     left = st.budget - int(f.computed.sum())
+    # the error's share of what is left: later rounds keep room for the outcome boundaries,
+    # which need every round down to stride 1
+    error_left = left if k == lat.rounds else math.floor(ERROR_SHARE * left)
     s = lat.stride(level)
     sub = np.array(list(itertools.product((0, 1, 2), repeat=lat.ndim)), dtype=np.int64) * (s // 2)
     taken = np.zeros(lat.size, bool)
@@ -380,11 +392,13 @@ def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
     for i in order:
         idx = _flat(lat, low[i] + sub)
         new = idx[~f.computed[idx] & ~taken[idx]]
-        if len(new) > left:
+        if len(new) > left or (not by_outcome[i] and len(new) > error_left):
             skipped += 1
             continue
         taken[new] = True
         left -= len(new)
+        if not by_outcome[i]:
+            error_left -= len(new)
         refined += 1
     nodes = np.array(np.unravel_index(np.nonzero(taken)[0], lat.shape)).T.astype(np.int64)
     flagged = {"outcome": int(cs["disagree"].sum()), "failed": int(cs["failed"].sum()),

@@ -37,7 +37,11 @@ if ADAPTIVE:
     MAPS = sweep_adaptive.maps(SETTINGS)
     ROUNDS = sweep_adaptive.lattice(SETTINGS).rounds
     # a round runs its chunks in its own processes; Snakemake scales this down to --cores
-    ROUND_THREADS = max(1, min(int(workflow.cores or 1), 64))
+    # (workflow.cores raises where no --cores/--jobs is given, e.g. --unlock)
+    try:
+        ROUND_THREADS = max(1, min(int(workflow.cores or 1), 64))
+    except WorkflowError:
+        ROUND_THREADS = 1
 
 # A damaged chunk file (truncated copy, full disk, bit rot) must be recomputed, not gathered:
 # the main process verifies every existing chunk of the plan and moves damaged ones to
