@@ -182,7 +182,7 @@ def main() -> None:
     ap.add_argument("--planes", default="paper,friction")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--max-share", type=float, default=0.25)
-    ap.add_argument("--start", type=int, default=5, help="start_points (round 0's points per axis)")
+    ap.add_argument("--start", type=int, default=9, help="start_points (round 0's points per axis)")
     ap.add_argument("--tolerance", type=float, default=0.01)
     ap.add_argument("--dense-only", action="store_true", help="compute the dense lattices and stop")
     args = ap.parse_args()
