@@ -610,6 +610,131 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
     return figure
 
 
+def _cell_outputs(nbformat, stdout: str, stderr: str, result, figures: list[bytes]) -> list:
+    import base64
+
+    outs = []
+    if stdout:
+        outs.append(nbformat.v4.new_output("stream", name="stdout", text=stdout))
+    if stderr:
+        outs.append(nbformat.v4.new_output("stream", name="stderr", text=stderr))
+    if result is not None:
+        outs.append(nbformat.v4.new_output("execute_result", data={"text/plain": repr(result)}))
+    for png in figures:
+        outs.append(nbformat.v4.new_output("display_data", data={"image/png": base64.b64encode(png).decode("ascii"),
+                                                                  "text/plain": "<Figure>"}))
+    return outs
+
+
+def _mtime(path: str) -> int | None:
+    try:
+        return os.stat(path).st_mtime_ns if path else None
+    except OSError:
+        return None
+
+
+def execute_in_process(notebook: str | Path, env: Mapping[str, str]):
+    """Execute a notebook's code cells in this process (a fresh namespace, `env` set in
+    os.environ meanwhile) and return it with its outputs as Jupyter would store them: each cell's
+    stdout and stderr, the value of a last expression, and the figures left open at its end (PNG,
+    as the inline backend shows them). A cell that raises gets its error output and the run stops
+    with RuntimeError naming the notebook and the cell. No kernel is started: what the notebooks
+    import (numpy, xarray, matplotlib, the package) is imported once for all of them."""
+    import ast
+    import contextlib
+    import io as _stdio
+    import traceback
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import nbformat
+
+    nb = nbformat.read(str(notebook), as_version=4)
+    saved_figure = env.get("SWEEP_FIGURE", "")
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    namespace: dict = {"__name__": "__main__"}
+    count = 0
+    plt.close("all")
+    try:
+        for cell in nb.cells:
+            if cell.cell_type != "code":
+                continue
+            count += 1
+            out, err = _stdio.StringIO(), _stdio.StringIO()
+            before = _mtime(saved_figure)
+            tree = ast.parse(cell.source)
+            last = tree.body.pop() if tree.body and isinstance(tree.body[-1], ast.Expr) else None
+            result = None
+            try:
+                with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                    exec(compile(tree, f"<{Path(notebook).name} cell {count}>", "exec"), namespace)
+                    if last is not None:
+                        result = eval(compile(ast.Expression(last.value), f"<{Path(notebook).name} cell {count}>",
+                                              "eval"), namespace)
+            except Exception as exc:
+                cell.outputs = _cell_outputs(nbformat, out.getvalue(), err.getvalue(), None, []) + [
+                    nbformat.v4.new_output("error", ename=type(exc).__name__, evalue=str(exc),
+                                           traceback=traceback.format_exception(exc))]
+                cell.execution_count = count
+                raise RuntimeError(f"notebook {notebook}, cell {count} raised {type(exc).__name__}: {exc}") from exc
+            pngs = []
+            saved_now = _mtime(saved_figure) != before
+            for num in plt.get_fignums():
+                if saved_now:   # the figure the cell saved: shown as saved, not drawn a second time
+                    pngs.append(Path(saved_figure).read_bytes())
+                    saved_now = False
+                    continue
+                buf = _stdio.BytesIO()
+                plt.figure(num).savefig(buf, format="png", dpi=72)
+                pngs.append(buf.getvalue())
+            plt.close("all")
+            cell.outputs = _cell_outputs(nbformat, out.getvalue(), err.getvalue(), result, pngs)
+            cell.execution_count = count
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    return nb
+
+
+def run_notebooks(notebooks: Sequence[str | Path], cube: str | Path, figures: Sequence[str | Path],
+                  executed: Sequence[str | Path], log_path: str | Path | None = None) -> list[Path]:
+    """Execute figure notebooks against the cube, all in this one process (execute_in_process):
+    each saves its figure (`figures`, PNG) and is written with its outputs to `executed`
+    (atomically). What the rule `notebook` runs; io.run_notebook runs one in a Jupyter kernel."""
+    import time
+
+    import nbformat
+
+    lines = []
+    done = []
+    for notebook, figure, ex in zip(notebooks, figures, executed):
+        t0 = time.perf_counter()
+        figure = Path(figure).resolve()
+        figure.parent.mkdir(parents=True, exist_ok=True)
+        figure.unlink(missing_ok=True)
+        env = {"SWEEP_CUBE": str(Path(cube).resolve()), "SWEEP_FIGURE": str(figure), "MPLBACKEND": "Agg"}
+        nb = execute_in_process(notebook, env)
+        ex = Path(ex)
+        ex.parent.mkdir(parents=True, exist_ok=True)
+        tmp = ex.parent / f".{ex.name}.tmp-{os.getpid()}"
+        nbformat.write(nb, str(tmp))
+        os.replace(tmp, ex)
+        if not figure.exists():
+            raise RuntimeError(f"notebook {notebook} ran but did not write {figure}")
+        lines.append(f"executed {notebook} -> {figure} in {time.perf_counter() - t0:.2f} s")
+        done.append(figure)
+    if log_path is not None:
+        Path(log_path).parent.mkdir(parents=True, exist_ok=True)
+        Path(log_path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return done
+
+
 def write_plan(path: str | Path, name: str, chunks: Mapping[str, _grid.Chunk], adaptive: Mapping | None = None) -> Path:
     """Write the chunk plan of a run ({name, scenes, chunks: {id: number of scenes}}) as JSON,
     atomically; `sweep.frontdoor` reads it to show scenes done / total. An adaptive map has no
