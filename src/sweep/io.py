@@ -174,18 +174,9 @@ def file_checksum(path: str | Path) -> str:
     """
     import netCDF4
 
-    h = hashlib.sha256()
     with netCDF4.Dataset(path, "r") as nc:
         nc.set_auto_maskandscale(False)
-        for name in sorted(nc.variables):
-            a = np.asarray(nc.variables[name][...])
-            if a.dtype.kind not in "biuf":
-                h.update(name.encode() + repr(a.tolist()).encode())
-                continue
-            a = a.astype(np.float64)
-            a = np.where(np.isnan(a), np.nan, a)
-            h.update(name.encode() + repr(a.shape).encode() + np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
+        return _checksum_of({name: np.asarray(v[...]) for name, v in nc.variables.items()})
 
 
 def _fsync_path(path: Path) -> None:
@@ -276,42 +267,64 @@ def write_chunk(chunk: _grid.Chunk, summaries: Sequence[Mapping], path: str | Pa
     return write_atomic(ds, path, _chunk_encoding(ds), finish=add_checksum)
 
 
-def verify_chunk(path: str | Path, chunk: _grid.Chunk | None = None) -> str | None:
-    """None if the chunk file is intact (and matches `chunk`), else the reason it is not."""
+def _checksum_of(arrays: Mapping[str, np.ndarray]) -> str:
+    """file_checksum's digest of raw arrays already read ({name: values})."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.asarray(arrays[name])
+        if a.dtype.kind not in "biuf":
+            h.update(name.encode() + repr(a.tolist()).encode())
+            continue
+        a = a.astype(np.float64)
+        a = np.where(np.isnan(a), np.nan, a)
+        h.update(name.encode() + repr(a.shape).encode() + np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def read_chunk_file(path: str | Path, chunk: _grid.Chunk | None = None) -> tuple[str | None, dict[str, np.ndarray]]:
+    """(None, every variable's raw values) if the chunk file is intact (and matches `chunk`), else
+    (the reason it is not, {}). One read of the file: the checksum is taken over the values read."""
     import netCDF4
 
     path = Path(path)
     try:
         if path.stat().st_size == 0:
-            return "empty file"
+            return "empty file", {}
         with netCDF4.Dataset(path, "r") as nc:
             attrs = {k: nc.getncattr(k) for k in nc.ncattrs()}
             sizes = {k: len(v) for k, v in nc.dimensions.items()}
-            names = set(nc.variables)
+            nc.set_auto_maskandscale(False)
+            arrays = {name: np.asarray(v[...]) for name, v in nc.variables.items()}
+        names = set(arrays)
         want = attrs.get("sweep_checksum")
         if want is None:
-            return "no sweep_checksum attribute (incomplete write)"
-        if file_checksum(path) != want:
-            return "checksum mismatch (damaged data)"
+            return "no sweep_checksum attribute (incomplete write)", {}
+        if _checksum_of(arrays) != want:
+            return "checksum mismatch (damaged data)", {}
         try:
             with_errors = bool(json.loads(attrs.get("sweep_chunk_spec", "{}"))["settings"].get("error_estimate", False))
         except (ValueError, KeyError, TypeError, AttributeError):
             with_errors = False
         missing = [v.name for v in variables(with_errors) if v.name not in names]
         if missing:
-            return f"missing variables {missing}"
+            return f"missing variables {missing}", {}
         if chunk is not None:
             if attrs.get("sweep_chunk_id") != chunk.id:
-                return f"chunk id {attrs.get('sweep_chunk_id')!r} != expected {chunk.id!r}"
+                return f"chunk id {attrs.get('sweep_chunk_id')!r} != expected {chunk.id!r}", {}
             if attrs.get("sweep_chunk_spec") != chunk.spec_json:
-                return "chunk spec differs from the expected one"
+                return "chunk spec differs from the expected one", {}
             if sizes.get("point") != len(chunk.points):
-                return f"{sizes.get('point')} points, expected {len(chunk.points)}"
+                return f"{sizes.get('point')} points, expected {len(chunk.points)}", {}
             if sizes.get("level") != len(chunk.spec["settings"]["levels"]):
-                return "wrong number of levels"
+                return "wrong number of levels", {}
     except (OSError, RuntimeError, ValueError, KeyError, IndexError) as exc:  # HDF5 damage surfaces as these
-        return f"unreadable ({type(exc).__name__}: {exc})"
-    return None
+        return f"unreadable ({type(exc).__name__}: {exc})", {}
+    return None, arrays
+
+
+def verify_chunk(path: str | Path, chunk: _grid.Chunk | None = None) -> str | None:
+    """None if the chunk file is intact (and matches `chunk`), else the reason it is not."""
+    return read_chunk_file(path, chunk)[0]
 
 
 def quarantine(path: str | Path, reason: str) -> Path:
@@ -452,57 +465,78 @@ def cube_attrs(settings: Mapping, name: str | None, history: str, repo_path: str
     return attrs
 
 
+def _fill(kind: str):
+    return {"float": np.nan, "int": INT_FILL, "bool": False}.get(kind, 0)
+
+
+def _dtype(kind: str):
+    return {"float": np.float64, "int": np.int32, "bool": np.bool_}.get(kind, np.int8)
+
+
 def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str | Path,
            repo_path: str | Path | None = None, history: str = "", name: str | None = None) -> Path:
-    """Gather verified chunk files into the cube at `out_path` (atomic write), lazily with dask.
+    """Gather verified chunk files into the cube at `out_path` (atomic write).
 
     `settings`: the normalised config (sweep.grid.normalize); `name`: the sweep's name (global
     attribute `sweep_name`, shown on the figures). Every grid point must be present exactly
     once; a damaged chunk file raises (after quarantining it) instead of being gathered.
+
+    Each chunk file is read once (netCDF4, its checksum verified over the values read) and its
+    values scattered into one memory-mapped array per variable in a temporary folder beside the
+    cube, which is then written block by block (dask over the maps, the cube's netCDF chunks): the
+    memory used is a few blocks, whatever the number of chunk files or scenes.
     """
+    import dask.array as dsa
     import xarray as xr
 
     paths = [Path(p) for p in chunk_paths]
+    out_path = Path(out_path)
     plan = _grid.plan_chunks(settings)
-    for p in paths:
-        reason = verify_chunk(p, plan.get(p.stem))
-        if reason is not None:
-            moved = quarantine(p, reason)
-            raise RuntimeError(f"chunk file {p} is damaged ({reason}); moved to {moved}. "
-                               "Run snakemake again to recompute it.")
     axes = _grid.AXES
     shape = _grid.grid_shape(settings)
     n_levels = len(settings["levels"])
-    src = xr.open_mfdataset([str(p) for p in paths], combine="nested", concat_dim="point",
-                            engine="netcdf4", data_vars="minimal", coords="minimal",
-                            compat="override", join="exact", parallel=False)
+    n = math.prod(shape)
+    error_estimate = bool(settings.get("outputs", {}).get("error_estimate", False))
+    vars_ = variables(error_estimate)
+    axis_values = [np.asarray(settings["grid"][a], dtype=np.float64) for a in axes]
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp(prefix=".gather-", dir=out_path.parent))
     try:
-        index = _grid.grid_index(settings)
-        pos = np.zeros(src.sizes["point"], dtype=np.int64)
-        for a in axes:  # flat row-major index of every point in the cube
-            vals = src[a].values
-            try:
-                idx = np.array([index[a][float(v)] for v in vals], dtype=np.int64)
-            except KeyError as exc:
-                raise RuntimeError(f"a chunk holds {a} = {exc.args[0]!r}, not on the grid axis") from None
-            pos = pos * len(index[a]) + idx
-        n = math.prod(shape)
-        if len(pos) != n or not np.array_equal(np.sort(pos), np.arange(n)):
-            raise RuntimeError(f"chunks hold {len(pos)} points with {len(np.unique(pos))} distinct "
+        maps = {}
+        for var in vars_:
+            m = np.lib.format.open_memmap(scratch / f"{var.name}.npy", mode="w+", dtype=_dtype(var.kind),
+                                          shape=(n, n_levels) if var.per_level else (n,))
+            m[...] = _fill(var.kind)
+            maps[var.name] = m
+        seen = np.zeros(n, dtype=np.int32)
+        for p in paths:
+            reason, data = read_chunk_file(p, plan.get(p.stem))
+            if reason is not None:
+                moved = quarantine(p, reason)
+                raise RuntimeError(f"chunk file {p} is damaged ({reason}); moved to {moved}. "
+                                   "Run snakemake again to recompute it.")
+            pos = np.zeros(len(data[axes[0]]), dtype=np.int64)
+            for a, vals in zip(axes, axis_values):  # flat row-major index of every point in the cube
+                got = np.asarray(data[a], dtype=np.float64)
+                idx = np.minimum(np.searchsorted(vals, got), len(vals) - 1)
+                off = vals[idx] != got
+                if off.any():
+                    raise RuntimeError(f"a chunk holds {a} = {float(got[off][0])!r}, not on the grid axis")
+                pos = pos * len(vals) + idx
+            np.add.at(seen, pos, 1)
+            for var in vars_:
+                maps[var.name][pos] = data[var.name].astype(_dtype(var.kind), copy=False)
+        if (seen != 1).any():
+            raise RuntimeError(f"chunks hold {int(seen.sum())} points with {int((seen > 0).sum())} distinct "
                                f"grid positions; the grid has {n}")
-        order = np.argsort(pos, kind="stable")
-        identity = bool(np.array_equal(order, np.arange(n)))
+        for m in maps.values():
+            m.flush()
         csizes = cube_chunksizes(shape + (n_levels,))
         data_vars, encoding = {}, {}
-        error_estimate = bool(settings.get("outputs", {}).get("error_estimate", False))
-        for var in variables(error_estimate):
-            arr = src[var.name].data
-            if not identity:
-                arr = arr[order]
+        for var in vars_:
             full_shape = shape + ((n_levels,) if var.per_level else ())
-            arr = arr.reshape(full_shape, merge_chunks=True)
             cs = csizes if var.per_level else csizes[:-1]
-            arr = arr.rechunk(cs)
+            arr = dsa.from_array(maps[var.name].reshape(full_shape), chunks=cs, lock=False)
             dims = axes + (("level",) if var.per_level else ())
             data_vars[var.name] = (dims, arr, _var_attrs(var))
             encoding[var.name] = variable_encoding(var.kind, cs)
@@ -514,12 +548,17 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
         cube = xr.Dataset(data_vars, coords=coords, attrs=attrs)
         log.info("gathering %d chunk files, %d scenes, grid %s x %d levels into %s (netCDF chunks %s)",
                  len(paths), n, dict(zip(axes, shape)), n_levels, out_path, csizes)
-        out = write_atomic(cube, out_path, encoding)
+        import dask
+
+        with dask.config.set(scheduler="synchronous"):
+            out = write_atomic(cube, out_path, encoding)
+        codes, counts = np.unique(maps["outcome"], return_counts=True)
         log.info("wrote %s (%d bytes); outcomes %s", out, out.stat().st_size,
-                 {outcomes.NAMES[int(c)]: int(k) for c, k in zip(*np.unique(cube.outcome.values, return_counts=True))})
+                 {outcomes.NAMES[int(c)]: int(k) for c, k in zip(codes, counts)})
+        del cube, data_vars, maps
         return out
     finally:
-        src.close()
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def open_cube(path: str | Path):
