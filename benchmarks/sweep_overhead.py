@@ -12,7 +12,8 @@ PYTHONPATH at one tree's src/, this tree's and the base's alternately.
   rule `notebook` there), this tree all in one process (sweep.io.run_notebooks). Wall time of the
   process, imports included.
 * gather: config/million.yaml's grid (2e4 chunk files of 41 or 59 scenes) and sub-grids of it
-  (its first mu_d value: 2000 files; its first mu_d and k1 values: 200), the chunk files synthetic
+  (its first mu_d value: 2000 files; its first mu_d and k1 values: 200); this tree's gather reads with
+  2 processes (the rule's threads), the base's with one (it had no option). The chunk files are synthetic
   (random values in every variable, written from two templates, checksums as the pipeline writes
   them; cached under benchmarks/out/sweep_overhead/chunks/). Wall time and peak memory (max RSS)
   of each gather process; the base only up to --before-max files (its per-file cost, measured,
@@ -199,7 +200,8 @@ from sweep import io
 settings = json.loads(open(sys.argv[1]).read())
 paths = open(sys.argv[2]).read().split()
 t0 = time.perf_counter()
-io.gather(paths, settings, sys.argv[3])
+kw = {"workers": int(sys.argv[4])} if sys.argv[4] != "-" else {}
+io.gather(paths, settings, sys.argv[3], **kw)
 print(time.perf_counter() - t0)
 """
 
@@ -217,7 +219,8 @@ def gather(base: Path, sizes: list[int], before_max: int) -> None:
             if label == "before" and len(paths) > before_max:
                 continue
             cube = OUT / f"cube-{label}-{n}.nc"
-            wall, rss, out = run_timed(GATHER, tree / "src", str(sfile), str(pfile), str(cube))
+            wall, rss, out = run_timed(GATHER, tree / "src", str(sfile), str(pfile), str(cube),
+                                       "2" if label == "after" else "-")
             res[label] = (wall, float(out.split()[-1]), rss)
             cube.unlink(missing_ok=True)
         line = f"  {len(paths):6d} files:"

@@ -473,8 +473,25 @@ def _dtype(kind: str):
     return {"float": np.float64, "int": np.int32, "bool": np.bool_}.get(kind, np.int8)
 
 
+def _read_job(job: tuple[Path, _grid.Chunk | None]) -> tuple[Path, str | None, dict[str, np.ndarray]]:
+    reason, data = read_chunk_file(*job)
+    return job[0], reason, data
+
+
+def _read_all(jobs: Sequence[tuple[Path, _grid.Chunk | None]], workers: int):
+    """read_chunk_file over `jobs`, in order, in `workers` processes (this one where 1)."""
+    if workers <= 1 or len(jobs) < 64:
+        yield from map(_read_job, jobs)
+        return
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        yield from pool.imap(_read_job, jobs, chunksize=16)
+
+
 def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str | Path,
-           repo_path: str | Path | None = None, history: str = "", name: str | None = None) -> Path:
+           repo_path: str | Path | None = None, history: str = "", name: str | None = None,
+           workers: int = 1) -> Path:
     """Gather verified chunk files into the cube at `out_path` (atomic write).
 
     `settings`: the normalised config (sweep.grid.normalize); `name`: the sweep's name (global
@@ -484,7 +501,8 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
     Each chunk file is read once (netCDF4, its checksum verified over the values read) and its
     values scattered into one memory-mapped array per variable in a temporary folder beside the
     cube, which is then written block by block (dask over the maps, the cube's netCDF chunks): the
-    memory used is a few blocks, whatever the number of chunk files or scenes.
+    memory used is a few blocks, whatever the number of chunk files or scenes. `workers`
+    processes read the chunk files (the rule `gather` gives its threads).
     """
     import dask.array as dsa
     import xarray as xr
@@ -509,8 +527,7 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             m[...] = _fill(var.kind)
             maps[var.name] = m
         seen = np.zeros(n, dtype=np.int32)
-        for p in paths:
-            reason, data = read_chunk_file(p, plan.get(p.stem))
+        for p, reason, data in _read_all([(p, plan.get(p.stem)) for p in paths], workers):
             if reason is not None:
                 moved = quarantine(p, reason)
                 raise RuntimeError(f"chunk file {p} is damaged ({reason}); moved to {moved}. "
