@@ -513,6 +513,28 @@ def test_progress_names_its_phase_and_its_eta_covers_gather_and_figures(tmp_path
     assert line.startswith("sweep tiny: figures 1/4 | ETA 0:08 | "), line
 
 
+def test_adaptive_progress_shows_rounds_and_one_line_per_finished_round(tmp_path):
+    results = tmp_path / "results" / "amap"
+    rounds = results / "rounds"
+    (rounds / "map-a").mkdir(parents=True)
+    t0 = time.time()
+    info = {"maps": {"map-a": "mu_d 0.3"}, "rounds": 2, "lattice": 81, "budget": 36, "rounds_dir": str(rounds)}
+    (results / "plan.json").write_text(json.dumps({"name": "amap", "scenes": 36, "chunks": {}, "adaptive": info}))
+    p = frontdoor.Progress(results, t0 - 1, jobs=2, t_origin=t0 - 5)
+    assert p.line("amap", t0).startswith("sweep amap: rounds 0 scenes computed (budget 36), 3 of 3 map rounds to go")
+    assert p.round_lines() == []
+    (rounds / "map-a" / "round0.json").write_text(json.dumps({"computed": 9, "line": "round 0 line"}))
+    assert p.line("amap", t0 + 1).startswith("sweep amap: rounds 9 scenes computed (budget 36), 2 of 3 map rounds")
+    assert p.round_lines() == ["round 0 line"] and p.round_lines() == []   # each round once
+    for k, n in ((1, 25), (2, 33)):
+        (rounds / "map-a" / f"round{k}.json").write_text(json.dumps({"computed": n, "line": f"round {k} line"}))
+    assert p.round_lines() == ["round 1 line", "round 2 line"]
+    for text in ("Job stats:\n", "job  count\n", "refine_round  3\n", "gather  1\n", "total  4\n",
+                 "localrule gather:\n", "    jobid: 1\n"):
+        p.feed(text, now=t0 + 3)
+    assert p.line("amap", t0 + 3).startswith("sweep amap: gather (33 scenes into cube.nc)")
+
+
 def test_compile_shows_a_ticking_elapsed_time_and_the_estimate(monkeypatch, capsys):
     """A cold numba cache: the line saying why and how long it usually takes, the ticking
     elapsed time while it compiles, then how long it took (here a stand-in that takes 2.3 s)."""

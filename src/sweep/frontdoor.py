@@ -79,9 +79,9 @@ JOB_STATS = re.compile(r"^(\w+)\s+(\d+)$")
 # other work: 75 s and 96 s here, 213 s on the fresh clone of issue #43.
 COMPILE_ESTIMATE = "usually 1-4 min on a 2-core machine, by how busy it is"
 # After the last scene: the gather (opening every chunk file: 0.5 s + 0.4 s per chunk file), then
-# each figure notebook (a Jupyter kernel that imports the package, reduces the cube and plots:
-# 9 s), measured on a busy 2-core machine (tiny sweep: 2 s, 9-10 s; default: 8 s, 8-10 s); the
-# run's own durations replace them as soon as one has finished.
+# the figures job (every notebook in one process: imports, reductions, plots; 9-10 s for the four
+# on a busy 2-core machine), measured on a busy 2-core machine; the run's own durations replace
+# them as soon as one has finished.
 GATHER_S, GATHER_S_PER_CHUNK = 0.5, 0.4
 NOTEBOOK_S = 9.0
 SIGNAL_GRACE_S = 60.0            # after the forwarded SIGINT, before SIGKILL
