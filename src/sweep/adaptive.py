@@ -23,7 +23,6 @@ import math
 import multiprocessing
 import os
 import time
-import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -223,17 +222,6 @@ def load_rounds(settings: Mapping, results: str | Path, map_id: str, upto: int) 
     return state, records
 
 
-def _atomic_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def round_line(name: str, label: str, rec: Mapping) -> str:
     """The progress line of a finished round (printed by the front door and the round's log)."""
     nxt = rec.get("next") or {}
@@ -271,7 +259,7 @@ def run_round(settings: Mapping, map_id: str, k: int, results: str | Path, out_p
     }
     rec["line"] = round_line(name, map_label(outer), rec)
     log.info("%s", rec["line"])
-    _atomic_text(Path(out_path), json.dumps(rec, indent=1))
+    _io.write_text_atomic(out_path, json.dumps(rec, indent=1))
     return rec
 
 

@@ -259,6 +259,16 @@ def _number(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
+def config_value(config: Mapping, key: str):
+    """The value at a dotted key of a config mapping (`disk.radius`), None where it is absent."""
+    node = config
+    for part in key.split("."):
+        if not isinstance(node, Mapping) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
 def cross_field_errors(config: Mapping, invalid: set[str] = frozenset()) -> list[ConfigError]:
     """Rules JSON schema cannot express; `config` must have its defaults filled: the relative
     bounds and excluded values of sweep.fields.RANGES (mu_d <= mu_s, k_i <= radius, thickness <=
@@ -271,12 +281,7 @@ def cross_field_errors(config: Mapping, invalid: set[str] = frozenset()) -> list
     errors = []
 
     def value_of(key: str):
-        node = config
-        for part in key.split("."):
-            if not isinstance(node, Mapping) or part not in node:
-                return None
-            node = node[part]
-        return node
+        return config_value(config, key)
 
     for key, field in fields.SWEEP_KEYS.items():
         rng = fields.RANGES[field]
@@ -338,12 +343,7 @@ def refine_errors(config: Mapping, invalid: set[str] = frozenset()) -> list[Conf
         return errors
 
     def value_of(key: str):
-        node = config
-        for part in key.split("."):
-            if not isinstance(node, Mapping) or part not in node:
-                return None
-            node = node[part]
-        return node
+        return config_value(config, key)
 
     ok_axes = {}
     for a, spec in axes.items():

@@ -609,6 +609,17 @@ NOTEBOOK_CELL_TIMEOUT_S = 600
 UNIX_SOCKET_DIR_MAX = 90
 
 
+def _write_notebook(nb, path: str | Path) -> None:
+    """Write an executed notebook atomically."""
+    import nbformat
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.parent / f".{path.name}.tmp-{os.getpid()}"
+    nbformat.write(nb, str(tmp))
+    os.replace(tmp, path)
+
+
 def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
                  executed: str | Path | None = None, log_path: str | Path | None = None) -> Path:
     """Execute a figure notebook with nbclient; it reads the cube and saves `figure` (PNG).
@@ -653,11 +664,7 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
             else:
                 os.environ[k] = v
     if executed is not None:
-        executed = Path(executed)
-        executed.parent.mkdir(parents=True, exist_ok=True)
-        tmp = executed.parent / f".{executed.name}.tmp-{os.getpid()}"
-        nbformat.write(nb, str(tmp))
-        os.replace(tmp, executed)
+        _write_notebook(nb, executed)
     if not figure.exists():
         raise RuntimeError(f"notebook {notebook} ran but did not write {figure}")
     if log_path is not None:
@@ -765,8 +772,6 @@ def run_notebooks(notebooks: Sequence[str | Path], cube: str | Path, figures: Se
     (atomically). What the rule `notebook` runs; io.run_notebook runs one in a Jupyter kernel."""
     import time
 
-    import nbformat
-
     lines = []
     done = []
     for notebook, figure, ex in zip(notebooks, figures, executed):
@@ -776,11 +781,7 @@ def run_notebooks(notebooks: Sequence[str | Path], cube: str | Path, figures: Se
         figure.unlink(missing_ok=True)
         env = {"SWEEP_CUBE": str(Path(cube).resolve()), "SWEEP_FIGURE": str(figure), "MPLBACKEND": "Agg"}
         nb = execute_in_process(notebook, env)
-        ex = Path(ex)
-        ex.parent.mkdir(parents=True, exist_ok=True)
-        tmp = ex.parent / f".{ex.name}.tmp-{os.getpid()}"
-        nbformat.write(nb, str(tmp))
-        os.replace(tmp, ex)
+        _write_notebook(nb, ex)
         if not figure.exists():
             raise RuntimeError(f"notebook {notebook} ran but did not write {figure}")
         lines.append(f"executed {notebook} -> {figure} in {time.perf_counter() - t0:.2f} s")
@@ -802,7 +803,13 @@ def write_plan(path: str | Path, name: str, chunks: Mapping[str, _grid.Chunk], a
             "chunks": {cid: len(c.points) for cid, c in chunks.items()}}
     if adaptive is not None:
         plan.update(scenes=int(adaptive["budget"]), adaptive=dict(adaptive))
-    text = json.dumps(plan)
+    return write_text_atomic(path, json.dumps(plan))
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write a text file atomically (a temporary name in its folder, then os.replace)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
         tmp.write_text(text, encoding="utf-8")
