@@ -194,3 +194,18 @@ def test_an_adaptive_overlay_replaces_the_default_grids_axes(tmp_path):
     later.write_text("grid:\n  alpha0: [1.0]\n  omega0: [10.0]\noutputs:\n  notebooks: [halt_time]\n")
     back = grid.load_sweep([(root / "config" / "adaptive.yaml", "a"), (later, "later")], check_scenes=False)
     assert not grid.is_adaptive(back.settings) and back.settings["grid"]["alpha0"] == [1.0]
+
+
+def test_a_three_axis_map():
+    lat = refine.make_lattice({a: {"from": 0.0, "to": 1.0, "points": 17} for a in ("x", "y", "z")}, 5)
+    assert lat.rounds == 2 and lat.ndim == 3 and len(lat.round0_nodes()) == 125
+    g = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T / 16.0
+    oc = np.where(g[:, 0] + g[:, 1] + g[:, 2] > 1.6, outcomes.CONTACT_LOST, outcomes.HALTED)
+    val = np.where(oc == outcomes.HALTED, np.exp(1 + g[:, 0] * g[:, 1] + np.sin(2 * g[:, 2])), np.nan)
+    f, st, plans = run_rounds(lat, oc, val, share=0.5)    # a boundary surface needs more than a curve
+    assert f.computed.sum() <= st.budget and all(len(p.nodes) for p in plans)
+    m = refine.reconstruct(lat, f, st)
+    rec = ~f.computed
+    assert (m.outcome[rec] != oc[rec]).mean() < 0.01
+    ok = rec & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
+    assert (np.abs(m.values["t"][ok, 0] - val[ok]) <= m.bars["t"][ok, 0]).mean() >= 0.9
