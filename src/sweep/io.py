@@ -465,6 +465,39 @@ def cube_attrs(settings: Mapping, name: str | None, history: str, repo_path: str
     return attrs
 
 
+# The gather writes its memory-mapped arrays back and drops their pages from its memory every
+# RELEASE_EVERY chunk files, so its resident memory stays bounded by what that many files touch.
+RELEASE_EVERY = 500
+
+
+def _release(maps) -> None:
+    """Flush memory maps to their files and drop their pages from this process's memory."""
+    import mmap
+
+    for m in maps:
+        m.flush()
+        mm = getattr(m, "_mmap", None)
+        if mm is not None and hasattr(mm, "madvise"):
+            mm.madvise(mmap.MADV_DONTNEED)
+
+
+class _Paged:
+    """A memory-mapped array as dask reads it block by block for the write: each block is copied
+    out and, every 64 blocks, the map's pages are dropped again (_release)."""
+
+    def __init__(self, m: np.ndarray, shape: tuple[int, ...]):
+        self.m, self.v = m, m.reshape(shape)
+        self.shape, self.dtype, self.ndim = self.v.shape, self.v.dtype, self.v.ndim
+        self.reads = 0
+
+    def __getitem__(self, key):
+        out = np.array(self.v[key])
+        self.reads += 1
+        if self.reads % 64 == 0:
+            _release([self.m])
+        return out
+
+
 def _fill(kind: str):
     return {"float": np.nan, "int": INT_FILL, "bool": False}.get(kind, 0)
 
@@ -527,6 +560,7 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             m[...] = _fill(var.kind)
             maps[var.name] = m
         seen = np.zeros(n, dtype=np.int32)
+        n_read = 0
         for p, reason, data in _read_all([(p, plan.get(p.stem)) for p in paths], workers):
             if reason is not None:
                 moved = quarantine(p, reason)
@@ -543,17 +577,19 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             np.add.at(seen, pos, 1)
             for var in vars_:
                 maps[var.name][pos] = data[var.name].astype(_dtype(var.kind), copy=False)
+            n_read += 1
+            if n_read % RELEASE_EVERY == 0:
+                _release(maps.values())
         if (seen != 1).any():
             raise RuntimeError(f"chunks hold {int(seen.sum())} points with {int((seen > 0).sum())} distinct "
                                f"grid positions; the grid has {n}")
-        for m in maps.values():
-            m.flush()
+        _release(maps.values())
         csizes = cube_chunksizes(shape + (n_levels,))
         data_vars, encoding = {}, {}
         for var in vars_:
             full_shape = shape + ((n_levels,) if var.per_level else ())
             cs = csizes if var.per_level else csizes[:-1]
-            arr = dsa.from_array(maps[var.name].reshape(full_shape), chunks=cs, lock=False)
+            arr = dsa.from_array(_Paged(maps[var.name], full_shape), chunks=cs, lock=False, asarray=False)
             dims = axes + (("level",) if var.per_level else ())
             data_vars[var.name] = (dims, arr, _var_attrs(var))
             encoding[var.name] = variable_encoding(var.kind, cs)
