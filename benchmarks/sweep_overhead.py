@@ -149,6 +149,7 @@ def synthetic_chunks(settings: dict) -> list[Path]:
     cdir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(52)
     templates: dict[int, Path] = {}
+    raw: dict[int, dict] = {}
     n_levels = len(settings["levels"])
     paths, t0, made = [], time.perf_counter(), 0
     for cid, chunk in plan.items():
@@ -176,17 +177,20 @@ def synthetic_chunks(settings: dict) -> list[Path]:
                 summaries.append(s)
             templates[k] = OUT / f"template-{k}.nc"
             io.write_chunk(chunk, summaries, templates[k])
+        if k not in raw:   # the template's values, read once: a file's checksum is computed, not read back
+            with netCDF4.Dataset(templates[k], "r") as nc:
+                nc.set_auto_maskandscale(False)
+                raw[k] = {name: np.asarray(v[...]) for name, v in nc.variables.items()}
         tmp = path.with_suffix(".tmp")
         shutil.copyfile(templates[k], tmp)
         pts = np.array(chunk.points, dtype=np.float64)
+        arrays = dict(raw[k], **{a: pts[:, i] for i, a in enumerate(grid.AXES)})
         with netCDF4.Dataset(tmp, "a") as nc:
             for i, a in enumerate(grid.AXES):
                 nc.variables[a][:] = pts[:, i]
             nc.setncattr("sweep_chunk_id", chunk.id)
             nc.setncattr("sweep_chunk_spec", chunk.spec_json)
-        digest = io.file_checksum(tmp)
-        with netCDF4.Dataset(tmp, "a") as nc:
-            nc.setncattr("sweep_checksum", digest)
+            nc.setncattr("sweep_checksum", io._checksum_of(arrays))
         os.replace(tmp, path)
         made += 1
         if made % 2000 == 0:
