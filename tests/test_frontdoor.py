@@ -405,7 +405,7 @@ BAD_CONFIGS = {
     # file text -> the lines the user sees (after "error: <file>: ")
     "typo.yaml": ("name: typo\nchunk_sise: 3\n", [
         "chunk_sise = 3 is invalid: no such key; allowed keys: chunk_size, disk, gravity, grid, "
-        "levels, mu_s, name, outputs, solver, stop"]),
+        "levels, mu_s, name, outputs, refine, solver, stop"]),
     "quoted.yaml": ("name: quoted\nsolver: {rtol: '1e-10'}\nmu_s: 0.25\n", [
         "solver.rtol = '1e-10' is invalid: a number in quotes is text: remove the quotes; allowed [1e-14, 1e-2] "
         "(relative error tolerance of the adaptive method, dimensionless)",
