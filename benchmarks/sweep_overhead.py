@@ -17,7 +17,8 @@ PYTHONPATH at one tree's src/, this tree's and the base's alternately.
   (random values in every variable, written from two templates, checksums as the pipeline writes
   them; cached under benchmarks/out/sweep_overhead/chunks/). Wall time and peak memory (max RSS)
   of each gather process; the base only up to --before-max files (its per-file cost, measured,
-  gives the rest).
+  gives the rest). Peak memory: the gathering process's VmHWM (its readers are forked from it), and
+  the largest max RSS of any process the benchmark ran so far.
 * sweep: the warm default sweep (config/config.yaml, 320 scenes, -j2) through Snakemake in a copy
   of each tree's workflow (the numba cache copied over, so neither compiles): wall time, against
   the ideal, the sum of the scenes' integration times / 2 + the gather's and the figures' job
@@ -206,7 +207,8 @@ paths = open(sys.argv[2]).read().split()
 t0 = time.perf_counter()
 kw = {"workers": int(sys.argv[4])} if sys.argv[4] != "-" else {}
 io.gather(paths, settings, sys.argv[3], **kw)
-print(time.perf_counter() - t0)
+hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM")][0].split()[1]
+print(int(hwm) / 1024, time.perf_counter() - t0)
 """
 
 
@@ -225,11 +227,13 @@ def gather(base: Path, sizes: list[int], before_max: int) -> None:
             cube = OUT / f"cube-{label}-{n}.nc"
             wall, rss, out = run_timed(GATHER, tree / "src", str(sfile), str(pfile), str(cube),
                                        "2" if label == "after" else "-")
-            res[label] = (wall, float(out.split()[-1]), rss)
+            hwm, inner = (float(x) for x in out.split()[-2:])
+            res[label] = (wall, inner, rss, hwm)
             cube.unlink(missing_ok=True)
         line = f"  {len(paths):6d} files:"
-        for label, (wall, inner, rss) in res.items():
-            line += f" {label} {wall:7.1f} s ({1000 * inner / len(paths):.1f} ms/file in the gather, max RSS {rss:.0f} MiB);"
+        for label, (wall, inner, rss, hwm) in res.items():
+            line += (f" {label} {wall:7.1f} s ({1000 * inner / len(paths):.1f} ms/file in the gather; peak memory "
+                     f"{hwm:.0f} MiB in the gathering process, {rss:.0f} MiB in any process so far);")
         if len(res) == 2:
             line += f" ratio after/before {res['after'][0] / res['before'][0]:.2f}"
         print(line, flush=True)

@@ -483,18 +483,16 @@ def _release(maps) -> None:
 
 class _Paged:
     """A memory-mapped array as dask reads it block by block for the write: each block is copied
-    out and, every 64 blocks, the map's pages are dropped again (_release)."""
+    out and the map's pages are dropped again (_release), so a block is resident only while it
+    is written."""
 
     def __init__(self, m: np.ndarray, shape: tuple[int, ...]):
         self.m, self.v = m, m.reshape(shape)
         self.shape, self.dtype, self.ndim = self.v.shape, self.v.dtype, self.v.ndim
-        self.reads = 0
 
     def __getitem__(self, key):
         out = np.array(self.v[key])
-        self.reads += 1
-        if self.reads % 64 == 0:
-            _release([self.m])
+        _release([self.m])
         return out
 
 
