@@ -281,9 +281,13 @@ def _checksum_of(arrays: Mapping[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def read_chunk_file(path: str | Path, chunk: _grid.Chunk | None = None) -> tuple[str | None, dict[str, np.ndarray]]:
+def read_chunk_file(path: str | Path, chunk: _grid.Chunk | None = None,
+                    expect_id: str | None = None) -> tuple[str | None, dict[str, np.ndarray]]:
     """(None, every variable's raw values) if the chunk file is intact (and matches `chunk`), else
-    (the reason it is not, {}). One read of the file: the checksum is taken over the values read."""
+    (the reason it is not, {}). One read of the file: the checksum is taken over the values read.
+    `expect_id` instead of `chunk`: the file's id attribute and the hash of its spec must both be
+    that id (the plan's chunks are named by the hash of their spec, so this is the same check
+    without the plan's spec texts at hand)."""
     import netCDF4
 
     path = Path(path)
@@ -317,6 +321,14 @@ def read_chunk_file(path: str | Path, chunk: _grid.Chunk | None = None) -> tuple
                 return f"{sizes.get('point')} points, expected {len(chunk.points)}", {}
             if sizes.get("level") != len(chunk.spec["settings"]["levels"]):
                 return "wrong number of levels", {}
+        elif expect_id is not None:
+            if attrs.get("sweep_chunk_id") != expect_id:
+                return f"chunk id {attrs.get('sweep_chunk_id')!r} != expected {expect_id!r}", {}
+            spec = attrs.get("sweep_chunk_spec", "")
+            if _grid.sha256_hex(spec)[:_grid.CHUNK_ID_HEX] != expect_id:
+                return "chunk spec differs from the expected one", {}
+            if sizes.get("point") != len(json.loads(spec)["points"]):
+                return f"{sizes.get('point')} points, expected {len(json.loads(spec)['points'])}", {}
     except (OSError, RuntimeError, ValueError, KeyError, IndexError) as exc:  # HDF5 damage surfaces as these
         return f"unreadable ({type(exc).__name__}: {exc})", {}
     return None, arrays
@@ -504,20 +516,26 @@ def _dtype(kind: str):
     return {"float": np.float64, "int": np.int32, "bool": np.bool_}.get(kind, np.int8)
 
 
-def _read_job(job: tuple[Path, _grid.Chunk | None]) -> tuple[Path, str | None, dict[str, np.ndarray]]:
-    reason, data = read_chunk_file(*job)
-    return job[0], reason, data
+def _read_job(job: tuple[Path, str | None]) -> tuple[Path, str | None, dict[str, np.ndarray]]:
+    path, cid = job
+    reason, data = read_chunk_file(path, expect_id=cid)
+    return path, reason, data
 
 
-def _read_all(jobs: Sequence[tuple[Path, _grid.Chunk | None]], workers: int):
-    """read_chunk_file over `jobs`, in order, in `workers` processes (this one where 1)."""
+# chunk files handed to the reading processes at a time (bounds what waits in their queues)
+READ_BATCH = 1000
+
+
+def _read_all(jobs: Sequence[tuple[Path, str | None]], workers: int):
+    """_read_job over `jobs`, in order, in `workers` processes (this one where 1)."""
     if workers <= 1 or len(jobs) < 64:
         yield from map(_read_job, jobs)
         return
     import multiprocessing
 
     with multiprocessing.get_context("fork").Pool(workers) as pool:
-        yield from pool.imap(_read_job, jobs, chunksize=16)
+        for i in range(0, len(jobs), READ_BATCH):
+            yield from pool.imap(_read_job, jobs[i:i + READ_BATCH], chunksize=16)
 
 
 def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str | Path,
@@ -540,7 +558,7 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
 
     paths = [Path(p) for p in chunk_paths]
     out_path = Path(out_path)
-    plan = _grid.plan_chunks(settings)
+    plan_ids = set(_grid.plan_chunks(settings))   # the ids only: the plan's spec texts are not kept
     axes = _grid.AXES
     shape = _grid.grid_shape(settings)
     n_levels = len(settings["levels"])
@@ -559,7 +577,7 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             maps[var.name] = m
         seen = np.zeros(n, dtype=np.int32)
         n_read = 0
-        for p, reason, data in _read_all([(p, plan.get(p.stem)) for p in paths], workers):
+        for p, reason, data in _read_all([(p, p.stem if p.stem in plan_ids else None) for p in paths], workers):
             if reason is not None:
                 moved = quarantine(p, reason)
                 raise RuntimeError(f"chunk file {p} is damaged ({reason}); moved to {moved}. "
