@@ -574,6 +574,7 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             m = np.lib.format.open_memmap(scratch / f"{var.name}.npy", mode="w+", dtype=_dtype(var.kind),
                                           shape=(n, n_levels) if var.per_level else (n,))
             m[...] = _fill(var.kind)
+            _release([m])
             maps[var.name] = m
         seen = np.zeros(n, dtype=np.int32)
         n_read = 0
@@ -614,13 +615,21 @@ def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str |
             encoding[c] = {"_FillValue": None}
         attrs = cube_attrs(settings, name, f"gathered {len(paths)} chunk files ({n} scenes) into this cube"
                            + (f"; {history}" if history else ""), repo_path)
-        cube = xr.Dataset(data_vars, coords=coords, attrs=attrs)
+        names = list(data_vars)
+        cube = xr.Dataset({names[0]: data_vars[names[0]]}, coords=coords, attrs=attrs)
         log.info("gathering %d chunk files, %d scenes, grid %s x %d levels into %s (netCDF chunks %s)",
                  len(paths), n, dict(zip(axes, shape)), n_levels, out_path, csizes)
         import dask
 
+        def the_others(tmp: Path) -> None:
+            # one variable at a time: only its blocks are ever in memory
+            for key in names[1:]:
+                xr.Dataset({key: data_vars[key]}).to_netcdf(tmp, mode="a", engine="netcdf4",
+                                                            encoding={key: encoding[key]})
+
         with dask.config.set(scheduler="synchronous"):
-            out = write_atomic(cube, out_path, encoding)
+            out = write_atomic(cube, out_path, {k: v for k, v in encoding.items() if k in coords or k == names[0]},
+                               finish=the_others)
         codes, counts = np.unique(maps["outcome"], return_counts=True)
         log.info("wrote %s (%d bytes); outcomes %s", out, out.stat().st_size,
                  {outcomes.NAMES[int(c)]: int(k) for c, k in zip(codes, counts)})
