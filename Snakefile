@@ -32,6 +32,14 @@ rule all:
         expand(f"{RESULTS}/figures/{{notebook}}.png", notebook=SETTINGS["outputs"]["notebooks"]),
 
 
-include: "workflow/rules/simulate.smk"
-include: "workflow/rules/gather.smk"
+if ADAPTIVE:
+
+    include: "workflow/rules/adaptive.smk"
+
+else:
+
+    include: "workflow/rules/simulate.smk"
+    include: "workflow/rules/gather.smk"
+
+
 include: "workflow/rules/figures.smk"

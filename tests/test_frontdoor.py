@@ -405,7 +405,7 @@ BAD_CONFIGS = {
     # file text -> the lines the user sees (after "error: <file>: ")
     "typo.yaml": ("name: typo\nchunk_sise: 3\n", [
         "chunk_sise = 3 is invalid: no such key; allowed keys: chunk_size, disk, gravity, grid, "
-        "levels, mu_s, name, outputs, solver, stop"]),
+        "levels, mu_s, name, outputs, refine, solver, stop"]),
     "quoted.yaml": ("name: quoted\nsolver: {rtol: '1e-10'}\nmu_s: 0.25\n", [
         "solver.rtol = '1e-10' is invalid: a number in quotes is text: remove the quotes; allowed [1e-14, 1e-2] "
         "(relative error tolerance of the adaptive method, dimensionless)",
@@ -542,6 +542,28 @@ def test_the_eta_is_a_lower_bound_until_a_chunk_job_has_finished(tmp_path):
     p.feed("Finished jobid: 1 (Rule: simulate_chunk)\n", now=t0 + 14)
     line = p.line("s", t0 + 14)
     assert f"| ETA {frontdoor._clock(12 + after)} |" in line, line
+
+
+def test_adaptive_progress_shows_rounds_and_one_line_per_finished_round(tmp_path):
+    results = tmp_path / "results" / "amap"
+    rounds = results / "rounds"
+    (rounds / "map-a").mkdir(parents=True)
+    t0 = time.time()
+    info = {"maps": {"map-a": "mu_d 0.3"}, "rounds": 2, "lattice": 81, "budget": 36, "rounds_dir": str(rounds)}
+    (results / "plan.json").write_text(json.dumps({"name": "amap", "scenes": 36, "chunks": {}, "adaptive": info}))
+    p = frontdoor.Progress(results, t0 - 1, jobs=2, t_origin=t0 - 5)
+    assert p.line("amap", t0).startswith("sweep amap: rounds 0 scenes computed (budget 36), 3 of 3 map rounds to go")
+    assert p.round_lines() == []
+    (rounds / "map-a" / "round0.json").write_text(json.dumps({"computed": 9, "line": "round 0 line"}))
+    assert p.line("amap", t0 + 1).startswith("sweep amap: rounds 9 scenes computed (budget 36), 2 of 3 map rounds")
+    assert p.round_lines() == ["round 0 line"] and p.round_lines() == []   # each round once
+    for k, n in ((1, 25), (2, 33)):
+        (rounds / "map-a" / f"round{k}.json").write_text(json.dumps({"computed": n, "line": f"round {k} line"}))
+    assert p.round_lines() == ["round 1 line", "round 2 line"]
+    for text in ("Job stats:\n", "job  count\n", "refine_round  3\n", "gather  1\n", "total  4\n",
+                 "localrule gather:\n", "    jobid: 1\n"):
+        p.feed(text, now=t0 + 3)
+    assert p.line("amap", t0 + 3).startswith("sweep amap: gather (33 scenes into cube.nc)")
 
 
 def test_compile_shows_a_ticking_elapsed_time_and_the_estimate(monkeypatch, capsys):

@@ -150,7 +150,8 @@ def test_stored_notebooks_have_no_outputs():
         for cell in nb.cells:
             if cell.cell_type == "code":
                 assert not cell.outputs and cell.execution_count is None, path.name
-    assert {p.stem for p in (ROOT / "workflow" / "notebooks").glob("*.ipynb")} == set(grid.NOTEBOOKS)
+    assert {p.stem for p in (ROOT / "workflow" / "notebooks").glob("*.ipynb")} == set(grid.NOTEBOOKS
+                                                                                    + grid.ADAPTIVE_NOTEBOOKS)
 
 
 @pytest.mark.parametrize("mutate, fragment", [
@@ -360,3 +361,107 @@ def test_slurm_profile_dry_run_batches_chunk_jobs(tmp_path):
               "--configfile", write_config(d, "many.yaml", cfg), "--dry-run")
     assert job_count(out, "simulate_chunk") == n_chunks
     assert out.count(f"Group job {group}") == math.ceil(n_chunks / per_group), out[-3000:]
+
+
+# ------------------------------------------------------------------------- the adaptive map
+
+def adaptive_config() -> dict:
+    return yaml.safe_load((ROOT / "config" / "tiny_adaptive.yaml").read_text())
+
+
+def cube_values(path: Path) -> dict[str, np.ndarray]:
+    with xr.open_dataset(path) as c:
+        return {k: c[k].values.copy() for k in c.data_vars}
+
+
+@pytest.fixture(scope="module")
+def adaptive_run(tmp_path_factory, first_run):
+    d = copy_workflow(tmp_path_factory.mktemp("adaptive") / "wf")
+    out = smk(d, "-j2", "--configfile", "config/tiny_adaptive.yaml")
+    return d, out
+
+
+def test_adaptive_map_rounds_cube_and_figure(adaptive_run):
+    from sweep import adaptive
+
+    d, out = adaptive_run
+    settings = settings_of(adaptive_config())
+    lat = adaptive.lattice(settings)
+    assert job_count(out, "refine_round") == lat.rounds + 1 >= 3
+    res = d / "results" / "tiny_adaptive"
+    (map_id,) = adaptive.maps(settings)
+    recs = [json.loads((res / "rounds" / map_id / f"round{k}.json").read_text()) for k in range(lat.rounds + 1)]
+    assert [r["round"] for r in recs] == list(range(lat.rounds + 1))
+    assert all(r["line"].startswith("sweep tiny_adaptive: map ") for r in recs)
+    cube = cube_values(res / "cube.nc")
+    n_comp = int(cube["computed"].sum())
+    assert n_comp == recs[-1]["computed"] == sum(r["scenes"] for r in recs) <= adaptive.budget(settings)
+    assert n_comp < lat.size and recs[1]["scenes"] > 0
+    # every node: computed (round >= 0, bars 0) or reconstructed (round -1); every float output has its bar
+    rnd, comp = cube["round"].ravel(), cube["computed"].ravel()
+    np.testing.assert_array_equal(rnd >= 0, comp == 1)
+    for name, v in cube.items():
+        if name.endswith("_interpolation_error"):
+            base = cube[name[:-len("_interpolation_error")]]
+            np.testing.assert_array_equal(np.isnan(v), np.isnan(base), err_msg=name)
+            comp_mask = np.broadcast_to((cube["computed"] == 1).reshape(cube["computed"].shape + (1,) * (v.ndim - 6)),
+                                        v.shape)
+            assert (v[comp_mask & np.isfinite(v)] == 0).all(), name
+    with xr.open_dataset(res / "cube.nc") as c:
+        assert c.t_halt_interpolation_error.attrs["units"] == "s" and "flag_meanings" in c.computed.attrs
+        # a computed node holds what the scene gives when run on its own
+        sub = c.where(c.computed == 1, drop=True).stack(p=grid.AXES).dropna("p", subset=["t_halt"])
+        p = sub.p.values[len(sub.p) // 2]
+        (summary,) = simulate_in_snapshot(settings, [tuple(p)])
+        assert float(sub.t_halt.sel(p=p)) == pytest.approx(summary["t_halt"], rel=1e-12)
+    assert (res / "figures" / "adaptive_map.png").read_bytes()[:4] == b"\x89PNG"
+    assert "Nothing to be done" in smk(d, "-j2", "--configfile", "config/tiny_adaptive.yaml", "--dry-run")
+
+
+def test_adaptive_map_killed_mid_round_resumes_to_the_same_cube(adaptive_run, tmp_path):
+    import signal
+
+    d0, _ = adaptive_run
+    d = copy_workflow(tmp_path / "wf")
+    env = dict(os.environ, PYTHONPATH=str(SNAPSHOT))
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(d / "Snakefile"), "--directory", str(d),
+           "-j2", "--configfile", "config/tiny_adaptive.yaml"]
+    proc = subprocess.Popen(cmd, cwd=d, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    res = d / "results" / "tiny_adaptive"
+    deadline = time.monotonic() + TIMEOUT_S
+    # kill -9 (Snakemake and its jobs) once round 1 has written a chunk file but not its round file
+    while time.monotonic() < deadline and proc.poll() is None:
+        r0 = list(res.glob("rounds/*/round0.json"))
+        if r0 and len(list((res / "chunks").glob("*.nc"))) > len(json.loads(r0[0].read_text())["chunks"]):
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, "the run ended before it could be killed mid-round"
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not list(res.glob("rounds/*/round1.json")) and not (res / "cube.nc").exists()
+    kept = {p.name for p in (res / "chunks").glob("*.nc")}
+    smk(d, "--unlock", "--configfile", "config/tiny_adaptive.yaml")
+    out = smk(d, "-j2", "--rerun-incomplete", "--configfile", "config/tiny_adaptive.yaml")
+    assert "refine_round" in out
+    # the same nodes and values as the uninterrupted run; the chunks finished before the kill were kept
+    a, b = cube_values(d0 / "results" / "tiny_adaptive" / "cube.nc"), cube_values(res / "cube.nc")
+    assert a.keys() == b.keys()
+    for k in a:
+        if k != "wall_time" and not k.startswith("wall_time"):
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    assert kept <= {p.name for p in (res / "chunks").glob("*.nc")}
+    for p in (res / "chunks").glob("*.nc"):
+        if p.name in kept:
+            assert (d0 / "results" / "tiny_adaptive" / "chunks" / p.name).exists()
+
+
+def test_adaptive_map_slurm_dry_run(tmp_path):
+    from sweep import adaptive
+
+    d = copy_workflow(tmp_path / "wf")
+    out = smk(d, "--profile", str(d / "workflow" / "profiles" / "slurm"),
+              "--configfile", "config/tiny_adaptive.yaml", "--dry-run")
+    assert job_count(out, "refine_round") == adaptive.lattice(settings_of(adaptive_config())).rounds + 1
+    assert job_count(out, "gather") == 1

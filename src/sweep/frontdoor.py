@@ -110,9 +110,9 @@ JOB_STATS = re.compile(r"^(\w+)\s+(\d+)$")
 # other work: 75 s and 96 s here, 213 s on the fresh clone of issue #43.
 COMPILE_ESTIMATE = "usually 1-4 min on a 2-core machine, by how busy it is"
 # After the last scene: the gather (opening every chunk file: 0.5 s + 0.4 s per chunk file), then
-# each figure notebook (a Jupyter kernel that imports the package, reduces the cube and plots:
-# 9 s), measured on a busy 2-core machine (tiny sweep: 2 s, 9-10 s; default: 8 s, 8-10 s); the
-# run's own durations replace them as soon as one has finished.
+# the figures job (every notebook in one process: imports, reductions, plots; 9-10 s for the four
+# on a busy 2-core machine), measured on a busy 2-core machine; the run's own durations replace
+# them as soon as one has finished.
 GATHER_S, GATHER_S_PER_CHUNK = 0.5, 0.4
 # the rule of the chunk jobs: until one has finished, the scenes' rate leaves out the jobs' start-up
 # and writing out (measured: ~10 s per job on a busy 2-core machine against ~4 s of scenes in a
@@ -379,6 +379,9 @@ class Progress:
         self.done_jobs: dict[str, list[float]] = collections.defaultdict(list)  # rule -> durations
         self._rule: str | None = None
         self._in_stats = False
+        self.adaptive: dict | None = None                  # an adaptive run's plan_info (sweep.adaptive)
+        self.shown_rounds: set[str] = set()
+        self.rounds_left = 0
 
     # --- Snakemake's output
     def feed(self, text: str, now: float | None = None) -> None:
@@ -423,6 +426,7 @@ class Progress:
             return
         self.plan = {str(k): int(v) for k, v in data["chunks"].items()}
         self.total = int(data["scenes"])
+        self.adaptive = data.get("adaptive")
 
     def chunks_present(self) -> set[str]:
         return {cid for cid in (self.plan or {}) if (self.results / "chunks" / f"{cid}.nc").is_file()}
@@ -434,6 +438,41 @@ class Progress:
         return {cid for cid in self.chunks_present()
                 if (self.results / "chunks" / f"{cid}.nc").resolve() not in marked}
 
+    # --- an adaptive map's rounds (sweep.adaptive): round files instead of a chunk plan
+    def _rounds(self) -> dict[str, list[dict]]:
+        """{map id: the records of its finished rounds, in order} of an adaptive run."""
+        out = {}
+        for map_id in self.adaptive["maps"]:
+            recs = []
+            for k in range(int(self.adaptive["rounds"]) + 1):
+                try:
+                    recs.append(json.loads((Path(self.adaptive["rounds_dir"]) / map_id / f"round{k}.json")
+                                           .read_text(encoding="utf-8")))
+                except (OSError, ValueError):
+                    break
+            out[map_id] = recs
+        return out
+
+    def round_lines(self) -> list[str]:
+        """The progress line of every round that finished during this run and was not shown yet."""
+        if self.plan is None or not getattr(self, "adaptive", None):
+            return []
+        lines = []
+        for map_id in self.adaptive["maps"]:
+            for k in range(int(self.adaptive["rounds"]) + 1):
+                path = Path(self.adaptive["rounds_dir"]) / map_id / f"round{k}.json"
+                key = str(path)
+                if key in self.shown_rounds:
+                    continue
+                try:
+                    if path.stat().st_mtime < self.t_start - 1:
+                        continue
+                    lines.append(json.loads(path.read_text(encoding="utf-8"))["line"])
+                except (OSError, ValueError, KeyError):
+                    break
+                self.shown_rounds.add(key)
+        return lines
+
     def done(self) -> int | None:
         if self.plan is None:
             self._load_plan()
@@ -441,6 +480,12 @@ class Progress:
                 return None
             self.finished = self.chunks_present()
             self.kept_at_start = sum(self.plan[c] for c in self.finished)
+            if getattr(self, "adaptive", None):
+                self.kept_at_start = sum(r[-1]["computed"] for r in self._rounds().values() if r)
+        if getattr(self, "adaptive", None):
+            rounds = self._rounds()
+            self.rounds_left = sum(int(self.adaptive["rounds"]) + 1 - len(r) for r in rounds.values())
+            return sum(r[-1]["computed"] for r in rounds.values() if r)
         n = 0
         for cid, size in self.plan.items():
             if cid in self.finished or (self.results / "chunks" / f"{cid}.nc").is_file():
@@ -472,7 +517,10 @@ class Progress:
     def phase(self, done: int | None) -> str:
         if done is None:
             return "plan"
-        if done < self.total:
+        if self.adaptive:
+            if self.rounds_left:
+                return "rounds"
+        elif done < self.total:
             return "scenes"
         rules = {r for r, _ in self.running.values()}
         if "notebook" in rules or ("gather" not in rules and self.counts.get("notebook", 0)
@@ -489,7 +537,9 @@ class Progress:
         GATHER_S_PER_CHUNK per chunk file, NOTEBOOK_S per notebook, or what this run's finished
         ones took; the notebooks `jobs` at a time)."""
         left, bound = 0.0, False
-        if done < self.total:
+        if self.adaptive and self.rounds_left:
+            return None     # an adaptive sweep: a round's size is known only when it starts
+        if done < self.total and not self.adaptive:
             first, last = self.first_seen, self.last_seen
             if first is None or not (last[0] > first[0] and last[1] > first[1]):
                 return None
@@ -513,10 +563,13 @@ class Progress:
                 self.first_seen = (now, done)
             if self.last_seen is None or done > self.last_seen[1]:
                 self.last_seen = (now, done)
-            if phase == "scenes":
+            if phase == "rounds":
+                parts[0] += (f" {done} scenes computed (budget {self.total}), {self.rounds_left} of "
+                             f"{len(self.adaptive['maps']) * (int(self.adaptive['rounds']) + 1)} map rounds to go")
+            elif phase == "scenes":
                 parts[0] += f" {done}/{self.total} ({pct:.0f}%)"
             elif phase == "gather":
-                parts[0] += f" ({self.total} scenes into cube.nc)"
+                parts[0] += f" ({done if self.adaptive else self.total} scenes into cube.nc)"
             else:
                 n_nb = self.counts.get("notebook", 0)
                 parts[0] += f" {min(len(self.done_jobs.get('notebook', ())), n_nb)}/{n_nb}"
@@ -785,6 +838,9 @@ def _run(argv, cwd, t_origin, sm_argv, workdir, sweep, resume) -> int:
     results = workdir / "results" / name
     shown = shown_path(results, cwd)
     n_scenes = math.prod(grid.grid_shape(sweep.settings))
+    if grid.is_adaptive(sweep.settings):   # at most its budget
+        from . import adaptive
+        n_scenes = adaptive.plan_info(sweep.settings, "")["budget"]
     try:
         try:
             warm_numba(status, label=f"sweep {name}: compile (numba kernels, then {n_scenes} scenes)")
@@ -839,6 +895,10 @@ def _run(argv, cwd, t_origin, sm_argv, workdir, sweep, resume) -> int:
                 _killpg(proc.pid, signal.SIGKILL)
             continue
         status.show(progress.line(name, time.time()))
+        for text in progress.round_lines():     # an adaptive map: one line per finished round
+            status.say(text)
+    for text in progress.round_lines():
+        status.say(text)
     _end_group(proc.pid)
     reader.join(timeout=10)
     log.close()
@@ -860,6 +920,11 @@ def _run(argv, cwd, t_origin, sm_argv, workdir, sweep, resume) -> int:
         again = f"{prefix} --unlock{resume[len(prefix):]} && {resume}" if locked else resume
         what = (f"kept {kept} of {progress.total} scenes ({len(present)} of {len(plan)} chunk files) "
                 f"in {shown}/chunks/" if plan else "nothing was computed yet")
+        if progress.adaptive:   # rounds: finished ones are kept whole, a stopped one keeps its chunk files
+            n_files = len(list((results / "chunks").glob("*.nc")))
+            n_rounds = sum(len(r) for r in progress._rounds().values())
+            what = (f"kept {n_rounds} finished map rounds ({progress.done() or 0} scenes) and {n_files} chunk files "
+                    f"in {shown}/chunks/ (a stopped round reuses its finished chunks)")
         status.say(f"sweep {name}: interrupted ({signal.Signals(state['signal']).name}) after {elapsed}; "
                    f"{what}; resume with: {again}")
         return 128 + state["signal"]

@@ -74,6 +74,8 @@ def schema_path() -> Path:
 SCHEMA_PATH = schema_path()
 
 NOTEBOOKS = ("halt_time", "frequency_ramps", "roll_slip", "cost")
+# the notebooks of an adaptive map (a refine: section) only
+ADAPTIVE_NOTEBOOKS = ("adaptive_map",)
 
 
 class SweepConfigError(ValueError):
@@ -257,6 +259,16 @@ def _number(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
+def config_value(config: Mapping, key: str):
+    """The value at a dotted key of a config mapping (`disk.radius`), None where it is absent."""
+    node = config
+    for part in key.split("."):
+        if not isinstance(node, Mapping) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
 def cross_field_errors(config: Mapping, invalid: set[str] = frozenset()) -> list[ConfigError]:
     """Rules JSON schema cannot express; `config` must have its defaults filled: the relative
     bounds and excluded values of sweep.fields.RANGES (mu_d <= mu_s, k_i <= radius, thickness <=
@@ -269,12 +281,7 @@ def cross_field_errors(config: Mapping, invalid: set[str] = frozenset()) -> list
     errors = []
 
     def value_of(key: str):
-        node = config
-        for part in key.split("."):
-            if not isinstance(node, Mapping) or part not in node:
-                return None
-            node = node[part]
-        return node
+        return config_value(config, key)
 
     for key, field in fields.SWEEP_KEYS.items():
         rng = fields.RANGES[field]
@@ -296,10 +303,113 @@ def cross_field_errors(config: Mapping, invalid: set[str] = frozenset()) -> list
                     continue
             if rng.excluded is not None and v == rng.excluded:
                 errors.append(ConfigError(name, v, rng.allowed(), problem=rng.problem(v)))
+    errors += refine_errors(config, invalid)
     solver = config.get("solver", {})
     if solver.get("method") == "fixed" and "dt" not in solver:
         errors.append(ConfigError("solver.dt", MISSING, fields.RANGES["solver.dt"].allowed(),
                                   problem="required when solver.method is 'fixed'"))
+    return errors
+
+
+def refine_errors(config: Mapping, invalid: set[str] = frozenset()) -> list[ConfigError]:
+    """The checks of an adaptive map (`refine:`) and of the axes JSON schema cannot express: every
+    axis under `grid` or `refine.axes`, not both; a lattice axis' `from` < `to`, both inside the
+    axis' range (fields.RANGES, relative bounds included), `from` > 0 for log spacing; at least
+    one refinement round (start_points below the smallest axis' points); round 0 within the
+    budget; the adaptive_map notebook only with refine."""
+    from . import refine as _refine
+
+    errors: list[ConfigError] = []
+    grid_cfg = config.get("grid") if isinstance(config.get("grid"), Mapping) else {}
+    ref = config.get("refine")
+    axes = ref.get("axes") if isinstance(ref, Mapping) and isinstance(ref.get("axes"), Mapping) else {}
+    for a in AXES:
+        key = f"grid.{a}"
+        if a in axes and a in grid_cfg:
+            errors.append(ConfigError(f"refine.axes.{a}", axes[a], f"each axis once: under grid or refine.axes",
+                                      problem=f"{a} is also listed under {key}"))
+        elif a not in axes and a not in grid_cfg and "grid" not in invalid:
+            errors.append(ConfigError(key, MISSING, "a list of values: " + fields.RANGES[fields.SWEEP_KEYS[key]].allowed()
+                                      + (", or an axis of refine.axes" if ref is not None else "")))
+    notebooks = config.get("outputs", {}).get("notebooks", []) if isinstance(config.get("outputs"), Mapping) else []
+    if ref is None:
+        if isinstance(notebooks, list) and "adaptive_map" in notebooks:
+            i = notebooks.index("adaptive_map")
+            errors.append(ConfigError(f"outputs.notebooks[{i}]", "adaptive_map",
+                                      "halt_time, frequency_ramps, roll_slip, cost (adaptive_map needs a refine: section)",
+                                      problem="adaptive_map draws an adaptive map and this config has no refine:"))
+        return errors
+    if not isinstance(ref, Mapping) or any(k.startswith("refine") for k in invalid):
+        return errors
+
+    def value_of(key: str):
+        return config_value(config, key)
+
+    ok_axes = {}
+    for a, spec in axes.items():
+        if not isinstance(spec, Mapping):
+            continue
+        field_name = fields.SWEEP_KEYS[f"grid.{a}"]
+        rng = fields.RANGES[field_name]
+        lo, hi = spec.get("from"), spec.get("to")
+        bad = False
+        for end, v in (("from", lo), ("to", hi)):
+            name = f"refine.axes.{a}.{end}"
+            if not _number(v) or name in invalid:
+                bad = True
+                continue
+            problem = rng.problem(v)
+            if problem is not None:
+                errors.append(ConfigError(name, v, rng.allowed(), problem=problem or None))
+                bad = True
+                continue
+            other_key = fields.SWEEP_KEY_OF.get(rng.relative.field) if rng.relative else None
+            other = value_of(other_key) if other_key else None
+            if other_key and _valid_number(other) and other >= 0 and other_key not in invalid:
+                err = rng.relative_error(name, v, other)
+                if err is not None:
+                    errors.append(err)
+                    bad = True
+        if bad:
+            continue
+        if not lo < hi:
+            errors.append(ConfigError(f"refine.axes.{a}.to", hi, f"a value above from = {lo!r}",
+                                      problem="the axis must run from a lower to a higher value"))
+            continue
+        if spec.get("spacing", "linear") == "log" and lo <= 0:
+            errors.append(ConfigError(f"refine.axes.{a}.from", lo, "> 0 with spacing: log",
+                                      problem="a log-spaced axis needs positive values"))
+            continue
+        if rng.excluded is not None and lo < rng.excluded < hi and spec.get("spacing", "linear") == "linear":
+            pts = spec.get("points")
+            if isinstance(pts, int) and _refine.is_lattice_size(pts) and rng.excluded in set(
+                    _refine.axis_values(float(lo), float(hi), pts).tolist()):
+                errors.append(ConfigError(f"refine.axes.{a}", dict(spec), rng.allowed(),
+                                          problem=f"a lattice point falls on the excluded value {rng.excluded!r}"))
+                continue
+        ok_axes[a] = spec
+    if len(ok_axes) != len(axes) or not (2 <= len(axes) <= 3):
+        return errors
+    points = [spec.get("points") for spec in axes.values()]
+    start = ref.get("start_points", 9)
+    if not all(isinstance(p, int) and _refine.is_lattice_size(p) for p in points) or not isinstance(start, int):
+        return errors
+    smallest = min(points)
+    if not start < smallest:
+        errors.append(ConfigError("refine.start_points", start,
+                                  f"2^l + 1 below the smallest axis' points ({smallest}): at most {(smallest - 1) // 2 + 1}",
+                                  problem="leaves no round to refine in"))
+        return errors
+    share = ref.get("max_share", 0.25)
+    if _valid_number(share) and 0 < share <= 1:
+        lat = _refine.make_lattice(axes, start)
+        n0 = len(lat.round0_nodes())
+        budget = math.floor(share * lat.size)
+        if n0 > budget:
+            errors.append(ConfigError("refine.max_share", share,
+                                      f"at least {n0} / {lat.size} = {n0 / lat.size:.4g} (round 0's {n0} nodes), "
+                                      "or fewer start_points",
+                                      problem=f"the budget, {budget} scenes, is below round 0's {n0}"))
     return errors
 
 
@@ -376,6 +486,29 @@ def _merge_into(base: dict, new: Mapping, label: str, origins: dict[str, str], p
                 origins[_key(sub_path)] = label
 
 
+def _later_axis_wins(merged: dict, data: Mapping, origins: dict[str, str]) -> None:
+    """An axis is a grid list or a lattice of refine.axes: where a file sets it one way, the way an
+    earlier file set it is dropped (an adaptive overlay over config/config.yaml's grid, or a grid
+    list over an earlier refine:). Both in the same file stays an error (refine_errors)."""
+    new_ref = data.get("refine", {}).get("axes", {}) if isinstance(data.get("refine"), Mapping) else {}
+    new_grid = data.get("grid", {}) if isinstance(data.get("grid"), Mapping) else {}
+    grid_ = merged.get("grid") if isinstance(merged.get("grid"), dict) else {}
+    ref = merged.get("refine") if isinstance(merged.get("refine"), dict) else {}
+    axes = ref.get("axes") if isinstance(ref.get("axes"), dict) else {}
+    for a in list(new_ref) if isinstance(new_ref, Mapping) else []:
+        if a in grid_ and a not in new_grid:
+            del grid_[a]
+            for key in [o for o in origins if o == f"grid.{a}" or o.startswith(f"grid.{a}[")]:
+                del origins[key]
+    for a in list(new_grid):
+        if a in axes and a not in (new_ref if isinstance(new_ref, Mapping) else {}):
+            del axes[a]
+            for key in [o for o in origins if o.startswith(f"refine.axes.{a}")]:
+                del origins[key]
+    if ref and not axes and "axes" in ref:
+        del merged["refine"]
+
+
 def read_config(files: Sequence[tuple[str | Path, str]], overrides: Mapping | None = None) -> ConfigSource:
     """Read sweep config files, in order, each given as (path, the name to show for it), and merge
     them as Snakemake does (a later file's keys over an earlier's; nested mappings key by key),
@@ -394,6 +527,7 @@ def read_config(files: Sequence[tuple[str | Path, str]], overrides: Mapping | No
         except ConfigError as err:
             raise SweepConfigError([err.with_source(label)]) from None
         _merge_into(merged, data, label, origins, [])
+        _later_axis_wins(merged, data, origins)
         last = label
     if overrides:
         _merge_into(merged, overrides, "--config", origins, [])
@@ -449,7 +583,8 @@ def normalize(config: Mapping, schema: dict | None = None, check_scenes: bool = 
                  "mass": float(disk["mass"]), "shape": disk["shape"]},
         "gravity": float(cfg["gravity"]),
         "mu_s": float(cfg["mu_s"]),
-        "grid": {a: sorted(float(v) for v in cfg["grid"][a]) for a in AXES},
+        "grid": {a: (refine_axis(cfg["refine"]["axes"][a]) if a in cfg.get("refine", {}).get("axes", {})
+                     else sorted(float(v) for v in cfg["grid"][a])) for a in AXES},
         "levels": sorted((float(v) for v in cfg["levels"]), reverse=True),
         "solver": solver,
         "stop": {"t_max": float(cfg["stop"]["t_max"]), "max_steps": int(cfg["stop"]["max_steps"])},
@@ -457,9 +592,31 @@ def normalize(config: Mapping, schema: dict | None = None, check_scenes: bool = 
         "outputs": {"notebooks": list(cfg["outputs"]["notebooks"]),
                     "error_estimate": bool(cfg["outputs"]["error_estimate"])},
     }
+    if "refine" in cfg:
+        ref = cfg["refine"]
+        settings["refine"] = {
+            "axes": {a: {"from": float(ref["axes"][a]["from"]), "to": float(ref["axes"][a]["to"]),
+                         "points": int(ref["axes"][a]["points"]), "spacing": ref["axes"][a].get("spacing", "linear")}
+                     for a in AXES if a in ref["axes"]},
+            "max_share": float(ref["max_share"]), "start_points": int(ref["start_points"]),
+            "tolerance": float(ref["tolerance"]), "outputs": list(ref["outputs"]),
+        }
     if check_scenes:
         check_scenes_valid(settings)
     return settings
+
+
+def refine_axis(spec: Mapping) -> list[float]:
+    """The values of a lattice axis of refine.axes (sweep.refine.axis_values)."""
+    from . import refine as _refine
+
+    return [float(v) for v in _refine.axis_values(float(spec["from"]), float(spec["to"]), int(spec["points"]),
+                                                 spec.get("spacing", "linear"))]
+
+
+def is_adaptive(settings: Mapping) -> bool:
+    """Whether a normalised config is an adaptive map (a `refine:` section)."""
+    return "refine" in settings
 
 
 @dataclass(frozen=True)

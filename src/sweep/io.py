@@ -174,18 +174,9 @@ def file_checksum(path: str | Path) -> str:
     """
     import netCDF4
 
-    h = hashlib.sha256()
     with netCDF4.Dataset(path, "r") as nc:
         nc.set_auto_maskandscale(False)
-        for name in sorted(nc.variables):
-            a = np.asarray(nc.variables[name][...])
-            if a.dtype.kind not in "biuf":
-                h.update(name.encode() + repr(a.tolist()).encode())
-                continue
-            a = a.astype(np.float64)
-            a = np.where(np.isnan(a), np.nan, a)
-            h.update(name.encode() + repr(a.shape).encode() + np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
+        return _checksum_of({name: np.asarray(v[...]) for name, v in nc.variables.items()})
 
 
 def _fsync_path(path: Path) -> None:
@@ -276,42 +267,76 @@ def write_chunk(chunk: _grid.Chunk, summaries: Sequence[Mapping], path: str | Pa
     return write_atomic(ds, path, _chunk_encoding(ds), finish=add_checksum)
 
 
-def verify_chunk(path: str | Path, chunk: _grid.Chunk | None = None) -> str | None:
-    """None if the chunk file is intact (and matches `chunk`), else the reason it is not."""
+def _checksum_of(arrays: Mapping[str, np.ndarray]) -> str:
+    """file_checksum's digest of raw arrays already read ({name: values})."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.asarray(arrays[name])
+        if a.dtype.kind not in "biuf":
+            h.update(name.encode() + repr(a.tolist()).encode())
+            continue
+        a = a.astype(np.float64)
+        a = np.where(np.isnan(a), np.nan, a)
+        h.update(name.encode() + repr(a.shape).encode() + np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def read_chunk_file(path: str | Path, chunk: _grid.Chunk | None = None,
+                    expect_id: str | None = None) -> tuple[str | None, dict[str, np.ndarray]]:
+    """(None, every variable's raw values) if the chunk file is intact (and matches `chunk`), else
+    (the reason it is not, {}). One read of the file: the checksum is taken over the values read.
+    `expect_id` instead of `chunk`: the file's id attribute and the hash of its spec must both be
+    that id (the plan's chunks are named by the hash of their spec, so this is the same check
+    without the plan's spec texts at hand)."""
     import netCDF4
 
     path = Path(path)
     try:
         if path.stat().st_size == 0:
-            return "empty file"
+            return "empty file", {}
         with netCDF4.Dataset(path, "r") as nc:
             attrs = {k: nc.getncattr(k) for k in nc.ncattrs()}
             sizes = {k: len(v) for k, v in nc.dimensions.items()}
-            names = set(nc.variables)
+            nc.set_auto_maskandscale(False)
+            arrays = {name: np.asarray(v[...]) for name, v in nc.variables.items()}
+        names = set(arrays)
         want = attrs.get("sweep_checksum")
         if want is None:
-            return "no sweep_checksum attribute (incomplete write)"
-        if file_checksum(path) != want:
-            return "checksum mismatch (damaged data)"
+            return "no sweep_checksum attribute (incomplete write)", {}
+        if _checksum_of(arrays) != want:
+            return "checksum mismatch (damaged data)", {}
         try:
             with_errors = bool(json.loads(attrs.get("sweep_chunk_spec", "{}"))["settings"].get("error_estimate", False))
         except (ValueError, KeyError, TypeError, AttributeError):
             with_errors = False
         missing = [v.name for v in variables(with_errors) if v.name not in names]
         if missing:
-            return f"missing variables {missing}"
+            return f"missing variables {missing}", {}
         if chunk is not None:
             if attrs.get("sweep_chunk_id") != chunk.id:
-                return f"chunk id {attrs.get('sweep_chunk_id')!r} != expected {chunk.id!r}"
+                return f"chunk id {attrs.get('sweep_chunk_id')!r} != expected {chunk.id!r}", {}
             if attrs.get("sweep_chunk_spec") != chunk.spec_json:
-                return "chunk spec differs from the expected one"
+                return "chunk spec differs from the expected one", {}
             if sizes.get("point") != len(chunk.points):
-                return f"{sizes.get('point')} points, expected {len(chunk.points)}"
+                return f"{sizes.get('point')} points, expected {len(chunk.points)}", {}
             if sizes.get("level") != len(chunk.spec["settings"]["levels"]):
-                return "wrong number of levels"
+                return "wrong number of levels", {}
+        elif expect_id is not None:
+            if attrs.get("sweep_chunk_id") != expect_id:
+                return f"chunk id {attrs.get('sweep_chunk_id')!r} != expected {expect_id!r}", {}
+            spec = attrs.get("sweep_chunk_spec", "")
+            if _grid.sha256_hex(spec)[:_grid.CHUNK_ID_HEX] != expect_id:
+                return "chunk spec differs from the expected one", {}
+            if sizes.get("point") != len(json.loads(spec)["points"]):
+                return f"{sizes.get('point')} points, expected {len(json.loads(spec)['points'])}", {}
     except (OSError, RuntimeError, ValueError, KeyError, IndexError) as exc:  # HDF5 damage surfaces as these
-        return f"unreadable ({type(exc).__name__}: {exc})"
-    return None
+        return f"unreadable ({type(exc).__name__}: {exc})", {}
+    return None, arrays
+
+
+def verify_chunk(path: str | Path, chunk: _grid.Chunk | None = None) -> str | None:
+    """None if the chunk file is intact (and matches `chunk`), else the reason it is not."""
+    return read_chunk_file(path, chunk)[0]
 
 
 def quarantine(path: str | Path, reason: str) -> Path:
@@ -399,107 +424,219 @@ def git_commit(path: str | Path) -> str:
     return head + ("-dirty" if dirty else "") if head else "unknown"
 
 
+def variable_encoding(kind: str, chunksizes: Sequence[int]) -> dict:
+    """The cube's netCDF encoding of a variable of `kind` (sweep.outputs.Var.kind): int32 with
+    fill -1 for counts (decoded with NaN for missing), int8 for outcome codes and flags, float64
+    with NaN fill; zlib with shuffle, in `chunksizes`."""
+    if kind == "int":
+        enc = {"dtype": "int32", "_FillValue": np.int32(INT_FILL)}
+    elif kind in ("outcome", "flag"):
+        enc = {"dtype": "int8", "_FillValue": None}
+    elif kind == "bool":
+        enc = {"_FillValue": None}
+    else:
+        enc = {"dtype": "float64", "_FillValue": np.nan}
+    enc.update(zlib=True, complevel=COMPLEVEL, shuffle=True, chunksizes=tuple(chunksizes))
+    return enc
+
+
+def cube_coords(settings: Mapping) -> dict:
+    """The cube's coordinates: the six axes (the values of `settings["grid"]`) and `level`."""
+    coords = {a: (a, np.array(settings["grid"][a], dtype=np.float64), _coord_attrs(a)) for a in _grid.AXES}
+    coords["level"] = ("level", np.array(settings["levels"], dtype=np.float64), dict(LEVEL_ATTRS))
+    return coords
+
+
+def cube_attrs(settings: Mapping, name: str | None, history: str, repo_path: str | Path | None) -> dict:
+    """The cube's global attributes: CF conventions, title, history (`history`, after the time),
+    provenance (version, git commit, config and its SHA-256, solver, core fingerprint)."""
+    from . import __version__
+
+    config_json = _grid.canonical_json(settings)
+    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    attrs = {
+        "Conventions": "CF-1.10",
+        "title": "Euler's disk (Kessler & O'Reilly 2002) parameter sweep" + (f" '{name}'" if name else ""),
+        "sweep_name": name or "",
+        "history": f"{created}: {history}",
+        "source": f"sweep {__version__}: rigid-disk model of Kessler & O'Reilly (2002), "
+                  "numba hybrid integrator",
+        "sweep_version": __version__,
+        "git_commit": git_commit(repo_path) if repo_path is not None else "unknown",
+        "config_json": config_json,
+        "config_sha256": _grid.sha256_hex(config_json),
+        "solver": _grid.canonical_json(settings["solver"]),
+        "sweep_core_sha256": _grid.core_fingerprint(),
+        "stop": _grid.canonical_json(settings["stop"]),
+        "created": created,
+    }
+    if settings.get("outputs", {}).get("error_estimate", False):  # the rerun's settings behind *_numerical_error
+        ref = _grid.error_reference(_grid.scene_settings(settings))
+        attrs["error_estimate_solver"] = _grid.canonical_json(ref["solver"])
+        attrs["error_estimate_stop"] = _grid.canonical_json(ref["stop"])
+    return attrs
+
+
+# The gather writes its memory-mapped arrays back and drops their pages from its memory every
+# RELEASE_EVERY chunk files, so its resident memory stays bounded by what that many files touch.
+RELEASE_EVERY = 500
+
+
+def _release(maps) -> None:
+    """Flush memory maps to their files and drop their pages from this process's memory."""
+    import mmap
+
+    for m in maps:
+        m.flush()
+        mm = getattr(m, "_mmap", None)
+        if mm is not None and hasattr(mm, "madvise"):
+            mm.madvise(mmap.MADV_DONTNEED)
+
+
+class _Paged:
+    """A memory-mapped array as dask reads it block by block for the write: each block is copied
+    out and the map's pages are dropped again (_release), so a block is resident only while it
+    is written."""
+
+    def __init__(self, m: np.ndarray, shape: tuple[int, ...]):
+        self.m, self.v = m, m.reshape(shape)
+        self.shape, self.dtype, self.ndim = self.v.shape, self.v.dtype, self.v.ndim
+
+    def __getitem__(self, key):
+        out = np.array(self.v[key])
+        _release([self.m])
+        return out
+
+
+def _fill(kind: str):
+    return {"float": np.nan, "int": INT_FILL, "bool": False}.get(kind, 0)
+
+
+def _dtype(kind: str):
+    return {"float": np.float64, "int": np.int32, "bool": np.bool_}.get(kind, np.int8)
+
+
+def _read_job(job: tuple[Path, str | None]) -> tuple[Path, str | None, dict[str, np.ndarray]]:
+    path, cid = job
+    reason, data = read_chunk_file(path, expect_id=cid)
+    return path, reason, data
+
+
+# chunk files handed to the reading processes at a time (bounds what waits in their queues)
+READ_BATCH = 1000
+
+
+def _read_all(jobs: Sequence[tuple[Path, str | None]], workers: int):
+    """_read_job over `jobs`, in order, in `workers` processes (this one where 1)."""
+    if workers <= 1 or len(jobs) < 64:
+        yield from map(_read_job, jobs)
+        return
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        for i in range(0, len(jobs), READ_BATCH):
+            yield from pool.imap(_read_job, jobs[i:i + READ_BATCH], chunksize=16)
+
+
 def gather(chunk_paths: Sequence[str | Path], settings: Mapping, out_path: str | Path,
-           repo_path: str | Path | None = None, history: str = "", name: str | None = None) -> Path:
-    """Gather verified chunk files into the cube at `out_path` (atomic write), lazily with dask.
+           repo_path: str | Path | None = None, history: str = "", name: str | None = None,
+           workers: int = 1) -> Path:
+    """Gather verified chunk files into the cube at `out_path` (atomic write).
 
     `settings`: the normalised config (sweep.grid.normalize); `name`: the sweep's name (global
     attribute `sweep_name`, shown on the figures). Every grid point must be present exactly
     once; a damaged chunk file raises (after quarantining it) instead of being gathered.
+
+    Each chunk file is read once (netCDF4, its checksum verified over the values read) and its
+    values scattered into one memory-mapped array per variable in a temporary folder beside the
+    cube, which is then written block by block (dask over the maps, the cube's netCDF chunks): the
+    memory used is a few blocks, whatever the number of chunk files or scenes. `workers`
+    processes read the chunk files (the rule `gather` gives its threads).
     """
+    import dask.array as dsa
     import xarray as xr
 
-    from . import __version__
-
     paths = [Path(p) for p in chunk_paths]
-    plan = _grid.plan_chunks(settings)
-    for p in paths:
-        reason = verify_chunk(p, plan.get(p.stem))
-        if reason is not None:
-            moved = quarantine(p, reason)
-            raise RuntimeError(f"chunk file {p} is damaged ({reason}); moved to {moved}. "
-                               "Run snakemake again to recompute it.")
+    out_path = Path(out_path)
+    plan_ids = set(_grid.plan_chunks(settings))   # the ids only: the plan's spec texts are not kept
     axes = _grid.AXES
     shape = _grid.grid_shape(settings)
     n_levels = len(settings["levels"])
-    src = xr.open_mfdataset([str(p) for p in paths], combine="nested", concat_dim="point",
-                            engine="netcdf4", data_vars="minimal", coords="minimal",
-                            compat="override", join="exact", parallel=False)
+    n = math.prod(shape)
+    error_estimate = bool(settings.get("outputs", {}).get("error_estimate", False))
+    vars_ = variables(error_estimate)
+    axis_values = [np.asarray(settings["grid"][a], dtype=np.float64) for a in axes]
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp(prefix=".gather-", dir=out_path.parent))
     try:
-        index = _grid.grid_index(settings)
-        pos = np.zeros(src.sizes["point"], dtype=np.int64)
-        for a in axes:  # flat row-major index of every point in the cube
-            vals = src[a].values
-            try:
-                idx = np.array([index[a][float(v)] for v in vals], dtype=np.int64)
-            except KeyError as exc:
-                raise RuntimeError(f"a chunk holds {a} = {exc.args[0]!r}, not on the grid axis") from None
-            pos = pos * len(index[a]) + idx
-        n = math.prod(shape)
-        if len(pos) != n or not np.array_equal(np.sort(pos), np.arange(n)):
-            raise RuntimeError(f"chunks hold {len(pos)} points with {len(np.unique(pos))} distinct "
+        maps = {}
+        for var in vars_:
+            m = np.lib.format.open_memmap(scratch / f"{var.name}.npy", mode="w+", dtype=_dtype(var.kind),
+                                          shape=(n, n_levels) if var.per_level else (n,))
+            m[...] = _fill(var.kind)
+            _release([m])
+            maps[var.name] = m
+        seen = np.zeros(n, dtype=np.int32)
+        n_read = 0
+        for p, reason, data in _read_all([(p, p.stem if p.stem in plan_ids else None) for p in paths], workers):
+            if reason is not None:
+                moved = quarantine(p, reason)
+                raise RuntimeError(f"chunk file {p} is damaged ({reason}); moved to {moved}. "
+                                   "Run snakemake again to recompute it.")
+            pos = np.zeros(len(data[axes[0]]), dtype=np.int64)
+            for a, vals in zip(axes, axis_values):  # flat row-major index of every point in the cube
+                got = np.asarray(data[a], dtype=np.float64)
+                idx = np.minimum(np.searchsorted(vals, got), len(vals) - 1)
+                off = vals[idx] != got
+                if off.any():
+                    raise RuntimeError(f"a chunk holds {a} = {float(got[off][0])!r}, not on the grid axis")
+                pos = pos * len(vals) + idx
+            np.add.at(seen, pos, 1)
+            for var in vars_:
+                maps[var.name][pos] = data[var.name].astype(_dtype(var.kind), copy=False)
+            n_read += 1
+            if n_read % RELEASE_EVERY == 0:
+                _release(maps.values())
+        if (seen != 1).any():
+            raise RuntimeError(f"chunks hold {int(seen.sum())} points with {int((seen > 0).sum())} distinct "
                                f"grid positions; the grid has {n}")
-        order = np.argsort(pos, kind="stable")
-        identity = bool(np.array_equal(order, np.arange(n)))
+        _release(maps.values())
         csizes = cube_chunksizes(shape + (n_levels,))
         data_vars, encoding = {}, {}
-        error_estimate = bool(settings.get("outputs", {}).get("error_estimate", False))
-        for var in variables(error_estimate):
-            arr = src[var.name].data
-            if not identity:
-                arr = arr[order]
+        for var in vars_:
             full_shape = shape + ((n_levels,) if var.per_level else ())
-            arr = arr.reshape(full_shape, merge_chunks=True)
             cs = csizes if var.per_level else csizes[:-1]
-            arr = arr.rechunk(cs)
+            arr = dsa.from_array(_Paged(maps[var.name], full_shape), chunks=cs, lock=False, asarray=False)
             dims = axes + (("level",) if var.per_level else ())
-            if var.kind == "int":  # decoded with NaN for missing; stored as int32 with a fill value
-                enc = {"dtype": "int32", "_FillValue": np.int32(INT_FILL)}
-            elif var.kind in ("outcome", "flag"):
-                enc = {"dtype": "int8", "_FillValue": None}
-            elif var.kind == "bool":
-                enc = {"_FillValue": None}
-            else:
-                enc = {"dtype": "float64", "_FillValue": np.nan}
-            enc.update(zlib=True, complevel=COMPLEVEL, shuffle=True, chunksizes=cs)
             data_vars[var.name] = (dims, arr, _var_attrs(var))
-            encoding[var.name] = enc
-        coords = {a: (a, np.array(settings["grid"][a], dtype=np.float64), _coord_attrs(a)) for a in axes}
-        coords["level"] = ("level", np.array(settings["levels"], dtype=np.float64), dict(LEVEL_ATTRS))
+            encoding[var.name] = variable_encoding(var.kind, cs)
+        coords = cube_coords(settings)
         for c in coords:
             encoding[c] = {"_FillValue": None}
-        config_json = _grid.canonical_json(settings)
-        created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-        attrs = {
-            "Conventions": "CF-1.10",
-            "title": "Euler's disk (Kessler & O'Reilly 2002) parameter sweep" + (f" '{name}'" if name else ""),
-            "sweep_name": name or "",
-            "history": f"{created}: gathered {len(paths)} chunk files ({n} scenes) into this cube"
-                       + (f"; {history}" if history else ""),
-            "source": f"sweep {__version__}: rigid-disk model of Kessler & O'Reilly (2002), "
-                      "numba hybrid integrator",
-            "sweep_version": __version__,
-            "git_commit": git_commit(repo_path) if repo_path is not None else "unknown",
-            "config_json": config_json,
-            "config_sha256": _grid.sha256_hex(config_json),
-            "solver": _grid.canonical_json(settings["solver"]),
-            "sweep_core_sha256": _grid.core_fingerprint(),
-            "stop": _grid.canonical_json(settings["stop"]),
-            "created": created,
-        }
-        if error_estimate:  # the rerun's settings behind every *_numerical_error variable
-            ref = _grid.error_reference(_grid.scene_settings(settings))
-            attrs["error_estimate_solver"] = _grid.canonical_json(ref["solver"])
-            attrs["error_estimate_stop"] = _grid.canonical_json(ref["stop"])
-        cube = xr.Dataset(data_vars, coords=coords, attrs=attrs)
+        attrs = cube_attrs(settings, name, f"gathered {len(paths)} chunk files ({n} scenes) into this cube"
+                           + (f"; {history}" if history else ""), repo_path)
+        names = list(data_vars)
+        cube = xr.Dataset({names[0]: data_vars[names[0]]}, coords=coords, attrs=attrs)
         log.info("gathering %d chunk files, %d scenes, grid %s x %d levels into %s (netCDF chunks %s)",
                  len(paths), n, dict(zip(axes, shape)), n_levels, out_path, csizes)
-        out = write_atomic(cube, out_path, encoding)
+        import dask
+
+        def the_others(tmp: Path) -> None:
+            # one variable at a time: only its blocks are ever in memory
+            for key in names[1:]:
+                xr.Dataset({key: data_vars[key]}).to_netcdf(tmp, mode="a", engine="netcdf4",
+                                                            encoding={key: encoding[key]})
+
+        with dask.config.set(scheduler="synchronous"):
+            out = write_atomic(cube, out_path, {k: v for k, v in encoding.items() if k in coords or k == names[0]},
+                               finish=the_others)
+        codes, counts = np.unique(maps["outcome"], return_counts=True)
         log.info("wrote %s (%d bytes); outcomes %s", out, out.stat().st_size,
-                 {outcomes.NAMES[int(c)]: int(k) for c, k in zip(*np.unique(cube.outcome.values, return_counts=True))})
+                 {outcomes.NAMES[int(c)]: int(k) for c, k in zip(codes, counts)})
+        del cube, data_vars, maps
         return out
     finally:
-        src.close()
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def open_cube(path: str | Path):
@@ -531,6 +668,17 @@ NOTEBOOK_CELL_TIMEOUT_S = 600
 # The longest folder for the kernel's Unix sockets (a socket path, folder + "/kernel-NNNNN", has
 # at most 107 bytes on Linux).
 UNIX_SOCKET_DIR_MAX = 90
+
+
+def _write_notebook(nb, path: str | Path) -> None:
+    """Write an executed notebook atomically."""
+    import nbformat
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.parent / f".{path.name}.tmp-{os.getpid()}"
+    nbformat.write(nb, str(tmp))
+    os.replace(tmp, path)
 
 
 def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
@@ -577,11 +725,7 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
             else:
                 os.environ[k] = v
     if executed is not None:
-        executed = Path(executed)
-        executed.parent.mkdir(parents=True, exist_ok=True)
-        tmp = executed.parent / f".{executed.name}.tmp-{os.getpid()}"
-        nbformat.write(nb, str(tmp))
-        os.replace(tmp, executed)
+        _write_notebook(nb, executed)
     if not figure.exists():
         raise RuntimeError(f"notebook {notebook} ran but did not write {figure}")
     if log_path is not None:
@@ -590,13 +734,143 @@ def run_notebook(notebook: str | Path, cube: str | Path, figure: str | Path,
     return figure
 
 
-def write_plan(path: str | Path, name: str, chunks: Mapping[str, _grid.Chunk]) -> Path:
+def _cell_outputs(nbformat, stdout: str, stderr: str, result, figures: list[bytes]) -> list:
+    import base64
+
+    outs = []
+    if stdout:
+        outs.append(nbformat.v4.new_output("stream", name="stdout", text=stdout))
+    if stderr:
+        outs.append(nbformat.v4.new_output("stream", name="stderr", text=stderr))
+    if result is not None:
+        outs.append(nbformat.v4.new_output("execute_result", data={"text/plain": repr(result)}))
+    for png in figures:
+        outs.append(nbformat.v4.new_output("display_data", data={"image/png": base64.b64encode(png).decode("ascii"),
+                                                                  "text/plain": "<Figure>"}))
+    return outs
+
+
+def _mtime(path: str) -> int | None:
+    try:
+        return os.stat(path).st_mtime_ns if path else None
+    except OSError:
+        return None
+
+
+def execute_in_process(notebook: str | Path, env: Mapping[str, str]):
+    """Execute a notebook's code cells in this process (a fresh namespace, `env` set in
+    os.environ meanwhile) and return it with its outputs as Jupyter would store them: each cell's
+    stdout and stderr, the value of a last expression, and the figures left open at its end (PNG,
+    as the inline backend shows them). A cell that raises gets its error output and the run stops
+    with RuntimeError naming the notebook and the cell. No kernel is started: what the notebooks
+    import (numpy, xarray, matplotlib, the package) is imported once for all of them."""
+    import ast
+    import contextlib
+    import io as _stdio
+    import traceback
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import nbformat
+
+    nb = nbformat.read(str(notebook), as_version=4)
+    saved_figure = env.get("SWEEP_FIGURE", "")
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    namespace: dict = {"__name__": "__main__"}
+    count = 0
+    plt.close("all")
+    try:
+        for cell in nb.cells:
+            if cell.cell_type != "code":
+                continue
+            count += 1
+            out, err = _stdio.StringIO(), _stdio.StringIO()
+            before = _mtime(saved_figure)
+            tree = ast.parse(cell.source)
+            last = tree.body.pop() if tree.body and isinstance(tree.body[-1], ast.Expr) else None
+            result = None
+            try:
+                with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                    exec(compile(tree, f"<{Path(notebook).name} cell {count}>", "exec"), namespace)
+                    if last is not None:
+                        result = eval(compile(ast.Expression(last.value), f"<{Path(notebook).name} cell {count}>",
+                                              "eval"), namespace)
+            except Exception as exc:
+                cell.outputs = _cell_outputs(nbformat, out.getvalue(), err.getvalue(), None, []) + [
+                    nbformat.v4.new_output("error", ename=type(exc).__name__, evalue=str(exc),
+                                           traceback=traceback.format_exception(exc))]
+                cell.execution_count = count
+                raise RuntimeError(f"notebook {notebook}, cell {count} raised {type(exc).__name__}: {exc}") from exc
+            pngs = []
+            saved_now = _mtime(saved_figure) != before
+            for num in plt.get_fignums():
+                if saved_now:   # the figure the cell saved: shown as saved, not drawn a second time
+                    pngs.append(Path(saved_figure).read_bytes())
+                    saved_now = False
+                    continue
+                buf = _stdio.BytesIO()
+                plt.figure(num).savefig(buf, format="png", dpi=72)
+                pngs.append(buf.getvalue())
+            plt.close("all")
+            cell.outputs = _cell_outputs(nbformat, out.getvalue(), err.getvalue(), result, pngs)
+            cell.execution_count = count
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    return nb
+
+
+def run_notebooks(notebooks: Sequence[str | Path], cube: str | Path, figures: Sequence[str | Path],
+                  executed: Sequence[str | Path], log_path: str | Path | None = None) -> list[Path]:
+    """Execute figure notebooks against the cube, all in this one process (execute_in_process):
+    each saves its figure (`figures`, PNG) and is written with its outputs to `executed`
+    (atomically). What the rule `notebook` runs; io.run_notebook runs one in a Jupyter kernel."""
+    import time
+
+    lines = []
+    done = []
+    for notebook, figure, ex in zip(notebooks, figures, executed):
+        t0 = time.perf_counter()
+        figure = Path(figure).resolve()
+        figure.parent.mkdir(parents=True, exist_ok=True)
+        figure.unlink(missing_ok=True)
+        env = {"SWEEP_CUBE": str(Path(cube).resolve()), "SWEEP_FIGURE": str(figure), "MPLBACKEND": "Agg"}
+        nb = execute_in_process(notebook, env)
+        _write_notebook(nb, ex)
+        if not figure.exists():
+            raise RuntimeError(f"notebook {notebook} ran but did not write {figure}")
+        lines.append(f"executed {notebook} -> {figure} in {time.perf_counter() - t0:.2f} s")
+        done.append(figure)
+    if log_path is not None:
+        Path(log_path).parent.mkdir(parents=True, exist_ok=True)
+        Path(log_path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return done
+
+
+def write_plan(path: str | Path, name: str, chunks: Mapping[str, _grid.Chunk], adaptive: Mapping | None = None) -> Path:
     """Write the chunk plan of a run ({name, scenes, chunks: {id: number of scenes}}) as JSON,
-    atomically; `sweep.frontdoor` reads it to show scenes done / total."""
+    atomically; `sweep.frontdoor` reads it to show scenes done / total. An adaptive map has no
+    chunks up front: `adaptive` (sweep.adaptive.plan_info) says where its rounds are, and
+    `scenes` is its budget."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps({"name": name, "scenes": sum(len(c.points) for c in chunks.values()),
-                       "chunks": {cid: len(c.points) for cid, c in chunks.items()}})
+    plan = {"name": name, "scenes": sum(len(c.points) for c in chunks.values()),
+            "chunks": {cid: len(c.points) for cid, c in chunks.items()}}
+    if adaptive is not None:
+        plan.update(scenes=int(adaptive["budget"]), adaptive=dict(adaptive))
+    return write_text_atomic(path, json.dumps(plan))
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write a text file atomically (a temporary name in its folder, then os.replace)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
         tmp.write_text(text, encoding="utf-8")

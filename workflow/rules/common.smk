@@ -26,8 +26,22 @@ config.update(_SWEEP.config, name=SWEEP_NAME)
 RESULTS = f"results/{SWEEP_NAME}"
 
 SETTINGS_JSON = sweep_grid.canonical_json(SETTINGS)
-PLAN = sweep_grid.plan_chunks(SETTINGS)
+# An adaptive map (refine:) plans its chunks round by round (workflow/rules/adaptive.smk): no
+# chunk plan up front; MAPS and the last round ROUNDS fix its jobs.
+ADAPTIVE = sweep_grid.is_adaptive(SETTINGS)
+PLAN = {} if ADAPTIVE else sweep_grid.plan_chunks(SETTINGS)
 CHUNK_DIR = f"{RESULTS}/chunks"
+if ADAPTIVE:
+    from sweep import adaptive as sweep_adaptive
+
+    MAPS = sweep_adaptive.maps(SETTINGS)
+    ROUNDS = sweep_adaptive.lattice(SETTINGS).rounds
+    # a round runs its chunks in its own processes; Snakemake scales this down to --cores
+    # (workflow.cores raises where no --cores/--jobs is given, e.g. --unlock)
+    try:
+        ROUND_THREADS = max(1, min(int(workflow.cores or 1), 64))
+    except WorkflowError:
+        ROUND_THREADS = 1
 
 # A damaged chunk file (truncated copy, full disk, bit rot) must be recomputed, not gathered:
 # the main process verifies every existing chunk of the plan and moves damaged ones to
@@ -44,4 +58,5 @@ if workflow.is_main_process:
               file=sys.stderr)
     if not DRYRUN:
         # what this run will compute, for the progress line of `python3 run.py sweep`
-        sweep_io.write_plan(f"{RESULTS}/plan.json", SWEEP_NAME, PLAN)
+        sweep_io.write_plan(f"{RESULTS}/plan.json", SWEEP_NAME, PLAN,
+                            sweep_adaptive.plan_info(SETTINGS, RESULTS) if ADAPTIVE else None)

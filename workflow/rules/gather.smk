@@ -1,4 +1,4 @@
-# All chunk files -> results/<name>/cube.nc (CF-1.10 netCDF-4, zlib), lazily with dask.
+# All chunk files -> results/<name>/cube.nc (CF-1.10 netCDF-4, zlib), read by `threads` processes.
 
 
 rule gather:
@@ -11,7 +11,7 @@ rule gather:
         name=SWEEP_NAME,
     log:
         f"{RESULTS}/logs/gather.log",
-    threads: 1
+    threads: 2
     resources:
         mem_mb=4000,
         runtime=60,

@@ -11,4 +11,5 @@ io.gather(
     repo_path=snakemake.scriptdir,  # noqa: F821
     history="snakemake rule gather",
     name=snakemake.params.name,  # noqa: F821
+    workers=snakemake.threads,  # noqa: F821
 )

@@ -1,0 +1,217 @@
+"""Adaptive maps against the dense lattice and against uniform sampling (issue #52, item 5).
+
+    .venv/bin/python benchmarks/adaptive_map.py [--points 33] [--planes paper,friction] [--jobs 2]
+                                               [--max-share 0.25] [--start 5] [--tolerance 0.01]
+
+For each plane (a 2-D map of the pipeline's `refine:` mode; the other axes fixed):
+
+1. the dense lattice, every node computed scene by scene with the pipeline's chunk runner
+   (sweep.adaptive.run_chunks, `--jobs` processes), its chunk files cached under
+   benchmarks/out/adaptive_map/<plane>-<points>/chunks/ (content-addressed, as the pipeline's: a
+   rerun with the same settings computes nothing);
+2. the adaptive map (sweep.refine.plan_round / reconstruct, the rounds the pipeline runs), whose
+   computed nodes take their values from the dense lattice: the integrator is deterministic, so
+   these are the values the pipeline would compute;
+3. uniform sampling with at least as many scenes: every second node (stride 2), reconstructed the
+   same way (nearest outcome, multilinear in log t_halt, the same error bars).
+
+Reports, side by side: scenes computed (share of the lattice), outcome wrong (share of the
+lattice's nodes), boundary displacement (for every node with a wrong outcome, the Chebyshev
+distance in lattice cells to the nearest node that truly has the outcome it was given: mean and
+max), t_halt's relative error at the reconstructed nodes that halted in both (median, p95, max;
+also where the map is smooth: the issue's criterion, |second difference of log t_halt| < 0.01
+along both axes, and the ratio of uniform's median there to the adaptive one's), the share of
+those nodes where the error bar holds (|error| <= t_halt_interpolation_error), and the median bar
+relative to the value.
+
+Planes: `paper` is issue #52's plane (mu_d 0.3, the paper's k1, k2, k3; alpha0 0.05..1.5 rad x
+omega0 2..200 rad/s log-spaced); `friction` is mu_d 0.05..0.45 x k3 0..8e-4 m at alpha0 1.0 rad,
+omega0 20 rad/s; `slow` is alpha0 0.2..1.4 x omega0 4..40 rad/s log at mu_d 0.2 (the paper's k's).
+Solver and stop settings: config/config.yaml's (rtol 1e-10, t_max 120 s).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from sweep import adaptive, grid, outcomes, refine  # noqa: E402
+
+PAPER_K = {"k1": [3.755e-6], "k2": [3.004e-5], "k3": [3.004e-4]}
+PLANES = {
+    "paper": ({"mu_d": [0.3], **PAPER_K},
+              {"alpha0": {"from": 0.05, "to": 1.5}, "omega0": {"from": 2.0, "to": 200.0, "spacing": "log"}}),
+    "friction": ({"k1": [3.755e-6], "k2": [3.004e-5], "alpha0": [1.0], "omega0": [20.0]},
+                 {"mu_d": {"from": 0.05, "to": 0.45}, "k3": {"from": 0.0, "to": 8.0e-4}}),
+    "slow": ({"mu_d": [0.2], **PAPER_K},
+             {"alpha0": {"from": 0.2, "to": 1.4}, "omega0": {"from": 4.0, "to": 40.0, "spacing": "log"}}),
+}
+
+
+def settings_of(plane: str, points: int, start: int, share: float, tol: float) -> dict:
+    import yaml
+
+    cfg = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    outer, axes = PLANES[plane]
+    cfg["name"] = f"bench-{plane}"
+    cfg["grid"] = dict(outer)
+    cfg["refine"] = {"axes": {a: dict(spec, points=points) for a, spec in axes.items()},
+                     "start_points": start, "max_share": share, "tolerance": tol}
+    cfg["outputs"] = {"notebooks": []}
+    return grid.normalize(cfg)
+
+
+def dense(settings: dict, out: Path, jobs: int) -> adaptive.MapState:
+    """Every node of the plane's lattice, computed (or read from the cache)."""
+    lat = adaptive.lattice(settings)
+    (map_id, outer), = adaptive.maps(settings).items()
+    nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    chunks = adaptive.chunks_of_round(settings, outer, lat, nodes)
+    t0 = time.perf_counter()
+    ran = adaptive.run_chunks(chunks, out / "chunks", jobs)
+    print(f"  dense {lat.shape[0]}x{lat.shape[1]}: {len(chunks)} chunks, {ran} computed now "
+          f"({time.perf_counter() - t0:.0f} s), the rest from {out / 'chunks'}", flush=True)
+    state = adaptive.MapState(settings)
+    state.add_chunks([out / "chunks" / f"{c.id}.nc" for c in chunks], 0)
+    return state
+
+
+def subset(lat, truth: adaptive.MapState, computed: np.ndarray, rnd: np.ndarray) -> refine.Fields:
+    f = refine.Fields.empty(lat, {k: v.shape[1] for k, v in truth.fields.values.items()}, truth.fields.log)
+    idx = np.nonzero(computed)[0]
+    nodes = np.array(np.unravel_index(idx, lat.shape)).T
+    f.set(lat, nodes, 0, truth.fields.outcome[idx], {k: v[idx] for k, v in truth.fields.values.items()})
+    f.round[idx] = rnd[idx]
+    return f
+
+
+def adaptive_fields(lat, st, truth: adaptive.MapState) -> refine.Fields:
+    """The rounds the pipeline runs, every computed node's values taken from the dense lattice."""
+    f = refine.Fields.empty(lat, {k: v.shape[1] for k, v in truth.fields.values.items()}, truth.fields.log)
+    for k in range(lat.rounds + 1):
+        plan = refine.plan_round(lat, f, st, k)
+        print(f"    round {k}: {len(plan.nodes)} scenes; cells flagged {plan.flagged}, refined {plan.refined}, "
+              f"left for the budget {plan.skipped}, rough {plan.rough}")
+        if not len(plan.nodes):
+            continue
+        idx = refine._flat(lat, plan.nodes)
+        f.set(lat, plan.nodes, k, truth.fields.outcome[idx], {n: v[idx] for n, v in truth.fields.values.items()})
+    return f
+
+
+def uniform_fields(lat, truth: adaptive.MapState) -> refine.Fields:
+    nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    on = (nodes % 2 == 0).all(axis=1)
+    return subset(lat, truth, on, np.where(on, 0, -1))
+
+
+def smooth_mask(lat, truth: adaptive.MapState) -> np.ndarray:
+    """Nodes where log t_halt is smooth: |second difference| < 0.01 along both axes (interior
+    nodes whose neighbours halted)."""
+    g = np.log(truth.fields.values["t_halt"][:, 0]).reshape(lat.shape)
+    ok = np.zeros(lat.shape, bool)
+    d0 = np.abs(g[2:, 1:-1] - 2 * g[1:-1, 1:-1] + g[:-2, 1:-1])
+    d1 = np.abs(g[1:-1, 2:] - 2 * g[1:-1, 1:-1] + g[1:-1, :-2])
+    ok[1:-1, 1:-1] = (d0 < 0.01) & (d1 < 0.01)
+    return ok.ravel()
+
+
+def displacement(lat, truth_oc: np.ndarray, got: np.ndarray) -> tuple[float, float]:
+    """(mean, max) over nodes with a wrong outcome of the Chebyshev distance (cells) to the
+    nearest node whose true outcome is the one given there."""
+    wrong = np.nonzero(truth_oc != got)[0]
+    if not wrong.size:
+        return 0.0, 0.0
+    nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    d = []
+    for i in wrong:
+        cand = nodes[truth_oc == got[i]]
+        d.append(np.abs(cand - nodes[i]).max(axis=1).min() if len(cand) else math.inf)
+    return float(np.mean(d)), float(np.max(d))
+
+
+def metrics(lat, st, truth: adaptive.MapState, f: refine.Fields, smooth: np.ndarray) -> dict:
+    m = refine.reconstruct(lat, f, st)
+    oc = truth.fields.outcome
+    rec = ~f.computed
+    t_true = truth.fields.values["t_halt"][:, 0]
+    t_got = m.values["t_halt"][:, 0]
+    bar = m.bars["t_halt"][:, 0]
+    halted = rec & (oc == outcomes.HALTED) & (m.outcome == outcomes.HALTED) & np.isfinite(t_true) & np.isfinite(t_got)
+    rel = np.abs(t_got - t_true) / t_true
+    holds = np.abs(t_got - t_true) <= bar
+    sm = halted & smooth
+    mean_d, max_d = displacement(lat, oc, m.outcome)
+    q = (lambda a, p: float(np.percentile(a, p)) if a.size else math.nan)
+    return {
+        "scenes": int(f.computed.sum()), "share": f.computed.mean(),
+        "outcome_wrong": float((m.outcome != oc).mean()), "disp_mean": mean_d, "disp_max": max_d,
+        "n_halted": int(halted.sum()),
+        "err_med": q(rel[halted], 50), "err_p95": q(rel[halted], 95), "err_max": q(rel[halted], 100),
+        "holds": float(holds[halted].mean()) if halted.any() else math.nan,
+        "bar_med": q((bar / t_got)[halted], 50),
+        "n_smooth": int(sm.sum()), "err_med_smooth": q(rel[sm], 50), "err_p95_smooth": q(rel[sm], 95),
+        "rough_nodes": int(m.rough.sum()),
+    }
+
+
+ROWS = [("scenes computed", "scenes", "{:d}"), ("share of the lattice", "share", "{:.1%}"),
+        ("outcome wrong (share of nodes)", "outcome_wrong", "{:.2%}"),
+        ("boundary displacement mean (cells)", "disp_mean", "{:.2f}"),
+        ("boundary displacement max (cells)", "disp_max", "{:.0f}"),
+        ("reconstructed halted nodes", "n_halted", "{:d}"),
+        ("t_halt rel. error median", "err_med", "{:.3%}"), ("t_halt rel. error p95", "err_p95", "{:.2%}"),
+        ("t_halt rel. error max", "err_max", "{:.1%}"),
+        ("error bar holds (share)", "holds", "{:.1%}"), ("median bar / value", "bar_med", "{:.2%}"),
+        ("smooth reconstructed halted nodes", "n_smooth", "{:d}"),
+        ("t_halt rel. error median, smooth", "err_med_smooth", "{:.4%}"),
+        ("t_halt rel. error p95, smooth", "err_p95_smooth", "{:.3%}"),
+        ("nodes in rough cells", "rough_nodes", "{:d}")]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--points", type=int, default=33, help="lattice points per axis (2^L + 1)")
+    ap.add_argument("--planes", default="paper,friction")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--max-share", type=float, default=0.25)
+    ap.add_argument("--start", type=int, default=9, help="start_points (round 0's points per axis)")
+    ap.add_argument("--tolerance", type=float, default=0.01)
+    ap.add_argument("--dense-only", action="store_true", help="compute the dense lattices and stop")
+    args = ap.parse_args()
+    for plane in args.planes.split(","):
+        settings = settings_of(plane, args.points, args.start, args.max_share, args.tolerance)
+        out = ROOT / "benchmarks" / "out" / "adaptive_map" / f"{plane}-{args.points}"
+        print(f"plane {plane}: {adaptive.map_label(next(iter(adaptive.maps(settings).values())))}; "
+              f"{', '.join(f'{a} {s}' for a, s in settings['refine']['axes'].items())}", flush=True)
+        truth = dense(settings, out, args.jobs)
+        if args.dense_only:
+            continue
+        lat = adaptive.lattice(settings)
+        st = adaptive.refine_settings(settings, lat)
+        counts = {outcomes.NAMES[int(c)]: int(n) for c, n in zip(*np.unique(truth.fields.outcome, return_counts=True))}
+        print(f"  dense outcomes: {counts}; start_points {args.start}, max_share {args.max_share}, "
+              f"tolerance {args.tolerance}, rounds {lat.rounds + 1}")
+        smooth = smooth_mask(lat, truth)
+        t0 = time.perf_counter()
+        fa = adaptive_fields(lat, st, truth)
+        t_plan = time.perf_counter() - t0
+        a = metrics(lat, st, truth, fa, smooth)
+        u = metrics(lat, st, truth, uniform_fields(lat, truth), smooth)
+        print(f"  (planning and reconstruction of the adaptive map: {t_plan:.2f} s)")
+        print(f"  {'':38s} {'adaptive':>12s} {'uniform':>12s}")
+        for label, key, fmt in ROWS:
+            print(f"  {label:38s} {fmt.format(a[key]):>12s} {fmt.format(u[key]):>12s}")
+        ratio = u["err_med_smooth"] / a["err_med_smooth"] if a["err_med_smooth"] > 0 else math.inf
+        print(f"  uniform / adaptive t_halt median error where smooth: {ratio:.1f}x", flush=True)
+
+
+if __name__ == "__main__":
+    main()

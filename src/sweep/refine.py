@@ -1,0 +1,514 @@
+"""Adaptive maps on a lattice: which nodes to compute next, and the full map rebuilt from them.
+
+Pure numpy, no I/O (the pipeline's side is sweep.adaptive). A map is a lattice of 2^L_a + 1 points
+on each of its d axes (d = 2 or 3), indexed by integer nodes. Round 0 computes the coarse
+sub-lattice of stride S = 2^R (R: the number of refinement rounds); round k (1..R) works at stride
+s_k = 2^(R - k) and refines some *cells* of round k - 1: a cell is a box of side s_{k-1} whose
+2^d corners are computed; refining it computes every node of its sub-lattice of stride s_k (the
+3^d - 2^d that are new, fewer where a neighbour already computed the shared ones), which makes
+its 2^d children cells. A cell is refined when
+
+* its corners differ in outcome (a boundary of the outcome map runs through it), or one of them
+  failed numerically (sweep.outcomes FAILED), or
+* its interpolation error estimate, for one of the driving outputs, exceeds the tolerance;
+
+unless its error does not fall as the cells shrink (ROUGH): sensitive dynamics, where refining
+buys nothing, reported as rough with its local spread.
+
+The error estimate is the hierarchical surplus: a node computed at round k is also predicted by
+multilinear interpolation from the corners of the cell of round k - 1 it lies in (log values for
+positive times and frequencies); the difference, |surplus|, is what interpolation at the coarser
+stride missed there. For a smooth function it falls 4x per halving (second order); a cell's
+interpolation error is estimated from the surpluses at its own corners (`cell_bar`). Round 0's
+nodes get surpluses too, against the lattice of stride 2S (every other node of round 0).
+
+Everything is a function of the set of computed nodes and their values, so the same config
+computes the same nodes (determinism: ties are broken by node index), and a round can be planned
+again after an interruption with the same answer.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import outcomes
+
+# Outcomes that are a numerical failure, not physics: the cells around them are refined.
+FAILED = frozenset({outcomes.STEP_LIMIT, outcomes.STEP_SIZE_UNDERFLOW, outcomes.NUMERICAL_ERROR, outcomes.NOT_RUN})
+# Bar of a smooth cell: its corners' |surplus| times the observed convergence factor (error of this
+# stride / error of the parent's), at least KAPPA: second-order interpolation errs 1/4 of the
+# surplus at most in the limit, KAPPA = 1/2 is that with a factor 2 of margin.
+KAPPA = 0.5
+# A cell is rough when its error fell by less than 1/ROUGH_RATIO over the last halving, or per
+# halving over the last two (its grandparent's error over its own below 1/ROUGH_RATIO^2 = 4); a
+# smooth function's falls 4x per halving, 16x over two.
+ROUGH_RATIO = 0.5
+SPACINGS = ("linear", "log")
+# A round before the last spends at most this share of the budget left on cells flagged for their
+# error (outcome boundaries and failures first, without this cap).
+ERROR_SHARE = 0.5
+ROUGH_ONE_HALVING = True
+
+
+def is_lattice_size(n: int) -> bool:
+    """Whether n = 2^L + 1 with L >= 1 (3, 5, 9, 17, 33, 65, ...)."""
+    return isinstance(n, int) and n >= 3 and ((n - 1) & (n - 2)) == 0
+
+
+def axis_values(start: float, stop: float, points: int, spacing: str = "linear") -> np.ndarray:
+    """The lattice values of one axis: `points` values from `start` to `stop` (SI units),
+    evenly spaced or evenly spaced in log (`spacing` 'log'; start, stop > 0)."""
+    if spacing == "log":
+        v = np.exp(np.linspace(math.log(start), math.log(stop), points))
+    else:
+        v = np.linspace(start, stop, points)
+    v[0], v[-1] = start, stop
+    return v
+
+
+@dataclass(frozen=True)
+class Lattice:
+    """A map's lattice: axis names, values per axis, and R, the refinement rounds after round 0
+    (round k's stride is 2^(R - k) on every axis)."""
+    axes: tuple[str, ...]
+    values: tuple[np.ndarray, ...] = field(compare=False)
+    rounds: int
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(len(v) for v in self.values)
+
+    @property
+    def size(self) -> int:
+        return math.prod(self.shape)
+
+    @property
+    def ndim(self) -> int:
+        return len(self.axes)
+
+    def stride(self, k: int) -> int:
+        """Stride (in lattice steps) of round k; k = -1 is the virtual lattice behind round 0's surpluses."""
+        return 2 ** (self.rounds - k)
+
+    def round0_nodes(self) -> np.ndarray:
+        s = self.stride(0)
+        return np.array(list(itertools.product(*(range(0, n, s) for n in self.shape))), dtype=np.int64)
+
+    def point(self, node: Sequence[int]) -> tuple[float, ...]:
+        return tuple(float(self.values[a][int(i)]) for a, i in enumerate(node))
+
+
+def make_lattice(axes: Mapping[str, Mapping], start_points: int) -> Lattice:
+    """The lattice of a `refine.axes` mapping ({name: {from, to, points, spacing}}, validated)
+    started with `start_points` (2^l + 1) points on its axis with the fewest points."""
+    names = tuple(axes)
+    values = tuple(axis_values(float(a["from"]), float(a["to"]), int(a["points"]), a.get("spacing", "linear"))
+                   for a in axes.values())
+    L_min = min(int(a["points"]) - 1 for a in axes.values()).bit_length() - 1
+    rounds = L_min - ((start_points - 1).bit_length() - 1)
+    return Lattice(names, values, rounds)
+
+
+def node_round(lat: Lattice, nodes: np.ndarray) -> np.ndarray:
+    """The round whose stride first reaches each node (0..R), -1 for the nodes of the virtual
+    stride-2S lattice (round 0's nodes that get no surplus)."""
+    nodes = np.asarray(nodes, dtype=np.int64).reshape(-1, lat.ndim)
+    out = np.full(len(nodes), lat.rounds, dtype=np.int64)
+    for k in range(lat.rounds - 1, -2, -1):
+        on = (nodes % lat.stride(k) == 0).all(axis=1)
+        out[on] = k
+    return out
+
+
+def corner_offsets(d: int) -> np.ndarray:
+    """The 2^d corners of a unit box, (2^d, d), in lexicographic order."""
+    return np.array(list(itertools.product((0, 1), repeat=d)), dtype=np.int64)
+
+
+def cell_lower(lat: Lattice, nodes: np.ndarray, s: int) -> np.ndarray:
+    """Lower corner of the cell of side s holding each node (a node on the upper edge of the
+    lattice goes to the last cell)."""
+    hi = np.array(lat.shape, dtype=np.int64) - 1 - s
+    return np.minimum((nodes // s) * s, hi)
+
+
+def multilinear(lat: Lattice, nodes: np.ndarray, lower: np.ndarray, s: int) -> tuple[np.ndarray, np.ndarray]:
+    """(corners (n, 2^d, d), weights (n, 2^d)) of multilinear interpolation at `nodes` in the cells
+    of side s with lower corners `lower` (index space: linear in the axis' spacing)."""
+    off = corner_offsets(lat.ndim)
+    t = (nodes - lower) / s                                        # (n, d) in [0, 1]
+    corners = lower[:, None, :] + s * off[None, :, :]
+    w = np.prod(np.where(off[None, :, :] == 1, t[:, None, :], 1.0 - t[:, None, :]), axis=2)
+    return corners, w
+
+
+def _flat(lat: Lattice, nodes: np.ndarray) -> np.ndarray:
+    return np.ravel_multi_index(tuple(np.asarray(nodes).reshape(-1, lat.ndim).T), lat.shape)
+
+
+@dataclass
+class Fields:
+    """What is known of a map: per lattice node (flat index) whether it is computed, its round
+    (-1: not computed), its outcome code, and the continuous outputs `values` ({name: array
+    (size, m)}, m components: 1, or one per level), each with whether it is interpolated in
+    log (`log`: positive times and frequencies)."""
+    computed: np.ndarray
+    round: np.ndarray
+    outcome: np.ndarray
+    values: dict[str, np.ndarray]
+    log: dict[str, bool]
+
+    @classmethod
+    def empty(cls, lat: Lattice, components: Mapping[str, int], log: Mapping[str, bool]) -> "Fields":
+        n = lat.size
+        return cls(np.zeros(n, bool), np.full(n, -1, np.int64), np.full(n, -1, np.int64),
+                   {k: np.full((n, m), np.nan) for k, m in components.items()}, dict(log))
+
+    def set(self, lat: Lattice, nodes: np.ndarray, rnd: int, outcome: np.ndarray, values: Mapping[str, np.ndarray]):
+        idx = _flat(lat, nodes)
+        if not idx.size:
+            return
+        self.computed[idx] = True
+        self.round[idx] = rnd
+        self.outcome[idx] = outcome
+        for k, v in values.items():
+            self.values[k][idx] = np.asarray(v, dtype=float).reshape(len(idx), -1)
+
+    def transformed(self, name: str) -> np.ndarray:
+        """The values in the space they are interpolated in: log for a log output whose computed
+        values are all positive (where they are finite), else as they are."""
+        v = self.values[name]
+        if self.log.get(name, False):
+            fin = v[np.isfinite(v)]
+            if fin.size and (fin > 0).all():
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    return np.log(v)
+        return v
+
+    def is_log(self, name: str) -> bool:
+        v = self.values[name]
+        fin = v[np.isfinite(v)]
+        return bool(self.log.get(name, False) and fin.size and (fin > 0).all())
+
+
+def surpluses(lat: Lattice, f: Fields, name: str) -> np.ndarray:
+    """|surplus| of output `name` at every computed node (size, m), in its interpolation space:
+    |value - multilinear prediction from the corners of the next coarser cell holding it|; for a node of
+    the virtual stride-2S lattice, the largest |second difference| at stride S along an axis (the
+    same quantity for a node halfway along an edge). NaN where there is none: a corner not
+    computed, a value missing, or a corner of another outcome (an outcome boundary is not a
+    smoothness)."""
+    g = f.transformed(name)
+    out = np.full(g.shape, np.nan)
+    all_nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    rounds = node_round(lat, all_nodes)
+    for k in range(0, lat.rounds + 1):
+        sel = np.nonzero((rounds == k) & f.computed)[0]
+        if not sel.size:
+            continue
+        nodes = all_nodes[sel]
+        s = lat.stride(k - 1)
+        lower = cell_lower(lat, nodes, s)
+        corners, w = multilinear(lat, nodes, lower, s)
+        cidx = _flat(lat, corners.reshape(-1, lat.ndim)).reshape(corners.shape[:2])
+        used = w > 0
+        ok = np.where(used, f.computed[cidx] & (f.outcome[cidx] == f.outcome[sel][:, None]), True).all(axis=1)
+        gv = g[cidx]                                                  # (n, 2^d, m)
+        with np.errstate(invalid="ignore"):
+            pred = np.einsum("nc,ncm->nm", w, np.where(used[:, :, None], gv, 0.0))
+            bad = np.where(used[:, :, None], ~np.isfinite(gv), False).any(axis=1)
+            sur = np.abs(g[sel] - pred)
+        sur[bad | ~ok[:, None]] = np.nan
+        out[sel] = sur
+    # the virtual lattice's nodes: the largest second difference along an axis at stride S
+    sel = np.nonzero((rounds == -1) & f.computed)[0]
+    s = lat.stride(0)
+    for a in range(lat.ndim):
+        nodes = all_nodes[sel]
+        inside = (nodes[:, a] >= s) & (nodes[:, a] + s < lat.shape[a])
+        if not inside.any():
+            continue
+        i = sel[inside]
+        step = np.zeros(lat.ndim, np.int64)
+        step[a] = s
+        lo, hi = _flat(lat, nodes[inside] - step), _flat(lat, nodes[inside] + step)
+        ok = f.computed[lo] & f.computed[hi] & (f.outcome[lo] == f.outcome[i]) & (f.outcome[hi] == f.outcome[i])
+        with np.errstate(invalid="ignore"):
+            sur = np.abs(g[i] - 0.5 * (g[lo] + g[hi]))
+        sur[~ok] = np.nan
+        out[i] = np.fmax(out[i], sur)
+    return out
+
+
+@dataclass(frozen=True)
+class Cell:
+    level: int                 # the round that computed its corners
+    lower: tuple[int, ...]
+
+
+def cells(lat: Lattice, computed: np.ndarray) -> dict[int, np.ndarray]:
+    """The cells that exist per level: level 0's all; level k + 1's the children of the level-k
+    cells whose centre is computed (refined). {level: lower corners (n, d)}, lexicographic."""
+    s0 = lat.stride(0)
+    out = {0: np.array(list(itertools.product(*(range(0, n - 1, s0) for n in lat.shape))), dtype=np.int64)}
+    off = corner_offsets(lat.ndim)
+    for k in range(0, lat.rounds):
+        low = out[k]
+        s = lat.stride(k)
+        refined = low[computed[_flat(lat, low + s // 2)]] if len(low) else low
+        kids = (refined[:, None, :] + (s // 2) * off[None, :, :]).reshape(-1, lat.ndim)
+        out[k + 1] = np.unique(kids, axis=0) if len(kids) else np.zeros((0, lat.ndim), np.int64)
+    return out
+
+
+def _corner_idx(lat: Lattice, lower: np.ndarray, s: int) -> np.ndarray:
+    corners = lower[:, None, :] + s * corner_offsets(lat.ndim)[None, :, :]
+    return _flat(lat, corners.reshape(-1, lat.ndim)).reshape(len(lower), -1)
+
+
+def cell_error(lat: Lattice, level: int, lower: np.ndarray, sur: np.ndarray) -> np.ndarray:
+    """A cell's error at its level: the largest |surplus| of its corners computed at that level
+    (the others are the parent's; at level 0 every corner), per component (n, m); NaN where none
+    has one."""
+    cidx = _corner_idx(lat, lower, lat.stride(level))
+    nodes = np.array(np.unravel_index(cidx.ravel(), lat.shape)).T
+    r = node_round(lat, nodes)
+    own = ((r == level) | ((level == 0) & (r == -1))).reshape(cidx.shape)
+    v = np.where(own[:, :, None], sur[cidx], np.nan)
+    with np.errstate(all="ignore"):
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.nanmax(v, axis=1)
+
+
+def parent_lower(lat: Lattice, level: int, lower: np.ndarray) -> np.ndarray:
+    return cell_lower(lat, lower, lat.stride(level - 1))
+
+
+@dataclass
+class Settings:
+    """Refinement settings: the driving outputs, the tolerance (an interpolation error bar the
+    map needs: relative for a log output, a share of the output's range over the map otherwise),
+    the node budget (computed nodes at most)."""
+    outputs: tuple[str, ...]
+    tolerance: float
+    budget: int
+
+
+def _scale(f: Fields, name: str) -> float:
+    """What a driving output's error is measured against: 1 for log outputs (relative), the
+    range of its values over the map otherwise (1 where it has none)."""
+    if f.is_log(name):
+        return 1.0
+    v = f.values[name][f.computed]
+    v = v[np.isfinite(v)]
+    rng = float(v.max() - v.min()) if v.size else 0.0
+    return rng if rng > 0 else 1.0
+
+
+def driving_error(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.ndarray,
+                  surs: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Per cell, the largest error of the driving outputs, in units of their tolerance (NaN: none)."""
+    errs = []
+    for name in st.outputs:
+        e = cell_error(lat, level, lower, surs[name]) / (_scale(f, name) * st.tolerance)
+        errs.append(e)
+    e = np.concatenate(errs, axis=1) if errs else np.full((len(lower), 1), np.nan)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmax(e, axis=1)
+
+
+def cell_states(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.ndarray,
+                surs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """For the cells of `level` at `lower`: disagree (corner outcomes differ), failed (a corner
+    failed), error (driving error in tolerances, times KAPPA: the bar), ratio (error / the
+    parent's, NaN at level 0), rough (over the last two halvings the error fell by less than
+    1/ROUGH_RATIO^2, and the cell would be refined for it)."""
+    cidx = _corner_idx(lat, lower, lat.stride(level))
+    oc = f.outcome[cidx]
+    disagree = (oc != oc[:, :1]).any(axis=1)
+    failed = np.isin(oc, list(FAILED)).any(axis=1)
+    e = driving_error(lat, f, st, level, lower, surs)
+    ratio = np.full(len(lower), np.nan)
+    rough = np.zeros(len(lower), bool)
+    if level >= 1:
+        pl = parent_lower(lat, level, lower)
+        ep = driving_error(lat, f, st, level - 1, pl, surs)
+        with np.errstate(all="ignore"):
+            ratio = e / ep
+        if ROUGH_ONE_HALVING:
+            with np.errstate(all="ignore"):
+                rough = (ratio > ROUGH_RATIO) & (KAPPA * e > 1.0)
+        if level >= 2:
+            gl = parent_lower(lat, level - 1, pl)
+            eg = driving_error(lat, f, st, level - 2, gl, surs)
+            with np.errstate(all="ignore"):
+                rough |= (e > ROUGH_RATIO ** 2 * eg) & (KAPPA * e > 1.0)
+    return {"disagree": disagree, "failed": failed, "error": KAPPA * e, "ratio": ratio, "rough": rough}
+
+
+@dataclass
+class Plan:
+    """The nodes of a round (lexicographic), and what the round found: cells flagged per reason,
+    refined, left for the budget, rough."""
+    round: int
+    nodes: np.ndarray
+    flagged: dict[str, int]
+    refined: int
+    skipped: int
+    rough: int
+
+
+def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
+    """The nodes round k computes, from what rounds < k computed (in `f`)."""
+    if k == 0:
+        nodes = lat.round0_nodes()
+        return Plan(0, nodes, {}, 0, 0, 0)
+    level = k - 1
+    low = cells(lat, f.computed)[level]
+    surs = {name: surpluses(lat, f, name) for name in st.outputs}
+    cs = cell_states(lat, f, st, level, low, surs)
+    err = np.nan_to_num(cs["error"], nan=0.0)
+    by_outcome = cs["disagree"] | cs["failed"]
+    by_error = (err > 1.0) & ~cs["rough"]
+    want = by_outcome | by_error
+    # outcome boundaries and failures first, then the largest errors; ties by position
+    order = sorted(np.nonzero(want)[0], key=lambda i: (0 if by_outcome[i] else 1, -err[i], tuple(low[i])))
+    left = st.budget - int(f.computed.sum())
+    # the error's share of what is left: later rounds keep room for the outcome boundaries,
+    # which need every round down to stride 1
+    error_left = left if k == lat.rounds else math.floor(ERROR_SHARE * left)
+    s = lat.stride(level)
+    sub = np.array(list(itertools.product((0, 1, 2), repeat=lat.ndim)), dtype=np.int64) * (s // 2)
+    taken = np.zeros(lat.size, bool)
+    refined = skipped = 0
+    for i in order:
+        idx = _flat(lat, low[i] + sub)
+        new = idx[~f.computed[idx] & ~taken[idx]]
+        if len(new) > left or (not by_outcome[i] and len(new) > error_left):
+            skipped += 1
+            continue
+        taken[new] = True
+        left -= len(new)
+        if not by_outcome[i]:
+            error_left -= len(new)
+        refined += 1
+    nodes = np.array(np.unravel_index(np.nonzero(taken)[0], lat.shape)).T.astype(np.int64)
+    flagged = {"outcome": int(cs["disagree"].sum()), "failed": int(cs["failed"].sum()),
+               "error": int(((err > 1.0) & ~cs["rough"]).sum())}
+    return Plan(k, nodes.reshape(-1, lat.ndim), flagged, refined, skipped, int((cs["rough"] & ~by_outcome).sum()))
+
+
+# ---------------------------------------------------------------------------------- the full map
+
+@dataclass
+class Map:
+    """The full lattice rebuilt: per node (flat) its outcome, the index of the corner that gave
+    its categorical values (itself where computed), each continuous output with its
+    interpolation error bar (absolute, the output's units; 0 where computed), and whether its
+    cell is rough."""
+    outcome: np.ndarray
+    source: np.ndarray
+    values: dict[str, np.ndarray]
+    bars: dict[str, np.ndarray]
+    rough: np.ndarray
+    cell_level: np.ndarray
+
+
+def leaf_of(lat: Lattice, computed: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(level, lower corner) of the finest existing cell holding each node."""
+    level = np.full(len(nodes), -1, np.int64)
+    lower = np.zeros_like(nodes)
+    for k in range(lat.rounds - 1, -1, -1):
+        s = lat.stride(k)
+        low = cell_lower(lat, nodes, s)
+        if k == 0:
+            exists = np.ones(len(nodes), bool)
+        else:
+            pl = cell_lower(lat, nodes, 2 * s)
+            exists = computed[_flat(lat, pl + s)]
+        take = exists & (level < 0)
+        level[take] = k
+        lower[take] = low[take]
+    return level, lower
+
+
+def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
+    """The full map from the computed nodes (see the module's docstring for the bars)."""
+    n = lat.size
+    all_nodes = np.array(np.unravel_index(np.arange(n), lat.shape)).T.astype(np.int64)
+    outcome = f.outcome.copy()
+    source = np.arange(n)
+    values = {k: v.copy() for k, v in f.values.items()}
+    bars = {k: np.where(np.isfinite(v), 0.0, np.nan) for k, v in f.values.items()}
+    rough_node = np.zeros(n, bool)
+    cell_level = np.full(n, -1, np.int64)
+    miss = np.nonzero(~f.computed)[0]
+    if not miss.size:
+        return Map(outcome, source, values, bars, rough_node, cell_level)
+    nodes = all_nodes[miss]
+    level, lower = leaf_of(lat, f.computed, nodes)
+    cell_level[miss] = level
+    surs = {k: surpluses(lat, f, k) for k in f.values}
+    for k in np.unique(level):
+        sel = np.nonzero(level == k)[0]
+        s = lat.stride(int(k))
+        corners, w = multilinear(lat, nodes[sel], lower[sel], s)
+        cidx = _flat(lat, corners.reshape(-1, lat.ndim)).reshape(corners.shape[:2])
+        # nearest corner (largest weight; ties: the first in lexicographic order) gives the outcome
+        # where the corners disagree, and every categorical value
+        near = cidx[np.arange(len(sel)), np.argmax(w, axis=1)]
+        oc = f.outcome[cidx]
+        used = w > 0
+        agree = np.where(used, oc == oc[np.arange(len(sel)), np.argmax(w, axis=1)][:, None], True).all(axis=1)
+        out = f.outcome[near]
+        tgt = miss[sel]
+        outcome[tgt] = out
+        source[tgt] = near
+        # cell flags for the bars: the cell's own states (rough uses the driving outputs)
+        ucells, inv = np.unique(lower[sel], axis=0, return_inverse=True)
+        inv = inv.ravel()
+        cs = cell_states(lat, f, st, int(k), ucells, {o: surs[o] for o in st.outputs})
+        rough = cs["rough"][inv]
+        ratio = cs["ratio"][inv]
+        rough_node[tgt] = rough
+        same = used & (oc == out[:, None])
+        for name, g_all in ((nm, f.transformed(nm)) for nm in f.values):
+            gv = g_all[cidx]                                            # (n, 2^d, m)
+            ok = same[:, :, None] & np.isfinite(gv)
+            wv = np.where(ok, w[:, :, None], 0.0)
+            wsum = wv.sum(axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                est = np.einsum("ncm,ncm->nm", wv, np.where(ok, gv, 0.0)) / wsum
+            est[(wsum <= 0) | ~np.isfinite(g_all[near])] = np.nan
+            lo = np.where(ok, gv, np.inf).min(axis=1)
+            hi = np.where(ok, gv, -np.inf).max(axis=1)
+            spread = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, np.nan)
+            e = cell_error(lat, int(k), ucells, surs[name])[inv]            # (n, m)
+            factor = np.clip(np.nan_to_num(ratio, nan=KAPPA), KAPPA, 1.0)[:, None]
+            bar = e * factor
+            mixed = (~agree | ~ok.all(axis=1).all(axis=1) | rough)[:, None]
+            with np.errstate(invalid="ignore"):
+                bar = np.where(mixed, np.fmax(np.where(rough[:, None], e, bar), spread), bar)
+            if f.is_log(name):
+                x = np.exp(est)
+                absbar = x * np.expm1(bar)
+            else:
+                x, absbar = est, bar
+            absbar = np.where(np.isfinite(x), absbar, np.nan)
+            values[name][tgt] = x
+            bars[name][tgt] = absbar
+    return Map(outcome, source, values, bars, rough_node, cell_level)
+
+
+def summarise(lat: Lattice, f: Fields) -> dict:
+    """Counts for a progress line: computed nodes and their share of the lattice."""
+    n = int(f.computed.sum())
+    return {"computed": n, "lattice": lat.size, "share": n / lat.size}

@@ -1,0 +1,211 @@
+"""sweep.refine: the lattice, the surpluses, the rounds' plans and the reconstruction with its
+error bars, on synthetic maps whose truth is known (no scenes are integrated here)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sweep import grid, outcomes, refine
+
+
+def lattice(points=33, start=5):
+    return refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": points},
+                                "y": {"from": 0.0, "to": 1.0, "points": points}}, start)
+
+
+def xy(lat):
+    x, y = np.meshgrid(lat.values[0], lat.values[1], indexing="ij")
+    return x.ravel(), y.ravel()
+
+
+def synthetic(lat, seed=1):
+    """A map with the three things the refinement must tell apart: a smooth positive output
+    (log-interpolated), an outcome boundary along a curve (no value beyond it), and a rough
+    patch (a factor exp(0.3 N(0, 1)) per node) at x > 0.6, y < 0.5."""
+    x, y = xy(lat)
+    oc = np.where(y > 0.7 + 0.1 * np.sin(4 * x), outcomes.CONTACT_LOST, outcomes.HALTED)
+    val = np.exp(1.0 + 2.0 * x + np.sin(3.0 * y))
+    rough = (x > 0.6) & (y < 0.5)
+    val = val * np.where(rough, np.exp(0.3 * np.random.default_rng(seed).standard_normal(val.shape)), 1.0)
+    return oc, np.where(oc == outcomes.HALTED, val, np.nan), rough
+
+
+def run_rounds(lat, oc, val, share=0.25, tol=0.01):
+    f = refine.Fields.empty(lat, {"t": 1}, {"t": True})
+    st = refine.Settings(("t",), tol, int(share * lat.size))
+    plans = []
+    for k in range(lat.rounds + 1):
+        p = refine.plan_round(lat, f, st, k)
+        idx = refine._flat(lat, p.nodes)
+        f.set(lat, p.nodes, k, oc[idx], {"t": val[idx]})
+        plans.append(p)
+    return f, st, plans
+
+
+def test_lattice_sizes_and_values():
+    assert [n for n in range(2, 70) if refine.is_lattice_size(n)] == [3, 5, 9, 17, 33, 65]
+    v = refine.axis_values(2.0, 200.0, 65, "log")
+    assert v[0] == 2.0 and v[-1] == 200.0 and v[32] == pytest.approx(20.0, rel=1e-12)
+    np.testing.assert_allclose(np.diff(np.log(v)), np.log(100.0) / 64, rtol=1e-9)
+    lat = refine.make_lattice({"a": {"from": 0.0, "to": 1.0, "points": 65},
+                               "b": {"from": 0.0, "to": 1.0, "points": 33}}, 9)
+    # R = log2(32) - log2(8) = 2 rounds after round 0; round 0 has 9 points on b, 17 on a
+    assert lat.rounds == 2 and len(lat.round0_nodes()) == 17 * 9
+    assert lat.stride(0) == 4 and lat.stride(lat.rounds) == 1
+
+
+def test_surplus_of_a_quadratic_is_its_second_difference():
+    # f = i^2 along axis 0 (index units): a node halfway along an edge of stride 2s is predicted
+    # as the mean of its neighbours, ((i - s)^2 + (i + s)^2) / 2 = i^2 + s^2, so |surplus| = s^2;
+    # a bilinear function has none.
+    lat = lattice(17, 3)                    # strides 8 (round 0), 4, 2, 1
+    i, j = np.unravel_index(np.arange(lat.size), lat.shape)
+    f = refine.Fields.empty(lat, {"q": 1, "b": 1}, {"q": False, "b": False})
+    nodes = np.stack([i, j], axis=1)
+    f.set(lat, nodes, 0, np.zeros(lat.size, int), {"q": i.astype(float) ** 2, "b": (1.0 + i) * (2.0 + 3 * j)})
+    sq = refine.surpluses(lat, f, "q")[:, 0].reshape(lat.shape)
+    rounds = refine.node_round(lat, nodes).reshape(lat.shape)
+    for k in range(1, lat.rounds + 1):
+        on_edge = (rounds == k) & (np.arange(17)[:, None] % lat.stride(k - 1) != 0) & (
+            np.arange(17)[None, :] % lat.stride(k - 1) == 0)
+        np.testing.assert_allclose(sq[on_edge], lat.stride(k) ** 2)
+    assert sq[4, 0] == 16.0 and sq[12, 8] == 16.0           # round 0's odd nodes: s = 4 against stride 8
+    assert np.nanmax(refine.surpluses(lat, f, "b")[:, 0][rounds.ravel() >= 0]) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_rounds_are_deterministic_and_within_budget():
+    lat = lattice()
+    oc, val, _ = synthetic(lat)
+    f1, st, p1 = run_rounds(lat, oc, val)
+    f2, _, p2 = run_rounds(lat, oc, val)
+    for a, b in zip(p1, p2):
+        np.testing.assert_array_equal(a.nodes, b.nodes)
+    assert f1.computed.sum() <= st.budget
+    assert len(p1[0].nodes) == 25 and all(len(p.nodes) for p in p1)       # every round computes
+    # each round's nodes are new, on its own stride, and make the refined cells' sub-lattices
+    seen = set()
+    for p in p1:
+        keys = {tuple(n) for n in p.nodes}
+        assert not keys & seen
+        seen |= keys
+        assert (p.nodes % lat.stride(p.round) == 0).all()
+
+
+def test_error_bars_hold_and_the_rough_patch_is_recognised():
+    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    oc, val, rough = synthetic(lat)
+    f, st, plans = run_rounds(lat, oc, val)
+    m = refine.reconstruct(lat, f, st)
+    rec = ~f.computed
+    assert f.computed.sum() <= 0.25 * lat.size
+    assert (m.outcome[rec] != oc[rec]).mean() < 0.01
+    ok = rec & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
+    err = np.abs(m.values["t"][:, 0] - val)
+    bar = m.bars["t"][:, 0]
+    assert (err[ok] <= bar[ok]).mean() >= 0.9
+    # the noise patch is reported rough, not refined to the bottom; the smooth part is not rough
+    assert m.rough[ok & rough].mean() > 0.9 and m.rough[ok & ~rough].mean() < 0.05
+    assert plans[-1].rough > 0
+    # (refined to the bottom, round 3 would compute 3/4 of the patch; only its rim is: shared edges)
+    assert (f.round[rough] == lat.rounds).mean() < 0.15
+    # where it is smooth the map is far better than the tolerance asks, and computed nodes carry no bar
+    assert np.median(err[ok & ~rough] / val[ok & ~rough]) < st.tolerance
+    assert (m.bars["t"][f.computed & np.isfinite(val), 0] == 0).all()
+
+
+def test_nodes_go_where_the_map_changes_and_bars_hold():
+    # a gentle background with one bump: the rounds spend their nodes on the bump
+    lat = lattice()
+    x, y = xy(lat)
+    bump = np.exp(-60 * ((x - 0.3) ** 2 + (y - 0.6) ** 2))
+    val = np.exp(0.5 + 0.3 * x + 0.2 * y ** 2 + 1.5 * bump)
+    f, st, _ = run_rounds(lat, np.zeros(lat.size, int), val)
+    near = bump > 1e-3          # r < 0.34: the bump and its flanks
+    assert f.computed[near].mean() > 3 * f.computed[~near].mean()
+    m = refine.reconstruct(lat, f, st)
+    rec = ~f.computed
+    err = np.abs(m.values["t"][:, 0] - val)
+    assert (err[rec] <= m.bars["t"][rec, 0]).mean() >= 0.9
+    assert np.median(err[rec & ~near] / val[rec & ~near]) < st.tolerance
+
+
+def test_failed_corners_and_outcome_boundaries_are_refined_first():
+    lat = lattice(17, 3)
+    x, y = xy(lat)
+    oc = np.where(x > 0.55, outcomes.CONTACT_LOST, outcomes.HALTED)
+    oc[(x == 0.0) & (y == 0.5)] = outcomes.NUMERICAL_ERROR        # a node of round 0, in two cells
+    val = np.where(oc == outcomes.HALTED, 1.0 + x, np.nan)       # linear: no error to refine for
+    f, st, plans = run_rounds(lat, oc, val, share=1.0)
+    assert plans[1].flagged["failed"] == 2 and plans[1].flagged["error"] == 0
+    # the finest round computes only around the boundary (x = 0.5 .. 0.5625) and the failed node
+    last = plans[-1].nodes * (1.0 / 16)
+    assert len(last) and all((0.4 <= n[0] <= 0.65) or (n[0] <= 0.125 and abs(n[1] - 0.5) <= 0.125) for n in last)
+    m = refine.reconstruct(lat, f, st)
+    np.testing.assert_array_equal(m.outcome, oc)
+
+
+def test_refine_config_errors_name_the_field():
+    base = {"grid": {"mu_d": [0.3], "k1": [0.0], "k2": [0.0], "k3": [0.0]},
+            "refine": {"axes": {"alpha0": {"from": 0.3, "to": 1.2, "points": 9},
+                                "omega0": {"from": 5.0, "to": 50.0, "points": 9, "spacing": "log"}},
+                       "start_points": 3, "max_share": 0.5}}
+    settings = grid.normalize(base, check_scenes=False)
+    assert settings["grid"]["omega0"][0] == 5.0 and settings["grid"]["omega0"][-1] == 50.0
+    assert len(settings["grid"]["alpha0"]) == 9 and grid.is_adaptive(settings)
+
+    def fields_of(mutate):
+        import copy
+        cfg = copy.deepcopy(base)
+        mutate(cfg)
+        with pytest.raises(grid.SweepConfigError) as exc:
+            grid.normalize(cfg, check_scenes=False)
+        return {e.field: str(e) for e in exc.value.errors}
+
+    assert "refine.axes.alpha0.points" in fields_of(lambda c: c["refine"]["axes"]["alpha0"].update(points=10))
+    assert "refine.axes.alpha0" in fields_of(lambda c: c["grid"].update(alpha0=[1.0]))
+    assert "refine.axes.omega0.from" in fields_of(lambda c: c["refine"]["axes"]["omega0"].update({"from": -1.0}))
+    assert "refine.axes.omega0.to" in fields_of(lambda c: c["refine"]["axes"]["omega0"].update(to=4.0))
+    msg = fields_of(lambda c: c["refine"].update(max_share=0.05))["refine.max_share"]
+    assert "round 0's 9" in msg
+    assert "refine.start_points" in fields_of(lambda c: c["refine"].update(start_points=9))
+    assert "refine.axes" in fields_of(lambda c: c["refine"]["axes"].pop("omega0") and c["grid"].update(omega0=[9.0]))
+    assert "grid.alpha0" in fields_of(lambda c: c["refine"]["axes"].pop("alpha0") and c["refine"]["axes"].update(
+        mu_d={"from": 0.1, "to": 0.3, "points": 5}) and c["grid"].pop("mu_d"))
+    assert "exceeds mu_s" in fields_of(lambda c: c["refine"]["axes"].update(mu_d={"from": 0.1, "to": 0.7, "points": 5})
+                                       or c["grid"].pop("mu_d"))["refine.axes.mu_d.to"]
+    assert "refine.axes.alpha0" in fields_of(lambda c: c["refine"]["axes"]["alpha0"].update({"from": -0.5, "to": 0.5}))
+    assert "refine.tolerance" in fields_of(lambda c: c["refine"].update(tolerance=0.0))
+    assert "refine.outputs[0]" in fields_of(lambda c: c["refine"].update(outputs=["n_steps"]))
+    tensor = {"grid": {a: [1.0] for a in grid.AXES}, "outputs": {"notebooks": ["adaptive_map"]}}
+    with pytest.raises(grid.SweepConfigError, match="outputs.notebooks"):
+        grid.normalize(tensor, check_scenes=False)
+
+
+def test_an_adaptive_overlay_replaces_the_default_grids_axes(tmp_path):
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    sweep = grid.load_sweep([(root / "config" / "config.yaml", "config/config.yaml"),
+                             (root / "config" / "adaptive.yaml", "config/adaptive.yaml")], check_scenes=False)
+    assert sweep.name == "adaptive" and len(sweep.settings["grid"]["alpha0"]) == 65
+    assert sweep.settings["grid"]["mu_d"] == [0.3]
+    # and a later grid list turns a lattice axis back into a list
+    later = tmp_path / "later.yaml"
+    later.write_text("grid:\n  alpha0: [1.0]\n  omega0: [10.0]\noutputs:\n  notebooks: [halt_time]\n")
+    back = grid.load_sweep([(root / "config" / "adaptive.yaml", "a"), (later, "later")], check_scenes=False)
+    assert not grid.is_adaptive(back.settings) and back.settings["grid"]["alpha0"] == [1.0]
+
+
+def test_a_three_axis_map():
+    lat = refine.make_lattice({a: {"from": 0.0, "to": 1.0, "points": 17} for a in ("x", "y", "z")}, 5)
+    assert lat.rounds == 2 and lat.ndim == 3 and len(lat.round0_nodes()) == 125
+    g = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T / 16.0
+    oc = np.where(g[:, 0] + g[:, 1] + g[:, 2] > 1.6, outcomes.CONTACT_LOST, outcomes.HALTED)
+    val = np.where(oc == outcomes.HALTED, np.exp(1 + g[:, 0] * g[:, 1] + np.sin(2 * g[:, 2])), np.nan)
+    f, st, plans = run_rounds(lat, oc, val, share=0.5)    # a boundary surface needs more than a curve
+    assert f.computed.sum() <= st.budget and all(len(p.nodes) for p in plans)
+    m = refine.reconstruct(lat, f, st)
+    rec = ~f.computed
+    assert (m.outcome[rec] != oc[rec]).mean() < 0.01
+    ok = rec & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
+    assert (np.abs(m.values["t"][ok, 0] - val[ok]) <= m.bars["t"][ok, 0]).mean() >= 0.9
