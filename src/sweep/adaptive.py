@@ -413,6 +413,13 @@ def map_figure(cube_path: str | Path, figure: str | Path, max_maps: int = 4) -> 
                           f"(reconstructed halted nodes)", fontsize=9)
             yy, xx = np.nonzero(sub.computed.values == 1)
             rough = sub.rough.values == 1
+            # a computed node inside a rough region is drawn with it (the flag marks reconstructed nodes)
+            near = np.zeros_like(rough)
+            near[1:, :] |= rough[:-1, :]
+            near[:-1, :] |= rough[1:, :]
+            near[:, 1:] |= rough[:, :-1]
+            near[:, :-1] |= rough[:, 1:]
+            rough = rough | ((sub.computed.values == 1) & near)
             for a in (ax, ax2):
                 a.scatter(x[xx], y[yy], s=7, c="k", marker="o", linewidths=0, label="computed")
                 if rough.any():
