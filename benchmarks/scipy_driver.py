@@ -16,7 +16,7 @@ independently of `sweep.core.contact` (only constants are read from the kernel):
   the sliding equations make it grow (a_P parallel to s, a_P.s > 0), attracting, nearest -F/|F|;
 * SLAVED -> ROLL where u.s(nu) reaches 0 (plastic impulse removes what is left of the slip);
   SLAVED -> SLIDE where |u| grows to SLAVE_EXIT x the slaving speed u_s = max(slip_tol,
-  slave_tol mu_d Phi / (1 + |theta'|)), or where the attracting direction ceases to exist (a fold: d cross/d nu
+  mu_d Phi max(SLAVE_FLOOR, slave_tol / (1 + |theta'|))), or where the attracting direction ceases to exist (a fold: d cross/d nu
   reaches 0, or no root is left near the last one: the stepper cannot continue and the fold is the
   last accepted point); after a fold the hand-over back to SLAVED is off until |u| grows past
   SLAVE_EXIT x u_s again;
@@ -106,6 +106,7 @@ __all__ = ["run_scipy", "numba_backend", "numpy_backend", "Backend"]
 BETA_FACE = _contact.BETA_FACE
 ZENO_DTAU = _contact.ZENO_DTAU
 SLAVE_EXIT = _contact.SLAVE_EXIT
+SLAVE_FLOOR = _contact.SLAVE_FLOOR
 
 ROLL, SLIDE, SLAVED = 0, 1, 2     # driver modes; model.rhs knows ROLL (0) and SLIDE (1)
 DIR_TOL = 1e-14                   # convergence of the slaved direction (rad)
@@ -404,11 +405,22 @@ class Disk:
         un = math.hypot(y[Y_U1], y[Y_U2])
         return (y[Y_U1] / un, y[Y_U2] / un) if un > 0.0 else (math.cos(c.nu), math.sin(c.nu))
 
+    def slaved_margin(self, y, aux, err):
+        """> 0 while a slaved slip stays slaved: below SLAVE_EXIT x the slaving speed, and its
+        direction's error below SLAVE_EXIT x slave_tol or the slip below SLAVE_EXIT x the floor's
+        speed SLAVE_FLOOR mu_d Phi."""
+        u = math.hypot(y[Y_U1], y[Y_U2])
+        margin = 1.0 - u / (SLAVE_EXIT * self.slave_speed(y, aux))
+        if self.p[P_SLAVE] > 0.0:
+            floor = 1.0 - u / (SLAVE_EXIT * SLAVE_FLOOR * self.p[P_MUD] * max(aux[X_PHI], 0.0))
+            margin = min(margin, max(floor, 1.0 - err / (SLAVE_EXIT * self.p[P_SLAVE])))
+        return margin
+
     def slave_speed(self, y, aux):
         """Where the direction is slaved: relaxation time |u|/(mu_d Phi) times the motion's rate
         1 + |theta'| (theta' = omega_3 / cos alpha) below slave_tol; at least slip_tol."""
         rate = 1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA]))
-        return max(self.u_tol, self.p[P_SLAVE] * self.p[P_MUD] * aux[X_PHI] / rate)
+        return max(self.u_tol, self.p[P_MUD] * aux[X_PHI] * max(SLAVE_FLOOR, self.p[P_SLAVE] / rate))
 
     # -- directions --
 
@@ -567,7 +579,7 @@ class Disk:
         if fate == "spirals_out":
             c.slow_off = True
             return -1
-        if fate == "ends" and math.isfinite(nu) and self.settle_onto(nu, t, y, c):
+        if fate == "ends" and math.isfinite(nu) and self.settle_onto(nu, t, y, c) == "settled":
             c.slave_off = False
             return -1
         phi = self.model(t, y, SLIDE, c, *self._slip_dir(y, c))[1][X_PHI]
@@ -604,27 +616,38 @@ class Disk:
         if math.isnan(root):
             c.slave_off = True
             return -1
-        if not self.settle_onto(root, t, y, c):
+        settled = self.settle_onto(root, t, y, c, strict=True)
+        if settled == "against":
             c.slave_off = True    # pointing against it: passing by u = 0, it goes on sliding
+        elif settled == "inaccurate":
+            c.slave_off = "floor"    # handed over at the floor's speed SLAVE_FLOOR mu_d Phi instead
         return -1
 
-    def settle_onto(self, root, t, y, c):
+    def settle_onto(self, root, t, y, c, strict=False):
         """SLIDE -> SLAVED at the quasi-static direction root, the slip across the slaved
         direction there (root plus its lag) removed by the plastic impulse, if that leaves the slip
-        along it; else nothing changes. Returns whether it settled."""
+        along it, and, strict (the hand-over at the slaving speed above the floor's), the slaved
+        direction's error within slave_tol; else nothing changes. Returns 'settled', 'against' or
+        'inaccurate'."""
         saved = y.copy()
-        lag, err = self.lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, c)
-        if self.p[P_SLAVE] > 0.0 and not err <= self.p[P_SLAVE]:
-            return False     # the first-order slow manifold is no good here: it slides on
+        u = math.hypot(y[Y_U1], y[Y_U2])
+        lag, err = self.lag(root, u, t, y, c)
+        if strict and self.p[P_SLAVE] > 0.0 and not err <= self.p[P_SLAVE]:
+            cs_, sn_ = math.cos(root), math.sin(root)
+            ys = np.array(y[:self.n], dtype=float)
+            ys[Y_U1], ys[Y_U2] = u * cs_, u * sn_
+            phi = self.model(t, ys, SLIDE, c, cs_, sn_)[1][X_PHI]
+            if u > SLAVE_FLOOR * self.p[P_MUD] * phi:
+                return "inaccurate"     # the first-order slow manifold is no good here: it slides on
         along = root + lag
         loss = self.be.project_velocity(y, self.p, c.side, True, c.side, True, self.S, along)
         if y[Y_U1] * math.cos(along) + y[Y_U2] * math.sin(along) > 0.0:
             y[Y_DSLIDE] += loss
             c.mode = SLAVED
             c.nu = root
-            return True
+            return "settled"
         y[:] = saved
-        return False
+        return "against"
 
     def set_slip(self, t, y, c):
         """Contact state for a given slip vector (start, or after an impact while slipping)."""
@@ -674,10 +697,7 @@ class Disk:
             lag, err = (0.0, math.inf) if math.isnan(root) else self.lag(root, un, t, y, c)
             nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root + lag
             _, aux = self.model(t, y, SLIDE, c, math.cos(nu), math.sin(nu), self.pf)
-            margin = 1.0 - un / (SLAVE_EXIT * self.slave_speed(y, aux))
-            if self.p[P_SLAVE] > 0.0:
-                margin = min(margin, 1.0 - err / (SLAVE_EXIT * self.p[P_SLAVE]))
-            return margin <= 0.0
+            return self.slaved_margin(y, aux, err) <= 0.0
         _, aux, _ = self.rhs(t, y, c, c.nu)
         return SLAVE_EXIT * self.slave_speed(y, aux) - un <= 0.0
 
@@ -1041,7 +1061,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             active.append({ROLL: "cone", SLIDE: "slipslow", SLAVED: "slipstop"}[seg.mode])
         if seg.mode == SLAVED:
             active += ["slipfast", "slave_lost"]
-        if seg.mode == SLIDE and not seg.slave_off:
+        if seg.mode == SLIDE and (not seg.slave_off or seg.slave_off == "floor"):
             active.append("slave")
         if seg.mode == SLIDE and (seg.slave_off or seg.slow_off):
             active.append("slipfast")      # fast again: the hand-over is re-armed
@@ -1063,6 +1083,8 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
             if kind == "slipslow":
                 return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slip_floor(tt, a[X_PHI], seg)
             if kind == "slave":
+                if seg.slave_off == "floor":
+                    return math.hypot(yy[Y_U1], yy[Y_U2]) - max(disk.u_tol, SLAVE_FLOOR * p[P_MUD] * a[X_PHI])
                 return math.hypot(yy[Y_U1], yy[Y_U2]) - disk.slave_speed(yy, a)
             if kind == "slipstop":
                 along = nu_ + a[X_LAG]
@@ -1071,10 +1093,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 if seg.mode != SLAVED:
                     return SLAVE_EXIT * disk.slave_speed(yy, a) - math.hypot(yy[Y_U1], yy[Y_U2])
                 # a slaved slip leaves where it is fast, or where its slaved direction's error is large
-                margin = 1.0 - math.hypot(yy[Y_U1], yy[Y_U2]) / (SLAVE_EXIT * disk.slave_speed(yy, a))
-                if p[P_SLAVE] > 0.0:
-                    margin = min(margin, 1.0 - a[X_SLAVE_ERR] / (SLAVE_EXIT * p[P_SLAVE]))
-                return margin
+                return disk.slaved_margin(yy, a, a[X_SLAVE_ERR])
             if kind == "slave_lost":
                 return -dc
             if kind == "contact":

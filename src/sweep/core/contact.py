@@ -48,6 +48,12 @@ from .model import (N_PARAMS, P_A, P_SLAVE, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UT
 BETA_FACE = 1e-6
 # Two rim-edge impacts closer than ZENO_DTAU (tau) end the scene as line contact.
 ZENO_DTAU = 1e-6
+# The slip direction is slaved at least where its relaxation time |u|/(mu_d Phi) is below SLAVE_FLOOR
+# (units of chi), whatever slave_tol: near flat the motion's rate 1 + |theta'| grows without bound
+# and slave_tol / rate alone left creeping slips to be integrated down to slip_tol, ~1/|u| steps
+# each (a harness scene ran into step_limit at slip_tol 1e-13 m/s). The slaved direction's error
+# there is second order in SLAVE_FLOOR (docs/model.md, 'Slow slip').
+SLAVE_FLOOR = 1e-7
 # A slaved slip returns to SLIDE only where it has grown to SLAVE_EXIT times the slaving speed: the
 # two modes' boundaries differ, so a slip near the slaving speed cannot switch at every step. The
 # slaved direction's error grows as the square of the relaxation time (docs/model.md, 'Slow slip'):
@@ -61,6 +67,12 @@ SLOW_OFF = 2.0
 # u = 0; its fate is read again at cs[CS_FLOOR], BELOW_STEP times slower each time
 BELOW = 3.0
 BELOW_STEP = 16.0
+# cs[CS_SLAVE_OFF] while a slide refused at the slaving speed for its slaved direction's error is
+# followed to the floor's speed SLAVE_FLOOR mu_d Phi, where it is handed over whatever that error
+# (try_slave); or re-armed where it is fast again
+AT_FLOOR = 4.0
+# settle_onto's answers
+SETTLED, AGAINST, INACCURATE = 0, 1, 2
 # tau: the differences of d/dtau(omega.a_i) along the motion for its second and third derivatives
 # (spin_rest_time): truncation O(SPIN_DIFF^2) and O(SPIN_DIFF), round-off EPS |g1| / SPIN_DIFF^2.
 SPIN_DIFF = 1e-3
@@ -107,10 +119,10 @@ def slip_floor(t, aux, p, cs):
 def slave_speed(y, aux, p):
     """Slip speed (u_hat) below which the slip direction is slaved: where its relaxation time
     |u|/(mu_d Phi) times the rate of the motion, 1 + |theta'| (the precession rate theta' =
-    omega_3 sec alpha, eq. 2.3, in units of 1/chi), is below slave_tol (p[P_SLAVE]); at least
-    slip_tol."""
+    omega_3 sec alpha, eq. 2.3, in units of 1/chi), is below slave_tol (p[P_SLAVE]), and at least
+    where the relaxation time alone is below SLAVE_FLOOR, and at least slip_tol."""
     rate = 1.0 + abs(y[Y_W3] / aux[X_COSA])
-    return max(p[P_UTOL], p[P_SLAVE] * p[P_MUD] * aux[X_PHI] / rate)
+    return max(p[P_UTOL], p[P_MUD] * aux[X_PHI] * max(SLAVE_FLOOR, p[P_SLAVE] / rate))
 
 
 @kernel
@@ -469,23 +481,27 @@ def try_slave(t, y, sys):
     # where the slip points against the direction, it is not settling onto it but passing by u = 0
     # (its direction turning towards a root along which it grows): it goes on sliding, as the
     # sliding equations carry it, past u = 0 or to slip_tol (docs/model.md)
-    if not settle_onto(root, t, y, sys):
+    settled = settle_onto(root, t, y, sys, True)
+    if settled == AGAINST:
         cs[CS_SLAVE_OFF] = 1.0
+    elif settled == INACCURATE:
+        cs[CS_SLAVE_OFF] = AT_FLOOR
     return -1
 
 
 @kernel
-def settle_onto(root, t, y, sys):
+def settle_onto(root, t, y, sys, strict):
     """SLIDE -> SLAVED at the quasi-static direction root: the slip component across the slow
     manifold's direction there (root plus the lag, root_lag) is removed by a plastic impulse
-    (O(u^2) loss), if that leaves the slip along it and the slaved direction's error there is
-    within slave_tol (slaved_slip); else the state is left as it was. Returns whether the slip
-    settled."""
+    (O(u^2) loss), if that leaves the slip along it and, strict (the hand-over at the slaving
+    speed above the floor's), the slaved direction's error there is within slave_tol (slaved_slip);
+    else the state is left as it was. Returns SETTLED, AGAINST or INACCURATE."""
     p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     side = int(cs[CS_SIDE])
     lag, _, err = root_lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
-    if p[P_SLAVE] > 0.0 and not err <= p[P_SLAVE]:
-        return False   # the slow manifold is no good approximation here: the slip slides on
+    u = math.hypot(y[Y_U1], y[Y_U2])
+    if strict and p[P_SLAVE] > 0.0 and not err <= p[P_SLAVE] and u > SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]:
+        return INACCURATE   # the slow manifold is no good approximation here: the slip slides on
     along = root + lag
     saved = wk[W_YSLIP]
     for i in range(n):
@@ -495,10 +511,10 @@ def settle_onto(root, t, y, sys):
         y[Y_DSLIDE] += loss
         cs[CS_MODE] = SLAVED
         cs[CS_NU] = root
-        return True
+        return SETTLED
     for i in range(n):
         y[i] = saved[i]
-    return False
+    return AGAINST
 
 
 # What a slide whose speed has fallen to slip_tol does next (slip_fate): it reaches u = 0 and ends,
@@ -571,7 +587,7 @@ def slow_slide(t, y, sys):
     if fate == FATE_SPIRALS_OUT:
         cs[CS_SLAVE_OFF] = SLOW_OFF
         return -1
-    if fate == FATE_ENDS and not math.isnan(nu) and settle_onto(nu, t, y, sys):
+    if fate == FATE_ENDS and not math.isnan(nu) and settle_onto(nu, t, y, sys, False) == SETTLED:
         cs[CS_SLAVE_OFF] = 0.0
         return -1
     eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
@@ -986,6 +1002,11 @@ def event_values(t, y, aux, p, cs, lev, g):
             g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p, cs)
         if cs[CS_SLAVE_OFF] == 0.0:
             g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(y, aux, p)
+        elif cs[CS_SLAVE_OFF] == AT_FLOOR:
+            # refused for its error at the slaving speed: handed over at the floor's, or re-armed
+            # where fast again
+            g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - max(p[P_UTOL], SLAVE_FLOOR * p[P_MUD] * aux[X_PHI])
+            g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(y, aux, p) - math.hypot(y[Y_U1], y[Y_U2])
         else:
             # the hand-over is off (no quasi-static direction to settle on, or the slip passed it
             # by) until the slip is fast again: SLAVE_EXIT times the slaving speed, as a slaved
@@ -1006,11 +1027,15 @@ def event_values(t, y, aux, p, cs, lev, g):
 @kernel
 def slaved_margin(y, aux, p):
     """EV_SLIP_FAST of a slaved slip: > 0 while the slip is below SLAVE_EXIT times the slaving speed
-    and the slaved direction's error (aux[X_SLAVE_ERR]) below SLAVE_EXIT times slave_tol; each as
-    a fraction of its bound, the smaller."""
-    margin = 1.0 - math.hypot(y[Y_U1], y[Y_U2]) / (SLAVE_EXIT * slave_speed(y, aux, p))
+    and the slaved direction's error (aux[X_SLAVE_ERR]) below SLAVE_EXIT times slave_tol, or the
+    slip below SLAVE_EXIT times the floor's speed SLAVE_FLOOR mu_d Phi; each as a fraction of its
+    bound."""
+    u = math.hypot(y[Y_U1], y[Y_U2])
+    margin = 1.0 - u / (SLAVE_EXIT * slave_speed(y, aux, p))
     if p[P_SLAVE] > 0.0:
-        margin = min(margin, 1.0 - aux[X_SLAVE_ERR] / (SLAVE_EXIT * p[P_SLAVE]))
+        # (within SLAVE_EXIT times the floor's speed the slip stays slaved whatever the error)
+        floor = 1.0 - u / (SLAVE_EXIT * SLAVE_FLOOR * p[P_MUD] * max(aux[X_PHI], 0.0))
+        margin = min(margin, max(floor, 1.0 - aux[X_SLAVE_ERR] / (SLAVE_EXIT * p[P_SLAVE])))
     return margin
 
 
