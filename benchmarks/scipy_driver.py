@@ -107,6 +107,7 @@ BETA_FACE = _contact.BETA_FACE
 ZENO_DTAU = _contact.ZENO_DTAU
 SLAVE_EXIT = _contact.SLAVE_EXIT
 SLAVE_FLOOR = _contact.SLAVE_FLOOR
+FLOOR_EXIT = _contact.FLOOR_EXIT
 
 ROLL, SLIDE, SLAVED = 0, 1, 2     # driver modes; model.rhs knows ROLL (0) and SLIDE (1)
 DIR_TOL = 1e-14                   # convergence of the slaved direction (rad)
@@ -410,11 +411,18 @@ class Disk:
         direction's error below SLAVE_EXIT x slave_tol or the slip below SLAVE_EXIT x the floor's
         speed SLAVE_FLOOR mu_d Phi."""
         u = math.hypot(y[Y_U1], y[Y_U2])
-        margin = 1.0 - u / (SLAVE_EXIT * self.slave_speed(y, aux))
+        margin = 1.0 - u / self.exit_speed(y, aux)
         if self.p[P_SLAVE] > 0.0:
-            floor = 1.0 - u / (SLAVE_EXIT * SLAVE_FLOOR * self.p[P_MUD] * max(aux[X_PHI], 0.0))
+            floor = 1.0 - u / (FLOOR_EXIT * SLAVE_FLOOR * self.p[P_MUD] * max(aux[X_PHI], 0.0))
             margin = min(margin, max(floor, 1.0 - err / (SLAVE_EXIT * self.p[P_SLAVE])))
         return margin
+
+    def exit_speed(self, y, aux):
+        """Where a slaved slip slides: SLAVE_EXIT x slave_tol's slaving speed, at least FLOOR_EXIT x
+        the floor's."""
+        rate = 1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA]))
+        return max(FLOOR_EXIT * self.u_tol,
+                   self.p[P_MUD] * aux[X_PHI] * max(FLOOR_EXIT * SLAVE_FLOOR, SLAVE_EXIT * self.p[P_SLAVE] / rate))
 
     def slave_speed(self, y, aux):
         """Where the direction is slaved: relaxation time |u|/(mu_d Phi) times the motion's rate
@@ -699,7 +707,7 @@ class Disk:
             _, aux = self.model(t, y, SLIDE, c, math.cos(nu), math.sin(nu), self.pf)
             return self.slaved_margin(y, aux, err) <= 0.0
         _, aux, _ = self.rhs(t, y, c, c.nu)
-        return SLAVE_EXIT * self.slave_speed(y, aux) - un <= 0.0
+        return self.exit_speed(y, aux) - un <= 0.0
 
     def stick_test(self, i, t, y, c, force=False):
         """At omega.a_i = 0: stick if the moment can hold it, else pass with the needed sign.
@@ -1091,7 +1099,7 @@ def run_scipy(scene, method: str = "DOP853", rtol: float = 1e-10, atol: float | 
                 return yy[Y_U1] * math.cos(along) + yy[Y_U2] * math.sin(along)
             if kind == "slipfast":
                 if seg.mode != SLAVED:
-                    return SLAVE_EXIT * disk.slave_speed(yy, a) - math.hypot(yy[Y_U1], yy[Y_U2])
+                    return disk.exit_speed(yy, a) - math.hypot(yy[Y_U1], yy[Y_U2])
                 # a slaved slip leaves where it is fast, or where its slaved direction's error is large
                 return disk.slaved_margin(yy, a, a[X_SLAVE_ERR])
             if kind == "slave_lost":

@@ -9,7 +9,8 @@ Parts (each prints one table; this tree and the base run in two worker processes
 extracted with `git archive` into a temporary directory with its own numba cache, as
 benchmarks/harness_cost.py does):
 
-* paper: the paper's disk (config/scenes/kessler2002.yaml) at mu_d 0.3, 0.49, 0.499, 0.5 (mu_s 0.5):
+* paper: the paper's disk (config/scenes/kessler2002.yaml) at mu_d 0.3, 0.49, 0.499, 0.5 (mu_s 0.5),
+  each kernel at its defaults and this tree again at each --slave-tols:
   accepted steps (rejected), right-hand sides, located events, roll<->slip transitions, slip
   fraction, CPU; and the steps at mu_d = mu_s over those at 0.3.
 * accuracy: the same disk at mu_d = mu_s, its level times and t_halt at the default settings
@@ -146,14 +147,23 @@ def paper(mu_d: float, **solver) -> dict:
     return cfg
 
 
-def part_paper(sides: dict) -> list[str]:
+def variants(sides: dict, slave_tols: list[float]):
+    """(label, side, solver settings): each kernel at its defaults, and this tree at each slave_tol."""
+    for name, side in sides.items():
+        yield name, side, {}
+        if name == "this tree":
+            for st in slave_tols:
+                yield f"this tree, slave_tol {st:g}", side, {"slave_tol": st}
+
+
+def part_paper(sides: dict, slave_tols: list[float]) -> list[str]:
     lines = ["## The paper's disk as mu_d approaches mu_s = 0.5", "",
              "| kernel | mu_d | steps (rejected) | RHS | located events | transitions | slip fraction | CPU (s) |",
              "|---|---|---|---|---|---|---|---|"]
-    for name, side in sides.items():
+    for name, side, solver in variants(sides, slave_tols):
         steps = {}
         for mu_d in MUDS:
-            r = side.run(paper(mu_d))
+            r = side.run(paper(mu_d, **solver))
             steps[mu_d] = r["n_steps"]
             lines.append(f"| {name} | {mu_d:g} | {r['n_steps']} ({r['n_rejected']}) | {r['n_rhs']} | {r['n_events']} | "
                          f"{r['n_transitions']} | {r['slip_fraction']:.2f} | {r['cpu']:.2f} |")
@@ -161,7 +171,7 @@ def part_paper(sides: dict) -> list[str]:
     return lines
 
 
-def part_accuracy(sides: dict) -> list[str]:
+def part_accuracy(sides: dict, slave_tols: list[float]) -> list[str]:
     ref = sides["this tree"].run(paper(0.5, rtol=1e-12, atol=1e-14, slave_tol=1e-6))
     pert = copy.deepcopy(paper(0.5, rtol=1e-12, atol=1e-14, slave_tol=1e-6))
     pert["initial"]["alpha"] += 1e-10
@@ -174,20 +184,20 @@ def part_accuracy(sides: dict) -> list[str]:
     sv = sens["levels"] + [sens["t_halt"]]
     d = [abs(a - b) / b for a, b in zip(sv, ref_v)]
     lines.append(f"| alpha0 + 1e-10 rad (sensitivity) | {' '.join(f'{x:.1e}' for x in d)} | {max(d):.1e} |")
-    for name, side in sides.items():
-        r = side.run(paper(0.5))
+    for name, side, solver in variants(sides, slave_tols):
+        r = side.run(paper(0.5, **solver))
         v = r["levels"] + [r["t_halt"]]
         d = [abs(a - b) / b for a, b in zip(v, ref_v)]
         lines.append(f"| {name}, default settings | {' '.join(f'{x:.1e}' for x in d)} | **{max(d):.1e}** |")
     return lines
 
 
-def part_k3(sides: dict) -> list[str]:
-    cfg = paper(0.5)
-    cfg["contact"]["k3"] = 0.0
+def part_k3(sides: dict, slave_tols: list[float]) -> list[str]:
     lines = ["## mu_d = mu_s with k3 = 0", "", "| kernel | outcome | t_halt (s) | steps (rejected) | CPU (s) |",
              "|---|---|---|---|---|"]
-    for name, side in sides.items():
+    for name, side, solver in variants(sides, slave_tols):
+        cfg = paper(0.5, **solver)
+        cfg["contact"]["k3"] = 0.0
         r = side.run(cfg)
         lines.append(f"| {name} | {r['outcome']} | {r['t_halt']:.4f} ± {r['t_halt_error']:.2g} | "
                      f"{r['n_steps']} ({r['n_rejected']}) | {r['cpu']:.1f} |")
@@ -328,6 +338,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=20261150)
     ap.add_argument("--parts", default="paper,accuracy,k3,random,mechanism,sweep,bands")
     ap.add_argument("--bands", type=int, default=150, help="harness scenes of the main draw in part 'bands'")
+    ap.add_argument("--slave-tols", type=float, nargs="*", default=[1e-4, 1e-3, 3e-3],
+                    help="this tree again at these solver.slave_tol in parts paper, accuracy and k3 (the default is 0)")
     a = ap.parse_args(argv)
     parts = a.parts.split(",")
     with tempfile.TemporaryDirectory() as tmp:
@@ -338,11 +350,11 @@ def main(argv=None) -> int:
         out = []
         try:
             if "paper" in parts:
-                out += part_paper(sides) + [""]
+                out += part_paper(sides, a.slave_tols) + [""]
             if "accuracy" in parts:
-                out += part_accuracy(sides) + [""]
+                out += part_accuracy(sides, a.slave_tols) + [""]
             if "k3" in parts:
-                out += part_k3(sides) + [""]
+                out += part_k3(sides, a.slave_tols) + [""]
             if "random" in parts:
                 out += part_random(sides, a.random, a.seed) + [""]
             if "mechanism" in parts:

@@ -824,7 +824,7 @@ def test_an_update_that_leaves_a_slaved_slip_past_its_exit_hands_it_to_slide(set
     y[M.Y_U1], y[M.Y_U2] = 1e-9 * math.cos(root), 1e-9 * math.sin(root)
     dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
     C.eval_rhs(0.0, y, _sys(p, sl.copy(), n, wk, ist), dy, aux)
-    u_exit = C.SLAVE_EXIT * C.slave_speed(y, aux, p)
+    u_exit = C.exit_speed(y, aux, p)
     for factor, mode in ((1.001, L.SLIDE), (0.999, L.SLAVED)):
         y = y0.copy()
         # the slip a little off the slaved direction, as the integrated slip vector is

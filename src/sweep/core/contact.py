@@ -59,6 +59,10 @@ SLAVE_FLOOR = 1e-7
 # slaved direction's error grows as the square of the relaxation time (docs/model.md, 'Slow slip'):
 # at 4 times the slaving speed slips that never left SLAVED carried 30 times the error of those at 2.
 SLAVE_EXIT = 2.0
+# ... and in the floor's region (SLAVE_FLOOR) where it has grown to FLOOR_EXIT times its speed, as
+# before slave_tol existed: exiting there at twice the speed cost 29 % more steps in the paper's
+# disk at mu_d = mu_s
+FLOOR_EXIT = 4.0
 # cs[CS_SLAVE_OFF] while a slide that spirals out from u = 0 slides on below slip_tol (slow_slide):
 # the hand-over and EV_SLIP_SLOW are both off until the slip is fast again (EV_SLIP_FAST)
 SLOW_OFF = 2.0
@@ -123,6 +127,15 @@ def slave_speed(y, aux, p):
     where the relaxation time alone is below SLAVE_FLOOR, and at least slip_tol."""
     rate = 1.0 + abs(y[Y_W3] / aux[X_COSA])
     return max(p[P_UTOL], p[P_MUD] * aux[X_PHI] * max(SLAVE_FLOOR, p[P_SLAVE] / rate))
+
+
+@kernel
+def exit_speed(y, aux, p):
+    """Slip speed (u_hat) past which a slaved slip slides (SLIDE): SLAVE_EXIT times the slaving
+    speed of slave_tol, at least FLOOR_EXIT times the floor's (slave_speed)."""
+    rate = 1.0 + abs(y[Y_W3] / aux[X_COSA])
+    return max(FLOOR_EXIT * p[P_UTOL],
+               p[P_MUD] * aux[X_PHI] * max(FLOOR_EXIT * SLAVE_FLOOR, SLAVE_EXIT * p[P_SLAVE] / rate))
 
 
 @kernel
@@ -1006,12 +1019,12 @@ def event_values(t, y, aux, p, cs, lev, g):
             # refused for its error at the slaving speed: handed over at the floor's, or re-armed
             # where fast again
             g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - max(p[P_UTOL], SLAVE_FLOOR * p[P_MUD] * aux[X_PHI])
-            g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(y, aux, p) - math.hypot(y[Y_U1], y[Y_U2])
+            g[EV_SLIP_FAST] = exit_speed(y, aux, p) - math.hypot(y[Y_U1], y[Y_U2])
         else:
             # the hand-over is off (no quasi-static direction to settle on, or the slip passed it
             # by) until the slip is fast again: SLAVE_EXIT times the slaving speed, as a slaved
             # slip's exit; a slip that reverses and later decays is handed over then
-            g[EV_SLIP_FAST] = SLAVE_EXIT * slave_speed(y, aux, p) - math.hypot(y[Y_U1], y[Y_U2])
+            g[EV_SLIP_FAST] = exit_speed(y, aux, p) - math.hypot(y[Y_U1], y[Y_U2])
     else:
         # the slip along the slaved direction at this state (the RHS's): reaches 0 where the slip ends
         g[EV_SLIP_STOP] = y[Y_U1] * math.cos(aux[X_NU] + aux[X_LAG]) + y[Y_U2] * math.sin(aux[X_NU] + aux[X_LAG])
@@ -1026,15 +1039,15 @@ def event_values(t, y, aux, p, cs, lev, g):
 
 @kernel
 def slaved_margin(y, aux, p):
-    """EV_SLIP_FAST of a slaved slip: > 0 while the slip is below SLAVE_EXIT times the slaving speed
-    and the slaved direction's error (aux[X_SLAVE_ERR]) below SLAVE_EXIT times slave_tol, or the
-    slip below SLAVE_EXIT times the floor's speed SLAVE_FLOOR mu_d Phi; each as a fraction of its
+    """EV_SLIP_FAST of a slaved slip: > 0 while the slip is below its exit speed (exit_speed) and
+    the slaved direction's error (aux[X_SLAVE_ERR]) below SLAVE_EXIT times slave_tol, or the slip
+    below FLOOR_EXIT times the floor's speed SLAVE_FLOOR mu_d Phi; each as a fraction of its
     bound."""
     u = math.hypot(y[Y_U1], y[Y_U2])
-    margin = 1.0 - u / (SLAVE_EXIT * slave_speed(y, aux, p))
+    margin = 1.0 - u / exit_speed(y, aux, p)
     if p[P_SLAVE] > 0.0:
-        # (within SLAVE_EXIT times the floor's speed the slip stays slaved whatever the error)
-        floor = 1.0 - u / (SLAVE_EXIT * SLAVE_FLOOR * p[P_MUD] * max(aux[X_PHI], 0.0))
+        # (within FLOOR_EXIT times the floor's speed the slip stays slaved whatever the error)
+        floor = 1.0 - u / (FLOOR_EXIT * SLAVE_FLOOR * p[P_MUD] * max(aux[X_PHI], 0.0))
         margin = min(margin, max(floor, 1.0 - aux[X_SLAVE_ERR] / (SLAVE_EXIT * p[P_SLAVE])))
     return margin
 
