@@ -84,7 +84,8 @@ for line in sys.stdin:
                 sel = (mode == m) & (u >= lo) & (u < (hi if hi is not None else math.inf))
                 if not sel.any():
                     continue
-                stab = float(np.median(h[sel] * sc.params[model.P_MUD] * phi[sel] / np.maximum(uhat[sel], 1e-300)))
+                ok = sel & np.isfinite(phi)   # (a row at an event carries no normal force)
+                stab = float(np.median(h[ok] * sc.params[model.P_MUD] * phi[ok] / np.maximum(uhat[ok], 1e-300))) if ok.any() else math.nan
                 rows.append([m, lo, hi, int(sel.sum()), float(h[sel].sum() * chi), float(h[sel].mean() * chi), stab])
         print(json.dumps({"rows": rows, "cpu": time.process_time() - t0}), flush=True)
         continue
