@@ -620,6 +620,10 @@ class Disk:
         u = math.hypot(y[Y_U1], y[Y_U2])
         root = self.attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, c)
         if math.isinf(root):
+            phi = self.rhs(t, y, c, c.nu)[1][X_PHI]
+            if self.p[P_SLAVE] > 0.0 and u > SLAVE_FLOOR * self.p[P_MUD] * phi:
+                c.slave_off = "floor"   # decided at the floor's speed, as at slave_tol 0
+                return -1
             return outcomes.PAINLEVE
         if math.isnan(root):
             c.slave_off = True
@@ -640,14 +644,18 @@ class Disk:
         saved = y.copy()
         u = math.hypot(y[Y_U1], y[Y_U2])
         lag, err = self.lag(root, u, t, y, c)
-        if strict and self.p[P_SLAVE] > 0.0 and not err <= self.p[P_SLAVE]:
+        along = root + lag
+        turn = math.atan2(y[Y_U2], y[Y_U1]) - along
+        turn = abs(math.atan2(math.sin(turn), math.cos(turn)))
+        if strict and self.p[P_SLAVE] > 0.0 and not (err <= self.p[P_SLAVE] and turn <= self.p[P_SLAVE]):
             cs_, sn_ = math.cos(root), math.sin(root)
             ys = np.array(y[:self.n], dtype=float)
             ys[Y_U1], ys[Y_U2] = u * cs_, u * sn_
             phi = self.model(t, ys, SLIDE, c, cs_, sn_)[1][X_PHI]
             if u > SLAVE_FLOOR * self.p[P_MUD] * phi:
-                return "inaccurate"     # the first-order slow manifold is no good here: it slides on
-        along = root + lag
+                # the first-order slow manifold is no good here, or the direction has yet to
+                # relax onto it: it slides on
+                return "inaccurate"
         loss = self.be.project_velocity(y, self.p, c.side, True, c.side, True, self.S, along)
         if y[Y_U1] * math.cos(along) + y[Y_U2] * math.sin(along) > 0.0:
             y[Y_DSLIDE] += loss

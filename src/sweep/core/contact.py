@@ -483,10 +483,16 @@ def try_slave(t, y, sys):
     SLIDE, and this hand-over is off until the slip is fast again (EV_SLIP_FAST re-arms it).
     Returns the outcome that ends the scene (PAINLEVE where the direction dynamics carry the slip
     into the Painleve singularity: see attracting_direction), else -1."""
-    cs = sys.cs
+    p, cs, wk = sys.p, sys.cs, sys.wk
     u = math.hypot(y[Y_U1], y[Y_U2])
+    eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+    floor_speed = SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]
     root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, sys)
     if root == JAMMED:
+        if p[P_SLAVE] > 0.0 and u > floor_speed:
+            # decided where the direction's relaxation is as fast as at slave_tol 0: at the floor
+            cs[CS_SLAVE_OFF] = AT_FLOOR
+            return -1
         return oc.PAINLEVE
     if math.isnan(root):
         cs[CS_SLAVE_OFF] = 1.0
@@ -513,9 +519,15 @@ def settle_onto(root, t, y, sys, strict):
     side = int(cs[CS_SIDE])
     lag, _, err = root_lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     u = math.hypot(y[Y_U1], y[Y_U2])
-    if strict and p[P_SLAVE] > 0.0 and not err <= p[P_SLAVE] and u > SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]:
-        return INACCURATE   # the slow manifold is no good approximation here: the slip slides on
     along = root + lag
+    if strict and p[P_SLAVE] > 0.0 and u > SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]:
+        # the slow manifold is no good approximation here, or the slip's direction has yet to
+        # relax onto it (the impulse would cut its transient short, an error first order in the
+        # relaxation time): the slip slides on
+        turn = math.atan2(y[Y_U2], y[Y_U1]) - along
+        turn = abs(math.atan2(math.sin(turn), math.cos(turn)))
+        if not (err <= p[P_SLAVE] and turn <= p[P_SLAVE]):
+            return INACCURATE
     saved = wk[W_YSLIP]
     for i in range(n):
         saved[i] = y[i]
