@@ -4,7 +4,6 @@
     .venv/bin/pip install -r benchmarks/requirements-heyoka.txt     # once (benchmark-only, not in the lock)
     .venv/bin/python benchmarks/peer_heyoka.py                      # everything (~15-25 min on 2 shared cores)
     .venv/bin/python benchmarks/peer_heyoka.py --parts check wp     # only some parts
-    .venv/bin/python benchmarks/peer_heyoka.py --parts taylor       # the numba Taylor ceiling (~2 min)
     .venv/bin/python benchmarks/peer_heyoka.py --quick              # fewer rounds and rungs (a smoke run)
 
 Parts (`--parts`, default all):
@@ -51,30 +50,6 @@ Parts (`--parts`, default all):
   count is checked to equal the batch run's). Scenes/s at matched median error (interpolated), from
   the thread CPU time of the whole simulate_batch call (packing and summaries included) and of
   heyoka's loops; minimum over --batch-rounds (11) interleaved rounds.
-* `taylor`: the ceiling of the method the targets need: heyoka's own method (Taylor series of order
-  p = ceil(-ln(tol)/2 + 1) from the recurrences of the right-hand side's elementary operations,
-  step rho_m / e^2 exp(-0.7/(p-1)) from the last two coefficients; Jorba & Zou 2005) written in
-  numba, here, for the rolling equations as `model.rhs` evaluates them in ROLL (tilt_balance and
-  spin_balance: sin/cos, 3 quotients, 14 products per order; general k_i, sigma_i and side), no
-  events and no outputs, side by side with heyoka (double, high_accuracy, the same tolerances) on the
-  `wp` scene and reference, interleaved, the minimum of --rounds. Checked first: its first-order
-  coefficients equal `model.rhs` at the initial state. Two variants: the 4 variables heyoka
-  integrates, and with what the project's state adds to a rolling step (the dissipated energies
-  k_i Phi sigma_i omega.a_i and theta). It shows what a numba Taylor step costs against heyoka's
-  LLVM code; the project does not integrate this way (yet).
-* `paper`: the paper's case (config/scenes/kessler2002.yaml, default settings, levels down to 1e-3)
-  for the current checkout and for `--baseline COMMIT` (default f453bd3) side by side: a temporary
-  `git worktree` of that commit, each side in its own subprocess with PYTHONPATH at its own src (its
-  own numba cache; the baseline's first run compiles it, and that time is reported), rounds
-  interleaved, minimum over --paper-rounds (the thread's CPU time of the simulate call, and the
-  kernel's wall time); the worktree is removed afterwards. In the same rounds, each side also runs
-  the rolling scene of `wp` ('lean', rtol 1e-10, a sample at T): its CPU per try side by side, and
-  whether the two end states are identical to the last bit (they are where a change leaves the
-  numerics alone, e.g. `--baseline 708eac6` against the generated DOP853 sums). Then, in this
-  process, the current checkout's right-hand-side floor: its paper case's RHS count times the cost
-  of one call (ROLL and SLIDE, in proportion to the tries), against the run's CPU time in the same
-  interleaved rounds: the most any change that keeps the RHS count can gain.
-
 Prints the tables and writes benchmarks/out/peer_heyoka.md and peer_heyoka.json (benchmarks/out/ is
 git-ignored). Reports the machine's load average before and after each part: the machine is shared.
 """
@@ -89,12 +64,10 @@ import os
 import platform
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -547,40 +520,6 @@ def rhs_cost_ns(p, y, n: int = 1_000_000) -> dict:
             for nstate, name in ((M.N_CORE, "core"), (M.N_FULL, "full"))}
 
 
-def paper_rhs_floor(cfg: dict, rounds: int) -> dict:
-    """What the right-hand side alone costs in the paper's case (this checkout): its RHS count times
-    the cost of one call, in ROLL and in SLIDE (rhs_call_ns at the initial state, with the
-    dimensionless slip (0.05, 0.015) for SLIDE, with as many components as the run integrates:
-    integrate.state_size), each mode's calls in proportion to its tries; against the paper case's
-    own CPU time, interleaved over `rounds` (minima). The floor is what the run would cost if everything around the right-hand side
-    (stage sums, error norm, acceptance test, event scan and location, outputs) cost nothing, at the
-    same RHS count: run CPU / floor is the most any change that keeps the steps can gain."""
-    from sweep.core import layout
-    from sweep.core.integrate import state_size
-    from sweep.simulate import _settings
-
-    scene = load_scene(copy.deepcopy(cfg))
-    nstate = int(state_size(_settings(scene)))
-    y0, _ = initial_state(scene)
-    ys = y0.copy()
-    ys[M.Y_U1], ys[M.Y_U2] = 0.05, 0.015
-    s = sweep.simulate(copy.deepcopy(cfg)).summary
-    run, roll, slide = [], [], []
-    for _ in range(rounds):
-        c0 = time.thread_time()
-        sweep.simulate(copy.deepcopy(cfg))
-        run.append(time.thread_time() - c0)
-        roll.append(rhs_call_ns(scene.params, y0, layout.ROLL, nstate, 200_000, 1))
-        slide.append(rhs_call_ns(scene.params, ys, layout.SLIDE, nstate, 200_000, 1))
-    tries = s["n_steps"] + s["n_rejected"]
-    slide_share = (s["n_steps_sliding"] + s["n_rejected_sliding"]) / tries
-    per_call = (1.0 - slide_share) * min(roll) + slide_share * min(slide)
-    floor = s["n_rhs"] * per_call * 1e-9
-    return {"run_cpu_min_s": min(run), "n_rhs": s["n_rhs"], "nstate": nstate, "tries": tries, "slide_share": slide_share,
-            "roll_ns": min(roll), "slide_ns": min(slide), "floor_s": floor, "floor_share": floor / min(run),
-            "max_speedup_same_rhs": min(run) / floor}
-
-
 # ---------------------------------------------------------------------------------------- parts
 
 def part_check(ctx: dict, res: dict) -> None:
@@ -972,401 +911,40 @@ def part_batch(ctx: dict, res: dict) -> None:
     say(f"\n({load()})")
 
 
-CHILD = r"""
-import json, sys, time, copy
-import sweep, yaml
-cfg = yaml.safe_load(open(sys.argv[1]))
-cfg.setdefault("stop", {})["levels"] = [1e-1, 1e-2, 1e-3]
-rolling, t_roll = json.loads(sys.argv[2]), float(sys.argv[3])
-out = {"file": sweep.__file__}
-t0 = time.perf_counter(); r = sweep.simulate(copy.deepcopy(cfg)); out["first_s"] = time.perf_counter() - t0
-sweep.simulate(copy.deepcopy(rolling), sample_times=[t_roll])
-print(json.dumps(out), flush=True)
-for line in sys.stdin:
-    c = copy.deepcopy(cfg)
-    t0, c0 = time.perf_counter(), time.thread_time()
-    s = sweep.simulate(c).summary
-    t1, c1 = time.perf_counter(), time.thread_time()
-    c2 = time.thread_time()
-    rr = sweep.simulate(copy.deepcopy(rolling), sample_times=[t_roll])
-    c3 = time.thread_time()
-    print(json.dumps({"call_s": t1 - t0, "call_cpu_s": c1 - c0, "kernel_s": s["wall_time"], "steps": s["n_steps"],
-                      "t3": s["levels"][-1]["t"], "outcome": s["outcome"], "roll_cpu_s": c3 - c2,
-                      "roll_tries": rr.summary["n_steps"] + rr.summary["n_rejected"],
-                      "roll_state": [float(rr.samples["alpha"][0])] + [float(v) for v in rr.samples["omega"][0]]}),
-          flush=True)
-"""
-
-
-def part_paper(ctx: dict, res: dict) -> None:
-    base = ctx["baseline"]
-    rounds = ctx["paper_rounds"]
-    scene_file = ROOT / "config" / "scenes" / "kessler2002.yaml"
-    say(f"\n## The paper's case to the 1e-3 level: this checkout ({git_head()}) vs {base}; {rounds} interleaved "
-        f"rounds; {load()}\n")
-    # the rolling scene of the work-precision part, lean, at the default rtol: the same steps on both
-    # sides where the kernel's numerics agree, so the CPU per try compares the machinery alone
-    rolling = scene_cfg(**copy.deepcopy(CONFIGS["lean"]))
-    rolling["stop"] = dict(rolling["stop"], t_max=T_S)
-    rolling["solver"] = {"rtol": 1e-10, "atol": 1e-12}
-    tmp = Path(tempfile.mkdtemp(prefix="sweep-baseline-")) / "wt"
-    subprocess.run(["git", "worktree", "add", "--detach", str(tmp), base], cwd=ROOT, check=True,
-                   capture_output=True, text=True)
-    procs = {}
-    try:
-        for name, src in (("current", ROOT / "src"), ("baseline", tmp / "src")):
-            env = dict(os.environ, PYTHONPATH=str(src))
-            env.pop("NUMBA_CACHE_DIR", None)
-            procs[name] = subprocess.Popen([sys.executable, "-c", CHILD, str(scene_file), json.dumps(rolling), str(T_S)],
-                                           env=env, cwd=str(src.parent), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                           text=True)
-        first = {}
-        for name, p in procs.items():
-            first[name] = json.loads(p.stdout.readline())
-            say(f"{name}: sweep from {first[name]['file']}; first run (import of the cache or compilation) "
-                f"{first[name]['first_s']:.1f} s")
-        runs = {k: [] for k in procs}
-        for rnd in range(rounds + 1):
-            for name, p in procs.items():
-                p.stdin.write("run\n")
-                p.stdin.flush()
-                d = json.loads(p.stdout.readline())
-                if rnd:
-                    runs[name].append(d)
-    finally:
-        for p in procs.values():
-            try:
-                p.stdin.close()
-                p.wait(timeout=60)
-            except Exception:  # noqa: BLE001
-                p.kill()
-        subprocess.run(["git", "worktree", "remove", "--force", str(tmp)], cwd=ROOT, capture_output=True)
-        subprocess.run(["git", "worktree", "prune"], cwd=ROOT, capture_output=True)
-        try:
-            tmp.parent.rmdir()
-        except OSError:
-            pass
-    summ = {}
-    for name, rr in runs.items():
-        summ[name] = {"cpu_min_s": min(r["call_cpu_s"] for r in rr), "kernel_min_s": min(r["kernel_s"] for r in rr),
-                      "call_min_s": min(r["call_s"] for r in rr),
-                      "cpu_median_s": float(np.median([r["call_cpu_s"] for r in rr])),
-                      "steps": rr[0]["steps"], "t3": rr[0]["t3"], "outcome": rr[0]["outcome"],
-                      "first_s": first[name]["first_s"], "roll_cpu_min_s": min(r["roll_cpu_s"] for r in rr),
-                      "roll_tries": rr[0]["roll_tries"], "roll_state": rr[0]["roll_state"]}
-    ratio = summ["baseline"]["cpu_min_s"] / summ["current"]["cpu_min_s"]
-    ratio_wall = summ["baseline"]["kernel_min_s"] / summ["current"]["kernel_min_s"]
-    lines = ["| checkout | simulate CPU min (ms) | CPU median (ms) | kernel wall min (ms) | steps | t(1e-3) (s) | "
-             "first run (s) |", "|---|---|---|---|---|---|---|"]
-    for name, lab in (("current", f"current ({git_head()})"), ("baseline", base)):
-        d = summ[name]
-        lines.append(f"| {lab} | {1e3 * d['cpu_min_s']:.1f} | {1e3 * d['cpu_median_s']:.1f} | "
-                     f"{1e3 * d['kernel_min_s']:.1f} | {d['steps']} | {d['t3']:.6f} | {d['first_s']:.1f} |")
-    table = "\n".join(lines)
-    say(table)
-    say(f"\nspeed-up of the current checkout over {base}: {ratio:.3f}x (thread-CPU minima of the simulate call), "
-        f"{ratio_wall:.3f}x (wall minima of the kernel call)")
-    rlines = ["| checkout | rolling scene CPU min (ms) | tries | CPU per try (us) |", "|---|---|---|---|"]
-    for name, lab in (("current", f"current ({git_head()})"), ("baseline", base)):
-        d = summ[name]
-        rlines.append(f"| {lab} | {1e3 * d['roll_cpu_min_s']:.2f} | {d['roll_tries']} | "
-                      f"{1e6 * d['roll_cpu_min_s'] / d['roll_tries']:.3f} |")
-    roll_ratio = summ["baseline"]["roll_cpu_min_s"] / summ["current"]["roll_cpu_min_s"]
-    same = summ["baseline"]["roll_state"] == summ["current"]["roll_state"]
-    say("\nthe rolling scene (lean, rtol 1e-10, to T; simulate with a sample at T, thread CPU of the call), same rounds:\n")
-    say("\n".join(rlines))
-    say(f"\nspeed-up {roll_ratio:.3f}x; end states (alpha, omega at T) "
-        + ("identical to the last bit" if same else "differ: the kernels' numerics differ"))
-    table += "\n\n" + "\n".join(rlines)
-    cfg = yaml.safe_load(scene_file.read_text())
-    cfg.setdefault("stop", {})["levels"] = [1e-1, 1e-2, 1e-3]
-    fl = paper_rhs_floor(cfg, rounds)
-    fline = (f"the right-hand side alone in the current checkout's paper case: {fl['n_rhs']} calls ({100 * fl['slide_share']:.0f} % "
-             f"of the tries sliding) x {fl['roll_ns']:.1f} ns (ROLL) / {fl['slide_ns']:.1f} ns (SLIDE) with {fl['nstate']} "
-             f"components = {1e3 * fl['floor_s']:.1f} ms, "
-             f"{100 * fl['floor_share']:.1f} % of the run's {1e3 * fl['run_cpu_min_s']:.1f} ms ({rounds} interleaved rounds, minima): "
-             f"with everything else free and the same RHS count, at most {fl['max_speedup_same_rhs']:.2f}x this checkout, "
-             f"{fl['max_speedup_same_rhs'] * ratio:.2f}x {base}")
-    say("\n" + fline)
-    table += "\n\n" + fline
-    res["paper"] = {"baseline": base, "rounds": rounds, "sides": summ, "speedup": ratio, "speedup_wall": ratio_wall,
-                    "rolling_speedup": roll_ratio, "rolling_identical": same, "rhs_floor": fl, "table": table,
-                    "load_after": load()}
-    say(f"\n({load()})")
-
-
-# ------------------------------------------------------------------------------- the Taylor ceiling
-
-# Taylor variables of the rolling equations: the state (alpha, w1..w3), the intermediates in the
-# order the right-hand side computes them, then what the project's state adds (dissipated energies,
-# theta) and the products they need
-(TY_A, TY_W1, TY_W2, TY_W3, TY_S, TY_C, TY_TN, TY_THD, TY_E, TY_F, TY_W1SQ, TY_EW1SQ, TY_PHI0, TY_W2W3, TY_W3T,
- TY_W3SQT, TY_ETHD, TY_Q, TY_ETHDQ, TY_R1, TY_DEN, TY_NUM1, TY_DW1, TY_FDW1, TY_PHI, TY_ETHDW1, TY_W1W2, TY_W1W3T,
- TY_KB2, TY_KB3, TY_PHIKB2, TY_PHIKB3, TY_DW2, TY_DW3, TY_G2, TY_G3, TY_DK1, TY_DK2, TY_DK3, TY_THETA, TY_WC2,
- TY_WS3, TY_WS2, TY_WC3, TY_PW1, TY_PG2, TY_PG3, TY_NV) = range(48)
-TY_PMAX = 40
-
-
-def taylor_kernels():
-    """(coeffs, propagate): numba kernels of the Taylor method for the rolling equations (see the
-    module docstring, part `taylor`). par: G, A, C, h (side |H|/R), k1 sigma1, k2 sigma2, k3 sigma3."""
-    from numba import njit
-
-    @njit(inline="always")
-    def mul(T, out, a, b, k):
-        acc = 0.0
-        for j in range(k + 1):
-            acc += T[a, j] * T[b, k - j]
-        T[out, k] = acc
-
-    @njit(inline="always")
-    def div(T, out, a, b, k):       # out = a / b
-        acc = T[a, k]
-        for j in range(1, k + 1):
-            acc -= T[b, j] * T[out, k - j]
-        T[out, k] = acc / T[b, 0]
-
-    @njit(error_model="numpy")
-    def coeffs(x, par, p, T, extra):
-        """T[v, 0..p]: the Taylor coefficients of every variable at the state x (alpha, w1, w2,
-        w3, and where extra the dissipated energies DK1..3 and theta), order by order: the
-        coefficient k of each intermediate from the coefficients 0..k before it, then the state's
-        coefficient k + 1 = (its rate's coefficient k) / (k + 1). The operations are model.rhs's in
-        ROLL (tilt_balance: a1 dw1 = r1 + qq Phi0 with qq = -k1 sigma1; spin_balance's 2x2 system)."""
-        G, Ai, Ci, h, k1s, k2s, k3s = par[0], par[1], par[2], par[3], par[4], par[5], par[6]
-        a1 = Ai + 1.0 + h * h
-        qq = -k1s
-        m11, m12, m21, m22 = Ci + 1.0, -h, -h, Ai + h * h
-        det = m11 * m22 - m12 * m21
-        for i in range(4):
-            T[i, 0] = x[i]
-        if extra:
-            for i in range(4):
-                T[TY_DK1 + i, 0] = x[4 + i]
-        for k in range(p):
-            if k == 0:
-                T[TY_S, 0] = math.sin(T[TY_A, 0])
-                T[TY_C, 0] = math.cos(T[TY_A, 0])
-            else:       # (sin a)' = a' cos a, (cos a)' = -a' sin a
-                sa = 0.0
-                ca = 0.0
-                for j in range(1, k + 1):
-                    ja = j * T[TY_A, j]
-                    sa += ja * T[TY_C, k - j]
-                    ca += ja * T[TY_S, k - j]
-                T[TY_S, k] = sa / k
-                T[TY_C, k] = -ca / k
-            div(T, TY_TN, TY_S, TY_C, k)
-            div(T, TY_THD, TY_W3, TY_C, k)
-            T[TY_E, k] = T[TY_C, k] + h * T[TY_S, k]
-            T[TY_F, k] = h * T[TY_C, k] - T[TY_S, k]
-            mul(T, TY_W1SQ, TY_W1, TY_W1, k)
-            mul(T, TY_EW1SQ, TY_E, TY_W1SQ, k)
-            T[TY_PHI0, k] = (G if k == 0 else 0.0) - T[TY_EW1SQ, k]
-            mul(T, TY_W2W3, TY_W2, TY_W3, k)
-            mul(T, TY_W3T, TY_W3, TY_TN, k)
-            mul(T, TY_W3SQT, TY_W3, TY_W3T, k)
-            mul(T, TY_ETHD, TY_E, TY_THD, k)
-            T[TY_Q, k] = T[TY_W2, k] - h * T[TY_W3, k]
-            mul(T, TY_ETHDQ, TY_ETHD, TY_Q, k)
-            T[TY_R1, k] = Ci * T[TY_W2W3, k] - Ai * T[TY_W3SQT, k] + T[TY_ETHDQ, k] - G * T[TY_F, k]
-            T[TY_DEN, k] = (a1 if k == 0 else 0.0) - qq * T[TY_F, k]
-            T[TY_NUM1, k] = T[TY_R1, k] + qq * T[TY_PHI0, k]
-            div(T, TY_DW1, TY_NUM1, TY_DEN, k)
-            mul(T, TY_FDW1, TY_F, TY_DW1, k)
-            T[TY_PHI, k] = T[TY_PHI0, k] + T[TY_FDW1, k]
-            mul(T, TY_ETHDW1, TY_ETHD, TY_W1, k)
-            mul(T, TY_W1W2, TY_W1, TY_W2, k)
-            mul(T, TY_W1W3T, TY_W1, TY_W3T, k)
-            T[TY_KB2, k] = k2s * T[TY_C, k] + k3s * T[TY_S, k]
-            T[TY_KB3, k] = k3s * T[TY_C, k] - k2s * T[TY_S, k]
-            mul(T, TY_PHIKB2, TY_PHI, TY_KB2, k)
-            mul(T, TY_PHIKB3, TY_PHI, TY_KB3, k)
-            rhs1 = -T[TY_ETHDW1, k] - T[TY_PHIKB2, k]
-            rhs2 = -Ci * T[TY_W1W2, k] + Ai * T[TY_W1W3T, k] + h * T[TY_ETHDW1, k] - T[TY_PHIKB3, k]
-            T[TY_DW2, k] = (m22 * rhs1 - m12 * rhs2) / det
-            T[TY_DW3, k] = (m11 * rhs2 - m21 * rhs1) / det
-            inv = 1.0 / (k + 1)
-            T[TY_A, k + 1] = T[TY_W1, k] * inv
-            T[TY_W1, k + 1] = T[TY_DW1, k] * inv
-            T[TY_W2, k + 1] = T[TY_DW2, k] * inv
-            T[TY_W3, k + 1] = T[TY_DW3, k] * inv
-            if extra:   # dissipated energies (Phi k_i sigma_i omega.a_i, eq. 3.3) and theta (thd)
-                mul(T, TY_WC2, TY_W2, TY_C, k)
-                mul(T, TY_WS3, TY_W3, TY_S, k)
-                mul(T, TY_WS2, TY_W2, TY_S, k)
-                mul(T, TY_WC3, TY_W3, TY_C, k)
-                T[TY_G2, k] = T[TY_WC2, k] - T[TY_WS3, k]
-                T[TY_G3, k] = T[TY_WS2, k] + T[TY_WC3, k]
-                mul(T, TY_PW1, TY_PHI, TY_W1, k)
-                mul(T, TY_PG2, TY_PHI, TY_G2, k)
-                mul(T, TY_PG3, TY_PHI, TY_G3, k)
-                T[TY_DK1, k + 1] = k1s * T[TY_PW1, k] * inv
-                T[TY_DK2, k + 1] = k2s * T[TY_PG2, k] * inv
-                T[TY_DK3, k + 1] = k3s * T[TY_PG3, k] * inv
-                T[TY_THETA, k + 1] = T[TY_THD, k] * inv
-
-    @njit(error_model="numpy")
-    def propagate(x0, par, tau, tol, T, extra):
-        """To tau from x0 with heyoka's order and step rules (absolute error control where the
-        state's inf-norm is below 1, relative above; the step from the state's coefficients only).
-        Returns (state, steps, order)."""
-        p = int(math.ceil(-math.log(tol) / 2.0 + 1.0))
-        x = x0.copy()
-        t = 0.0
-        steps = 0
-        safety = math.exp(-0.7 / (p - 1)) / math.e ** 2
-        while t < tau:
-            coeffs(x, par, p, T, extra)
-            nx = 0.0
-            n1 = 0.0
-            n2 = 0.0
-            for i in range(4):
-                nx = max(nx, abs(x[i]))
-                n1 = max(n1, abs(T[i, p - 1]))
-                n2 = max(n2, abs(T[i, p]))
-            scale = max(nx, 1.0)
-            h = min((scale / n1) ** (1.0 / (p - 1)), (scale / n2) ** (1.0 / p)) * safety
-            if t + h >= tau:
-                h = tau - t
-            for i in range(4):
-                acc = T[i, p]
-                for k in range(p - 1, -1, -1):
-                    acc = acc * h + T[i, k]
-                x[i] = acc
-            if extra:
-                for i in range(4):
-                    acc = T[TY_DK1 + i, p]
-                    for k in range(p - 1, -1, -1):
-                        acc = acc * h + T[TY_DK1 + i, k]
-                    x[4 + i] = acc
-            t = t + h if t + h < tau else tau
-            steps += 1
-        return x, steps, p
-
-    return coeffs, propagate
-
-
-def part_taylor(ctx: dict, res: dict) -> None:
-    ref = reference(ctx, res)
-    y4, tau, rounds, tols = ctx["y4"], ctx["tau"], ctx["rounds"], ctx["hy_tols"]
-    sc, side, sig2 = ctx["scene"], ctx["side"], ctx["sig2"]
-    say(f"\n## The Taylor method in numba (heyoka's method, the same rolling equations) vs heyoka; "
-        f"{rounds} interleaved rounds; {load()}\n")
-    coeffs, propagate = taylor_kernels()
-    p = sc.params
-    # sigma1, sigma3 as the project's rolling state starts them (k1 = k3 = 0 here: they do not enter)
-    par = np.array([p[M.P_G], p[M.P_A], p[M.P_C], side * p[M.P_H], p[M.P_K1], sig2 * p[M.P_K2], p[M.P_K3]])
-    T = np.zeros((TY_NV, TY_PMAX + 1))
-    y0 = ctx["scene_y0"]
-    dy = np.zeros(M.N_FULL)
-    aux = np.zeros(M.N_AUX)
-    M.rhs(0.0, y0, p, M.Contact(M.ROLL, side, np.array([1.0, sig2, 1.0]), np.zeros(3, np.int64), 0.0, 0.0),
-          M.N_CORE, dy, aux)
-    coeffs(y0[:4].copy(), par, 3, T, True)
-    first = np.array([T[TY_A, 1], T[TY_W1, 1], T[TY_W2, 1], T[TY_W3, 1], T[TY_DK2, 1]])
-    check = float(np.max(np.abs(first - dy[[M.Y_ALPHA, M.Y_W1, M.Y_W2, M.Y_W3, M.Y_DK2]])))
-    say(f"first-order coefficients (alpha, w1..w3, DK2) against model.rhs (ROLL) at the initial state: largest "
-        f"difference {check:.1e}; Phi {abs(T[TY_PHI, 0] - aux[M.X_PHI]):.1e}")
-    if check > 1e-14 * max(1.0, float(np.max(np.abs(first)))):
-        raise SystemExit("the Taylor recurrences do not reproduce model.rhs")
-    y8 = np.zeros(8)
-    y8[:4] = y4
-    c0 = time.perf_counter()
-    propagate(y4, par, tau, 1e-8, T, False)
-    propagate(y8, par, tau, 1e-8, T, True)
-    compile_s = time.perf_counter() - c0
-    tas = {tol: hy.taylor_adaptive(ctx["system_num"], np.array(y4), tol=tol, high_accuracy=True) for tol in tols}
-    variants = {"numba": (y4, False), "numba, project state": (y8, True)}
-    info = {}
-    for rnd in range(rounds + 1):
-        for tol in tols:
-            for name, (x0, extra) in variants.items():
-                wall, cpu, (x, steps, order) = timed(propagate, x0, par, tau, tol, T, extra)
-                d = info.setdefault((name, tol), {"err": float(np.max(np.abs(x[:4] - ref))), "steps": steps,
-                                                  "order": order, "cpu": math.inf, "wall": math.inf})
-                if rnd:
-                    d["cpu"], d["wall"] = min(d["cpu"], cpu), min(d["wall"], wall)
-            ta = tas[tol]
-            ta.time = 0.0
-            ta.state[:] = y4
-            wall, cpu, r = timed(ta.propagate_until, tau)
-            d = info.setdefault(("heyoka", tol), {"err": float(np.max(np.abs(ta.state - ref))), "steps": int(r[3]),
-                                                   "order": int(ta.order), "cpu": math.inf, "wall": math.inf})
-            if rnd:
-                d["cpu"], d["wall"] = min(d["cpu"], cpu), min(d["wall"], wall)
-    names = [*variants, "heyoka"]
-    lines = ["| side | tol | error (max abs) | CPU (ms) | steps | order | CPU us/step |", "|---|---|---|---|---|---|---|"]
-    for name in names:
-        for tol in tols:
-            d = info[(name, tol)]
-            lines.append(f"| {name} | {tol:.0e} | {d['err']:.2e} | {1e3 * d['cpu']:.2f} | {d['steps']} | {d['order']} | "
-                         f"{1e6 * d['cpu'] / d['steps']:.2f} |")
-    table = "\n".join(lines)
-    say(table)
-    say(f"\n(numba compile of the two variants: {compile_s:.1f} s)")
-    sides = {n: [info[(n, t)] for t in tols] for n in names}
-    mlines = ["| error | numba / heyoka (CPU) | numba with the project's state / heyoka | numba, heyoka CPU (ms) |",
-              "|---|---|---|---|"]
-    matched = []
-    for row in matched_rows(sides, MATCH):
-        a_, b_, h_ = row[("numba", "cpu")], row[("numba, project state", "cpu")], row[("heyoka", "cpu")]
-        lab = f"~{row['error']:.1e}" if row["approx"] else f"{row['error']:.0e}"
-        matched.append({"target": row["target"], "error": row["error"], "approx": row["approx"], "numba_cpu": a_,
-                        "numba_state_cpu": b_, "heyoka_cpu": h_, "ratio": a_ / h_, "ratio_state": b_ / h_})
-        mlines.append(f"| {lab} | {fmt(a_ / h_, '.2f')} | {fmt(b_ / h_, '.2f')} | {fmt(1e3 * a_, '.2f')}, "
-                      f"{fmt(1e3 * h_, '.2f')} |")
-    mtable = "\n".join(mlines)
-    say("\nmatched-error ratios:\n")
-    say(mtable)
-    same = all(info[("numba", t)]["steps"] == info[("heyoka", t)]["steps"] for t in tols)
-    say(f"\nsteps equal to heyoka's at every tolerance: {same}")
-    res["taylor"] = {"check": check, "compile_s": compile_s, "points": [{"side": k[0], "tol": k[1], **v}
-                                                                          for k, v in info.items()],
-                     "matched": matched, "same_steps": same, "table": table, "matched_table": mtable,
-                     "load_after": load()}
-    say(f"\n({load()})")
-
-
 # ------------------------------------------------------------------------------------------- main
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--parts", nargs="+", default=["check", "wp", "batch", "paper", "taylor"],
-                    choices=["check", "wp", "batch", "paper", "taylor"])
+    ap.add_argument("--parts", nargs="+", default=["check", "wp", "batch"], choices=["check", "wp", "batch"])
     ap.add_argument("--rounds", type=int, default=21, help="interleaved timing rounds, work-precision (21)")
     ap.add_argument("--batch-rounds", type=int, default=11, help="interleaved timing rounds, batch (11)")
-    ap.add_argument("--paper-rounds", type=int, default=21)
-    ap.add_argument("--baseline", default="f453bd3", help="git commit for the paper case's side-by-side (f453bd3)")
     ap.add_argument("--quick", action="store_true", help="3 rounds, fewer rungs, 16 batch scenes (a smoke run)")
     ap.add_argument("--no-real128", action="store_true", help="long-double reference even where real128 exists")
     ap.add_argument("--out", default=str(OUT / "peer_heyoka"), help="output stem (.md, .json)")
     a = ap.parse_args(argv)
-    ctx = {"rounds": a.rounds, "batch_rounds": a.batch_rounds, "paper_rounds": a.paper_rounds,
-           "baseline": a.baseline, "no_real128": a.no_real128, "n_check": 2000, "n_batch": N_BATCH,
-           "rtols": RTOLS, "hy_tols": HY_TOLS, "batch_rtols": BATCH_RTOLS, "batch_hy_tols": BATCH_HY_TOLS,
+    ctx = {"rounds": a.rounds, "batch_rounds": a.batch_rounds, "no_real128": a.no_real128, "n_check": 2000,
+           "n_batch": N_BATCH, "rtols": RTOLS, "hy_tols": HY_TOLS, "batch_rtols": BATCH_RTOLS, "batch_hy_tols": BATCH_HY_TOLS,
            "batch_match": BATCH_MATCH}
     if a.quick:
-        ctx.update(rounds=3, batch_rounds=2, paper_rounds=3, n_check=300, n_batch=16,
+        ctx.update(rounds=3, batch_rounds=2, n_check=300, n_batch=16,
                    rtols=RTOLS[::2], hy_tols=HY_TOLS[::2], batch_rtols=BATCH_RTOLS[::2], batch_hy_tols=BATCH_HY_TOLS[::2])
     res: dict = {"env": env_line(), "load_before": load(), "argv": sys.argv[1:]}
     say(f"# peer_heyoka: {res['env']}\n({res['load_before']})")
 
-    # the scene, its state and the heyoka system (every part but 'paper' needs them)
-    if set(a.parts) - {"paper"}:
-        sc = load_scene(scene_cfg())
-        y0, mode = initial_state(sc)
-        assert mode == M.ROLL
-        side = 1.0 if y0[M.Y_ALPHA] > 0 else -1.0
-        g2 = y0[M.Y_W2] * math.cos(y0[0]) - y0[M.Y_W3] * math.sin(y0[0])
-        rol = Rolling()
-        ctx.update(scene=sc, scene_y0=y0, y4=y0[:4].copy(), side=side, sig2=1.0 if g2 > 0 else -1.0,
-                   tau=T_S / sc.chi, rolling=rol)
-        ctx["system"] = rol.heyoka_system(ctx["sig2"])      # exact parameters (par[]): the references
-        ctx["system_num"] = rol.heyoka_system(ctx["sig2"], par_values(sc.params, side))   # the timed runs
-        sweep.simulate(project_scene(CONFIGS["lean"], 1e-8, 1.0), sample_times=[0.5])   # compile / load
-    parts = {"check": part_check, "wp": part_wp, "batch": part_batch, "paper": part_paper, "taylor": part_taylor}
-    for name in ("check", "wp", "batch", "paper", "taylor"):
+    # the scene, its state and the heyoka system
+    sc = load_scene(scene_cfg())
+    y0, mode = initial_state(sc)
+    assert mode == M.ROLL
+    side = 1.0 if y0[M.Y_ALPHA] > 0 else -1.0
+    g2 = y0[M.Y_W2] * math.cos(y0[0]) - y0[M.Y_W3] * math.sin(y0[0])
+    rol = Rolling()
+    ctx.update(scene=sc, scene_y0=y0, y4=y0[:4].copy(), side=side, sig2=1.0 if g2 > 0 else -1.0,
+               tau=T_S / sc.chi, rolling=rol)
+    ctx["system"] = rol.heyoka_system(ctx["sig2"])      # exact parameters (par[]): the references
+    ctx["system_num"] = rol.heyoka_system(ctx["sig2"], par_values(sc.params, side))   # the timed runs
+    sweep.simulate(project_scene(CONFIGS["lean"], 1e-8, 1.0), sample_times=[0.5])   # compile / load
+    parts = {"check": part_check, "wp": part_wp, "batch": part_batch}
+    for name in ("check", "wp", "batch"):
         if name in a.parts:
             parts[name](ctx, res)
     res["load_end"] = load()
@@ -1385,11 +963,6 @@ def main(argv=None) -> int:
                "### Project step anatomy", "", f"model.rhs: {res['wp']['rhs_ns']}", "", res["wp"]["anatomy_table"], ""]
     if "batch" in res:
         md += ["## Batch", "", res["batch"]["table"], "", res["batch"]["matched_table"], ""]
-    if "taylor" in res:
-        md += ["## The Taylor method in numba vs heyoka", "", res["taylor"]["table"], "", res["taylor"]["matched_table"], ""]
-    if "paper" in res:
-        md += ["## Paper case", "", res["paper"]["table"], "",
-               f"speed-up: {res['paper']['speedup']:.3f}x (CPU), {res['paper']['speedup_wall']:.3f}x (wall)", ""]
     stem.with_suffix(".md").write_text("\n".join(md))
     say(f"\nwritten: {stem.with_suffix('.md')}, {stem.with_suffix('.json')}")
     return 0
