@@ -70,6 +70,21 @@ def test_scene_defaults_are_valid_and_every_scene_field_has_one():
         assert (f.range is not None) == (f.kind in ("number", "vector", "levels")), f.path
 
 
+def test_the_registry_names_the_shapes_and_kernel_slots_the_model_has():
+    """disk.shape's choices are scene.SHAPES' (their k^2), and every Param names a parameter slot of
+    the model that make_params leaves to it (set to 0 there) with a known scale."""
+    from sweep.core import model
+
+    shape = next(f for f in fields.FIELDS if f.path == "disk.shape")
+    assert shape.choices == tuple(scene.SHAPES)
+    made, _ = model.make_params(1.0, 0.03755, 0.0128, 9.81, 0.5, 0.3, (0.0, 0.0, 0.0))
+    for f in fields.FIELDS:
+        if f.kernel is not None:
+            slot = getattr(model, f.kernel.slot)
+            assert 0 <= slot < model.N_PARAMS and made[slot] == 0.0, f.path
+            assert f.kernel.scale in scene.KERNEL_SCALE, f.path
+
+
 def test_the_packaged_schema_file_is_the_one_the_registry_builds():
     """config.schema.yaml (for tools that read a file) equals what load_schema builds from the
     template and the registry; regenerate it with grid.write_schema() after a registry change."""
