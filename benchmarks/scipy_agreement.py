@@ -1,4 +1,4 @@
-"""Does the SciPy driver (benchmarks/scipy_driver.py) agree with the kernel on the harness scenes?
+"""Does the SciPy driver (tests/reference/scipy_driver.py) agree with the kernel on the harness scenes?
 
     python benchmarks/scipy_agreement.py [--scenes N] [--seed S] [--rtol R] [--cap SECONDS] [--tag NAME]
     python benchmarks/scipy_agreement.py --analyse benchmarks/out/scipy-agreement-<tag>.jsonl [--diagnose]
@@ -41,6 +41,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent))   # the repository root: the SciPy peer is tests.reference.scipy_driver
 
 import convergence as cv  # noqa: E402  (the harness' scene generator, level filter and kernel run)
 
@@ -50,7 +51,7 @@ AGREE = 1e-8    # agreement required (relative)
 
 
 def _driver(cfg: dict, rtol: float, cap: float) -> dict:
-    from scipy_driver import run_scipy
+    from tests.reference.scipy_driver import run_scipy
     from sweep.scene import load_scene
 
     c = json.loads(json.dumps(cfg))

@@ -6,8 +6,7 @@ against a base commit side by side (docs/model.md, 'Slow slip').
         [--parts paper,accuracy,k3,random,mechanism]
 
 Parts (each prints one table; this tree and the base run in two worker processes, the base
-extracted with `git archive` into a temporary directory with its own numba cache, as
-benchmarks/harness_cost.py does):
+extracted with `git archive` into a temporary directory with its own numba cache):
 
 * paper: the paper's disk (config/scenes/kessler2002.yaml) at mu_d 0.3, 0.49, 0.499, 0.5 (mu_s 0.5),
   each kernel at its defaults and this tree again at each --slave-tols:
@@ -38,7 +37,9 @@ import argparse
 import copy
 import json
 import math
+import subprocess
 import sys
+import tarfile
 import tempfile
 from pathlib import Path
 
@@ -49,9 +50,17 @@ ROOT = Path(__file__).resolve().parents[1]
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import convergence as cv  # noqa: E402
-from harness_cost import extract  # noqa: E402
 
 FAILURES = ("step_size_underflow", "step_limit", "numerical_error")
+
+
+def extract(commit: str, into: Path) -> Path:
+    """src/ of `commit` into `into` (git archive); returns its src directory."""
+    tar = into / "src.tar"
+    subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", "-o", str(tar), commit, "src"], check=True)
+    with tarfile.open(tar) as t:
+        t.extractall(into, filter="data")
+    return into / "src"
 MUDS = (0.3, 0.49, 0.499, 0.5)
 U_BANDS = (0.0, 1e-9, 1e-7, 1e-5, 1e-3, 1e-1, math.inf)   # m/s
 

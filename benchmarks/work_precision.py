@@ -45,11 +45,12 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT))   # the SciPy peer: tests.reference.scipy_driver
 
 import sweep  # noqa: E402
 from sweep.scene import DEFAULTS, load_scene  # noqa: E402
 
-from scipy_driver import numpy_backend, run_scipy  # noqa: E402
+from tests.reference.scipy_driver import numpy_backend, run_scipy  # noqa: E402
 
 OUT = HERE / "out"
 BUDGET_S = 60.0

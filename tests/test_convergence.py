@@ -250,7 +250,7 @@ def _counts(cfg, rtol, spin_tol):
 
 def _peer_end(cfg):
     """The SciPy peer's outcome and end time (s) for a harness scene at rtol 1e-12."""
-    from scipy_driver import run_scipy
+    from tests.reference.scipy_driver import run_scipy
     from sweep.scene import load_scene
 
     c = copy.deepcopy(cfg)
@@ -424,7 +424,7 @@ def test_the_peers_minimum_over_a_short_step_late_in_a_run_is_the_minimum():
     8.8e-9) exceeds the step, and it returned its first golden-section point (seed 20261128 scene
     19: |u| 1.342e-9 there, against a minimum of 1.250e-9 below slip_tol 1.264e-9; the slide's end
     was missed at rtol 1e-11 and 1e-12). A V of |u| with its bottom at 0.63 of the step:"""
-    from scipy_driver import _step_minimum
+    from tests.reference.scipy_driver import _step_minimum
 
     t_old, hstep = 124.24662130825361, 8.8155e-9
     t_bottom = t_old + 0.63 * hstep

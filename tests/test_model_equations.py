@@ -17,24 +17,21 @@ compared relative to 1 + the sum of the magnitudes of the individual power terms
 steady_rolling_w3sq is compared with the reference's zero of d(omega_1)/dtau, whose own error is
 amplified near the pole of omega_3^2 by the condition number used there.
 
-Run ``python tests/test_model_equations.py`` for a table of the maximal errors.
+Run ``.venv/bin/python -m tests.test_model_equations`` for a table of the maximal errors.
 """
 from __future__ import annotations
 
 import math
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from reference import newton_euler as ne  # noqa: E402
+from tests.reference import newton_euler as ne
 
-from sweep.core import model as M  # noqa: E402
-from sweep.core import layout as L  # noqa: E402
-from sweep.core.impulse import project_velocity, stop_axis_rate  # noqa: E402
+from sweep.core import model as M
+from sweep.core import layout as L
+from sweep.core.impulse import project_velocity, stop_axis_rate
 
 RTOL = 1e-12
 N_VALID = 1000          # valid (den > 0, Phi > 0) states per mode / stuck combination

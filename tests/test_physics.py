@@ -172,7 +172,7 @@ def test_without_k2_the_wobble_still_brings_the_disk_down():
     """docs/model.md, 'Does the model reach pi/2 in finite time?': with k2 = 0 the steady
     centre-fixed rolling dissipates nothing through k3 (omega.a3 = 0 there), but the slips keep a
     wobble up through which k3 does, and the disk comes down onto its face. The SciPy driver
-    (benchmarks/scipy_driver.py, its own contact rules, rtol 1e-11) gives the 0.01 rad level at
+    (tests/reference/scipy_driver.py, its own contact rules, rtol 1e-11) gives the 0.01 rad level at
     20.72947823 s and the face at 27.392 s with 304 transitions and no stick phase; an earlier
     integrator stuck the k3 component there and froze the inclination at beta ~ 1.3e-3."""
     import yaml

@@ -260,7 +260,7 @@ def test_the_slaved_directions_lag_agrees_with_the_peers():
     (scipy_driver.Disk.lag: central differences, plain Python) at random slow slips of the paper's
     disk at mu_d = mu_s: the same first-order slow manifold, lag = u nu*'/(c' - rad), to 1e-5 of the
     lag; and the error measures agree to 1e-6."""
-    from scipy_driver import Contact, Disk, numba_backend
+    from tests.reference.scipy_driver import Contact, Disk, numba_backend
     from sweep.scene import load_scene
 
     sc = load_scene(_paper_edge())

@@ -163,8 +163,7 @@ def test_scipy_driver_agrees_with_sweep_on_the_paper_case():
     Only well-conditioned quantities: the 0.3 and 0.1 rad level times and alpha at tau <= 100
     (deeper levels are dynamically sensitive, tests/test_physics.py).
     """
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    from scipy_driver import run_scipy
+    from tests.reference.scipy_driver import run_scipy
 
     cfg = _cfg({})
     cfg["stop"]["levels"] = [0.3, 0.1]

@@ -9,13 +9,12 @@ which has a root if and only if the gaps between level times shrink faster than 
 (for decade levels: t3 - t2 < t2 - t1); that is the finite-time criterion. For geometric levels it
 is Aitken's delta-squared extrapolation. Its error estimate is the extrapolated remainder
 t_halt - t3: the level times are located on the trajectory (to the integration's accuracy), the
-remainder is what the fit adds, and the halt cannot come before t3. Measured against the halt with
-levels extended to 1e-6 rad (benchmarks/error_bars.py, every 8th point of the default grid, the 26
-scenes halted by the fit): the true miss was 0.0007-0.94 of this remainder (median 0.17), never
-more. The former estimate, the change against the fit on the previous three levels, was below the
-true miss in 8 of 26 scenes (up to 9.6x) and far above it in others (that triple reaches back to
-0.1 rad, where the final law does not hold yet). The numerical error of t_halt is a separate
-quantity: t_halt_numerical_error (outputs.error_estimate).
+remainder is what the fit adds, and the halt cannot come before t3. Against the halt with levels
+extended to 1e-6 rad, on every 8th point of the default grid, the true miss is 0.0007-0.94 of this
+remainder, never more (CHANGELOG.md, 'Error bars'); the change against the fit on the previous three
+levels is no error estimate (that triple reaches back to 0.1 rad, where the final law does not hold
+yet). The numerical error of t_halt is a separate quantity: t_halt_numerical_error
+(outputs.error_estimate).
 
 Ramp exponent n of the precession frequency, Omega ~ (t_halt - t)^(-n): least squares of
 ln Omega_i against ln(t_halt - t_i) over the reached levels with a precession frequency (the mean

@@ -9,8 +9,8 @@ ends; the kernel releases the GIL, so the threads run in parallel. The kernel ou
 (statistics, level records, end state and the fitted halt time and exponents) become the SI summary
 dict in Python (`simulate.summary_from`, unit scaling only: ~20 us per scene).
 
-A GPU path (device="cuda", numba-cuda) was built and measured on an H200 host: 18.4 scenes/s
-against 70.1 on the same machine's 16 CPU cores; it was removed on 2026-11-27 (CHANGELOG.md).
+There is no GPU path: one (device="cuda", numba-cuda) ran 18.4 scenes/s on an H200 host against
+70.1 on the same machine's 16 CPU cores (CHANGELOG.md).
 """
 from __future__ import annotations
 
@@ -143,7 +143,7 @@ def simulate_batch(scenes: Iterable, device: str = "cpu", workers: int | None = 
     NaNs, as in the pipeline.
     """
     if device not in DEVICES:
-        raise ConfigError("device", device, "'cpu' (the GPU path, device='cuda', was removed on 2026-11-27: "
+        raise ConfigError("device", device, "'cpu' (the GPU path, device='cuda', was removed: "
                           "it ran slower than the CPU; see CHANGELOG.md)")
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise ConfigError("workers", workers, "an integer >= 1 (CPU threads)")

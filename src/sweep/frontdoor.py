@@ -107,7 +107,7 @@ JOB_ID = re.compile(r"^\s+jobid: (\d+)")
 JOB_DONE = re.compile(r"^Finished jobid: (\d+) \(Rule: (\w+)\)")
 JOB_STATS = re.compile(r"^(\w+)\s+(\d+)$")
 # The kernels' compilation (docs/pipeline.md, "Running"): measured on 2-core machines shared with
-# other work: 75 s and 96 s here, 213 s on the fresh clone of issue #43.
+# other work: 75 s to 213 s on a fresh clone.
 COMPILE_ESTIMATE = "usually 1-4 min on a 2-core machine, by how busy it is"
 # After the last scene: the gather (opening every chunk file: 0.5 s + 0.4 s per chunk file), then
 # the figures job (every notebook in one process: imports, reductions, plots; 9-10 s for the four

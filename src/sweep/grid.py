@@ -1,6 +1,7 @@
 """Sweep configuration: validation, normalisation and the split of the grid into chunks.
 
-A sweep is the Cartesian product of six axes (see `AXES`), every point one scene integrated by
+A sweep is the Cartesian product of the axes of the registry of inputs (sweep.fields; `AXES`
+here), every point one scene integrated by
 `sweep.simulate`. The grid is cut into *chunks*, one Snakemake job each, whose identity is the
 SHA-256 of the canonical JSON of their content (the point values, every setting that changes a
 scene's result, and a fingerprint of the physics core's source). So a chunk file is reused
@@ -9,9 +10,9 @@ in the axes.
 
 Chunk layout (see docs/pipeline.md, "How reruns work"):
 
-* A chunk never mixes values of the *outer* axes (mu_d, k1, k2, k3): adding a value to one of
+* A chunk never mixes values of the *outer* axes (mu_d, k1, k2, k3; `OUTER_AXES`): adding a value to one of
   these axes, anywhere in it, adds whole new chunks and leaves every existing one untouched.
-* For one outer point, the *inner* points (alpha0, omega0), in row-major order of the sorted
+* For one outer point, the *inner* points (alpha0, omega0; `INNER_AXES`), in row-major order of the sorted
   axes, are cut by content-defined chunking: a chunk ends after the inner point p when
   ``H(p) % chunk_size == 0`` (H: a hash of p's values only) or when it has reached
   ``2 * chunk_size`` points. Inserting a value into alpha0 or omega0 therefore changes only the
@@ -38,28 +39,31 @@ from . import fields
 from . import outputs as _outputs
 from .errors import MISSING, ConfigError, quoted_number
 
-AXES = ("mu_d", "k1", "k2", "k3", "alpha0", "omega0")
-OUTER_AXES = AXES[:4]
-INNER_AXES = AXES[4:]
-AXIS_UNITS = {"mu_d": "1", "k1": "m", "k2": "m", "k3": "m", "alpha0": "rad", "omega0": "rad s-1"}
-AXIS_LONG_NAMES = {
-    "mu_d": "dynamic friction coefficient",
-    "k1": "rolling resistance length k1 (moment k1 |N|)",
-    "k2": "pivoting resistance length k2 (moment k2 |N|)",
-    "k3": "rolling resistance length k3 (moment k3 |N|)",
-    "alpha0": "initial angle alpha",
-    "omega0": "initial spin rate about -e3",
-}
+# the axes, their order, chunk layout, units and long names: the registry of inputs (sweep.fields)
+AXES = tuple(a.name for a in fields.AXES)
+OUTER_AXES = tuple(a.name for a in fields.AXES if a.outer)
+INNER_AXES = tuple(a.name for a in fields.AXES if not a.outer)
+AXIS_UNITS = {a.name: a.units for a in fields.AXES}
+AXIS_LONG_NAMES = {a.name: a.long_name for a in fields.AXES}
+# the values of an axis a config may leave out
+AXIS_DEFAULTS = {a.name: list(a.default) for a in fields.AXES if a.default is not None}
 
 
 # Length of the hex chunk id: 16 hex digits = 64 bits, so a collision among even 10^6 chunks
 # has probability ~ n^2 / 2^65 < 3e-8.
 CHUNK_ID_HEX = 16
 
-# The config schema ships as package data (sweep/schema/config.schema.yaml, see pyproject.toml),
-# so an installed (non-editable) package finds it too; the front door and the Snakemake workflow
-# validate against this same file (load_sweep, called by sweep.frontdoor and workflow/rules/common.smk).
+# The config schema ships as package data: its template (sweep/schema/config.template.yaml, see
+# pyproject.toml), from which load_schema builds it with the registry of inputs (sweep.fields), and
+# the schema so built (config.schema.yaml, written by write_schema, checked against the build by
+# tests/test_grid.py) for tools that want a file, e.g. snakemake.utils.validate. The front door and
+# the Snakemake workflow validate with load_schema (load_sweep, called by sweep.frontdoor and
+# workflow/rules/common.smk).
+SCHEMA_TEMPLATE = ("schema", "config.template.yaml")
 SCHEMA_RESOURCE = ("schema", "config.schema.yaml")
+SCHEMA_HEADER = ("# The sweep config's JSON schema, generated from config.template.yaml and the registry of\n"
+                 "# inputs (sweep.fields): do not edit. Regenerate: .venv/bin/python -c 'from sweep import grid; "
+                 "grid.write_schema()'\n")
 
 
 def schema_path() -> Path:
@@ -108,16 +112,28 @@ def sha256_hex(text: str) -> str:
 # --------------------------------------------------------------------------------------------
 
 def load_schema(path: str | Path | None = None) -> dict:
-    """The config JSON schema (YAML file), by default the packaged sweep/schema/config.schema.yaml
-    (read with importlib.resources), with the ranges of sweep.fields filled in (fields.apply_to_schema)."""
+    """The config JSON schema: by default built from the packaged template
+    (sweep/schema/config.template.yaml, read with importlib.resources) and the registry of inputs
+    (fields.config_schema); else the schema file at `path`, its registry markers filled in."""
     import yaml
 
     if path is None:
         from importlib.resources import files
 
-        return fields.apply_to_schema(yaml.safe_load(files(__package__).joinpath(*SCHEMA_RESOURCE).read_text(encoding="utf-8")))
-    with open(path, encoding="utf-8") as fh:
-        return fields.apply_to_schema(yaml.safe_load(fh))
+        text = files(__package__).joinpath(*SCHEMA_TEMPLATE).read_text(encoding="utf-8")
+    else:
+        text = Path(path).read_text(encoding="utf-8")
+    return fields.config_schema(yaml.safe_load(text))
+
+
+def write_schema(path: str | Path | None = None) -> Path:
+    """Write the schema load_schema builds to `path` (default: the packaged config.schema.yaml)."""
+    import yaml
+
+    path = Path(path) if path is not None else SCHEMA_PATH
+    text = SCHEMA_HEADER + yaml.safe_dump(load_schema(), sort_keys=False, allow_unicode=True, width=120)
+    path.write_text(text, encoding="utf-8")
+    return path
 
 
 def _key(path: Iterator[Any] | list[Any]) -> str:
@@ -167,9 +183,8 @@ def fill_defaults(config: Mapping, schema: dict) -> dict:
     return fill(config, schema)
 
 
-# `execution` (where chunks ran: cpu, or cuda on a GPU) went with the GPU path: a config that still
-# has it is refused with the reason, not as an unknown key.
-EXECUTION_REMOVED = ("the GPU path was removed on 2026-11-27 (it ran slower than the CPU: CHANGELOG.md); "
+# `execution` (where chunks ran: cpu, or cuda on a GPU) is refused with the reason, not as an unknown key.
+EXECUTION_REMOVED = ("the GPU path was removed (it ran slower than the CPU: CHANGELOG.md); "
                      "delete the `execution` section: chunks run on CPU cores, on a cluster with "
                      "--profile workflow/profiles/slurm")
 
@@ -328,7 +343,7 @@ def refine_errors(config: Mapping, invalid: set[str] = frozenset()) -> list[Conf
         if a in axes and a in grid_cfg:
             errors.append(ConfigError(f"refine.axes.{a}", axes[a], f"each axis once: under grid or refine.axes",
                                       problem=f"{a} is also listed under {key}"))
-        elif a not in axes and a not in grid_cfg and "grid" not in invalid:
+        elif a not in axes and a not in grid_cfg and a not in AXIS_DEFAULTS and "grid" not in invalid:
             errors.append(ConfigError(key, MISSING, "a list of values: " + fields.RANGES[fields.SWEEP_KEYS[key]].allowed()
                                       + (", or an axis of refine.axes" if ref is not None else "")))
     notebooks = config.get("outputs", {}).get("notebooks", []) if isinstance(config.get("outputs"), Mapping) else []
@@ -584,7 +599,7 @@ def normalize(config: Mapping, schema: dict | None = None, check_scenes: bool = 
         "gravity": float(cfg["gravity"]),
         "mu_s": float(cfg["mu_s"]),
         "grid": {a: (refine_axis(cfg["refine"]["axes"][a]) if a in cfg.get("refine", {}).get("axes", {})
-                     else sorted(float(v) for v in cfg["grid"][a])) for a in AXES},
+                     else sorted(float(v) for v in cfg["grid"].get(a, AXIS_DEFAULTS.get(a)))) for a in AXES},
         "levels": sorted((float(v) for v in cfg["levels"]), reverse=True),
         "solver": solver,
         "stop": {"t_max": float(cfg["stop"]["t_max"]), "max_steps": int(cfg["stop"]["max_steps"])},
@@ -723,20 +738,24 @@ def grid_shape(settings: Mapping) -> tuple[int, ...]:
 def scene(settings: Mapping, point: Mapping[str, float] | tuple[float, ...]) -> dict:
     """The `sweep.simulate` scene dict (SI units) of one grid point.
 
-    The start is rolling: omega = [0, 0, -omega0] rad/s, slip = [0, 0] m/s, theta = psi = 0.
+    The fixed part of the start is rolling: slip = [0, 0] m/s, theta = psi = 0; each axis sets its
+    field (omega0: omega = [0, 0, -omega0] rad/s).
     """
     p = dict(zip(AXES, point)) if not isinstance(point, Mapping) else dict(point)
-    return {
+    sc = {
         "disk": dict(settings["disk"]),
-        "contact": {"mu_s": settings["mu_s"], "mu_d": p["mu_d"],
-                    "k1": p["k1"], "k2": p["k2"], "k3": p["k3"]},
+        "contact": {"mu_s": settings["mu_s"]},
         "gravity": settings["gravity"],
-        "initial": {"alpha": p["alpha0"], "omega": [0.0, 0.0, -p["omega0"]],
-                    "slip": [0.0, 0.0], "theta": 0.0, "psi": 0.0},
+        "initial": {"slip": [0.0, 0.0], "theta": 0.0, "psi": 0.0},
         "stop": {"levels": list(settings["levels"]), "t_max": settings["stop"]["t_max"],
                  "max_steps": settings["stop"]["max_steps"]},
         "solver": dict(settings["solver"]),
     }
+    for a in fields.AXES:
+        field = fields.axis_field(a.name)
+        value = p[a.name] if a.to_scene is None else a.to_scene(p[a.name])
+        fields.set_path(sc, a.sets or field.path, value)
+    return sc
 
 
 # --------------------------------------------------------------------------------------------
@@ -783,7 +802,7 @@ def split_inner(inner_points: list[tuple[float, ...]], chunk_size: int) -> list[
 # (chunk files carry CHUNK_FORMAT for those), so editing them does not recompute chunks.
 # the modules besides the kernels (core.jit.kernel_sources) whose change gives every chunk a new
 # identity: they turn a scene into the kernel's inputs and its outputs into the summary
-CHUNK_MODULES = ("scene.py", "simulate.py", "diagnostics.py")
+CHUNK_MODULES = ("fields.py", "scene.py", "simulate.py", "diagnostics.py")
 
 
 def core_fingerprint() -> str:

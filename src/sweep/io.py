@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from . import fields
 from . import grid as _grid
 from . import outcomes, reasons
 from . import outputs as _outputs
@@ -881,16 +882,8 @@ def write_text_atomic(path: str | Path, text: str) -> Path:
     return path
 
 
-# axis labels of the figures: words, symbol, unit
-AXIS_LABELS = {
-    "mu_d": "dynamic friction coefficient μ_d",
-    "k1": "rolling resistance k1 (m)",
-    "k2": "pivoting resistance k2 (m)",
-    "k3": "rolling resistance k3 (m)",
-    "alpha0": "initial tilt α0 (rad)",
-    "omega0": "initial spin ω0 (rad/s)",
-    "level": "inclination level β (rad)",
-}
+# axis labels of the figures: words, symbol, unit (the sweep axes': sweep.fields)
+AXIS_LABELS = {**{a.name: a.label for a in fields.AXES}, "level": "inclination level β (rad)"}
 
 
 def figure_caption(ds, reduced: str = "median over the axes not shown") -> str:

@@ -13,7 +13,7 @@ LINE_CONTACT = 4         # alpha came to 0 and stayed: the disk stands on its fl
 STEP_SIZE_UNDERFLOW = 5  # the error control asked for a step below the round-off floor of tau
 NUMERICAL_ERROR = 6      # a NaN/inf appeared, or an exception was raised for this point
 NOT_RUN = 7              # reserved for the pipeline: the point was not computed (never written by a finished chunk)
-FACE_CONTACT = 8         # no longer written: a disk that reaches flat (1e-6 rad) has halted (HALTED, summary lay_flat); the code stays reserved
+FACE_CONTACT = 8         # not written: a disk that reaches flat (1e-6 rad) has halted (HALTED, summary lay_flat); the code stays reserved
 PAINLEVE = 9             # the contact law admits no acceleration (Painleve paradox: a sliding disk with high mu_d
                          # drives the normal-force coefficient to 0): the rigid-body model with Coulomb friction ends
 

@@ -30,32 +30,8 @@ from .core import model
 from .core.contact import BETA_FACE
 from .errors import ConfigError, raise_all
 
-DEFAULTS: dict[str, Any] = {
-    "disk": {"radius": 0.03755, "thickness": 0.0128, "mass": 0.4387, "shape": "solid"},
-    "contact": {"mu_s": 0.5, "mu_d": 0.3, "k1": 3.755e-6, "k2": 3.004e-5, "k3": 3.004e-4},
-    "gravity": 9.81,
-    "initial": {"alpha": 1.0, "omega": [0.0, 0.0, -14.457], "slip": [0.0, 0.0], "theta": 0.0, "psi": 0.0},
-    # t_max: the paper's disk halts in ~10 s; real Euler's disks spin for up to ~2 min.
-    # max_steps: ~1e4 steps per halt for the paper's case at rtol 1e-10; 5e6 bounds a pathological
-    # scene to ~30 s of CPU while letting the densest scenes of the convergence harness's ranges
-    # (~250 located events per second, ~4e4 tries per second at rtol 1e-13) run past 100 s.
-    "stop": {"levels": [1.0e-1, 1.0e-2, 1.0e-3, 1.0e-4], "t_max": 120.0, "max_steps": 5_000_000},
-    # rtol 1e-10: halt times converge to ~1e-9 relative there (docs/performance.md, 'Error bars'), at a cost of a
-    # few ms per scene; slip_tol: slip speed (m/s) at which a slide meets its fate; spin_tol: rate
-    # (rad/s) of a moment component at which it sticks if it goes on to rest and the moment can hold
-    # it; neither decides what happens (docs/model.md, 'Where a slip ends', 'Sticking at spin_tol').
-    # slave_tol: the slip direction's relaxation time times the motion's rate below which it is solved
-    # as its slow manifold instead of integrated; results converge as it goes to 0 (docs/model.md,
-    # 'Slow slip').
-    "solver": {"method": "adaptive", "rtol": 1.0e-10, "atol": 1.0e-12, "dt": 1.0e-3, "slip_tol": 1.0e-9,
-               "spin_tol": 1.0e-7, "slave_tol": 3.0e-3},
-    "outputs": {"normal_force_frequency": True, "kinematics": False},
-    # The disk's elastic material, used only by the sound synthesis (sweep.audio, sweep.plate), never by
-    # the integrator or the summary: E (Pa), density (kg/m^3), poisson (-), damping (modal damping
-    # ratio, fraction of critical). Default: the paper's steel (its footnote); damping 1e-3 is a
-    # choice for a disk in contact with a table (free steel rings longer, ~1e-4).
-    "material": {"E": 1.95e11, "density": 7737.27, "poisson": 0.28, "damping": 1.0e-3},
-}
+# every field's default, by section (the registry of inputs, sweep.fields: ranges and reasons there)
+DEFAULTS: dict[str, Any] = fields.SCENE_DEFAULTS
 
 SHAPES = {"solid": 1.0, "shell": 2.0}   # k^2 of eq. (2.4)
 
@@ -156,66 +132,69 @@ def load_scene(src) -> Scene:
     raise ConfigError("scene", type(src).__name__, "a path to a YAML file or a dict")
 
 
+# the fields model.make_params reads (the others that reach the kernel name their slot: Field.kernel)
+MODEL_INPUTS = ("disk.radius", "disk.thickness", "disk.shape", "gravity", "contact.mu_s", "contact.mu_d",
+                "contact.k1", "contact.k2", "contact.k3")
+
+# SI -> the kernel's units (lengths in R, times in chi): Param.scale -> (value, chi, R) -> dimensionless
+KERNEL_SCALE = {
+    "1": lambda v, chi, R: v,
+    "length": lambda v, chi, R: v / R,
+    "rate": lambda v, chi, R: v * chi,
+    "speed": lambda v, chi, R: v * chi / R,
+}
+
+
+def _check_field(ok: _Checks, f: fields.Field, v, values: dict):
+    """The valid value of field f (None where invalid: the error is in ok.errors); `values`: the
+    fields checked before it, for its relative bound."""
+    if f.kind == "number":
+        return ok.field(f.path, v, values=values)
+    if f.kind == "vector":
+        return ok.vector(f.path, v, f.size)
+    if f.kind == "choice":
+        return ok.choice(f.path, v, f.choices)
+    if f.kind == "flag":
+        if not isinstance(v, bool):
+            ok.errors.append(ConfigError(f.path, v, "true or false"))
+        return v
+    if f.kind == "levels":
+        if not isinstance(v, (list, tuple)) or not v:
+            ok.errors.append(ConfigError(f.path, v, "a non-empty list, each " + f.range.allowed()))
+            return None
+        lv = [ok.field(f.path, x, f"{f.path}[{i}]") for i, x in enumerate(v)]
+        if any(x is None for x in lv):
+            return None
+        if len(set(lv)) != len(lv):
+            ok.errors.append(ConfigError(f.path, lv, "distinct values (a level is listed twice)"))
+            return None
+        return sorted(lv, reverse=True)
+    raise ValueError(f"{f.path}: unknown field kind {f.kind!r}")
+
+
 def _validate(raw) -> Scene:
     errors: list[ConfigError] = []
     cfg = _merge("", raw, DEFAULTS, errors)
     ok = _Checks(errors)
-
-    d = cfg["disk"]
-    for k in ("radius", "mass"):
-        d[k] = ok.field(f"disk.{k}", d[k])
-    d["thickness"] = ok.field("disk.thickness", d["thickness"], values={"disk.radius": d["radius"]})
-    d["shape"] = ok.choice("disk.shape", d["shape"], tuple(SHAPES))
-    c = cfg["contact"]
-    c["mu_s"] = ok.field("contact.mu_s", c["mu_s"])
-    known = {"disk.radius": d["radius"], "contact.mu_s": c["mu_s"]}
-    for k in ("mu_d", "k1", "k2", "k3"):
-        c[k] = ok.field(f"contact.{k}", c[k], values=known)
-    cfg["gravity"] = ok.field("gravity", cfg["gravity"])
-    ini = cfg["initial"]
-    ini["alpha"] = ok.field("initial.alpha", ini["alpha"])
-    ini["omega"] = ok.vector("initial.omega", ini["omega"], 3)
-    ini["slip"] = ok.vector("initial.slip", ini["slip"], 2)
-    ini["theta"] = ok.field("initial.theta", ini["theta"])
-    ini["psi"] = ok.field("initial.psi", ini["psi"])
-    st = cfg["stop"]
-    lv = st["levels"]
-    if not isinstance(lv, (list, tuple)) or not lv:
-        errors.append(ConfigError("stop.levels", lv, "a non-empty list, each " + fields.RANGES["stop.levels"].allowed()))
-        st["levels"] = None
-    else:
-        lv = [ok.field("stop.levels", x, f"stop.levels[{i}]") for i, x in enumerate(lv)]
-        if any(x is None for x in lv):
-            st["levels"] = None
-        elif len(set(lv)) != len(lv):
-            errors.append(ConfigError("stop.levels", lv, "distinct values (a level is listed twice)"))
-            st["levels"] = None
-        else:
-            st["levels"] = sorted(lv, reverse=True)
-    st["t_max"] = ok.field("stop.t_max", st["t_max"])
-    st["max_steps"] = ok.field("stop.max_steps", st["max_steps"])
-    so = cfg["solver"]
-    so["method"] = ok.choice("solver.method", so["method"], ("adaptive", "fixed"))
-    for k in ("rtol", "atol", "dt", "slip_tol", "spin_tol", "slave_tol"):
-        so[k] = ok.field(f"solver.{k}", so[k])
-    out = cfg["outputs"]
-    for k in out:
-        if not isinstance(out[k], bool):
-            errors.append(ConfigError(f"outputs.{k}", out[k], "true or false"))
-    mat = cfg["material"]   # sound synthesis only: not passed to the kernel
-    for k in ("E", "density", "poisson", "damping"):
-        mat[k] = ok.field(f"material.{k}", mat[k])
+    values: dict[str, Any] = {}     # field -> its valid value, None where invalid
+    for f in fields.FIELDS:
+        if not f.scene:
+            continue
+        *section, key = f.path.split(".")
+        node = cfg[section[0]] if section else cfg
+        node[key] = values[f.path] = _check_field(ok, f, node[key], values)
+    d, st, ini = cfg["disk"], cfg["stop"], cfg["initial"]
 
     # the checks that need the disk's model parameters: where the fields they read are valid
-    needed = [d["radius"], d["thickness"], d["shape"], cfg["gravity"], c["mu_s"], c["mu_d"], c["k1"], c["k2"],
-              c["k3"], so["slip_tol"], so["spin_tol"], so["slave_tol"]]
+    kernel_fields = [f for f in fields.FIELDS if f.kernel is not None]
+    needed = [values[k] for k in MODEL_INPUTS] + [values[f.path] for f in kernel_fields]
     if errors and any(x is None for x in needed):
         raise_all(errors)
+    c = cfg["contact"]
     params, chi = model.make_params(SHAPES[d["shape"]], d["radius"], d["thickness"], cfg["gravity"],
                                     c["mu_s"], c["mu_d"], (c["k1"], c["k2"], c["k3"]))
-    params[model.P_UTOL] = so["slip_tol"] * chi / d["radius"]
-    params[model.P_WTOL] = so["spin_tol"] * chi
-    params[model.P_SLAVE] = so["slave_tol"]
+    for f in kernel_fields:
+        params[getattr(model, f.kernel.slot)] = KERNEL_SCALE[f.kernel.scale](values[f.path], chi, d["radius"])
     if st["levels"] is not None:
         bmax = max_level(params)
         if st["levels"][0] > bmax:

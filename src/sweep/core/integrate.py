@@ -52,7 +52,6 @@ BALANCE_FACTOR = 4.0
 # the scale of energy_increment (measured: up to 5 EPS); a floor that round-off could exceed would
 # reject every shorter step alike (both scale with the step), so it is set well above.
 BALANCE_ROUNDOFF = 32.0 * EPS
-# ... and the old floor of a balance taken between two rounded states (state_balance_error).
 STATE_BALANCE_ROUNDOFF = 4.0 * EPS
 # The right-hand side's own round-off in the energy direction (power_defect: what dE/dtau plus the
 # dissipated power leaves of 0 at a step's ends) enters the increment as h times a weighted sum of

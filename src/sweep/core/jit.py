@@ -6,7 +6,7 @@ floating-point error model: a division by zero gives inf or NaN, which the integ
 turn into a rejected try (a non-finite stage) or a failure outcome, instead of a ZeroDivisionError
 that ends the whole run and loses the scene (a slip onset's bisection can close on a Painleve
 pole, where Phi's coefficient is exactly 0: docs/model.md, 'Roll -> slip'). Results where nothing
-divides by zero are the same to the bit; the divisions no longer test their divisor.
+divides by zero are the same to the bit.
 
 The kernels never allocate (every buffer comes from the caller) and never return arrays, so nothing
 in them needs a reference count; with the runtime on, every row view

@@ -18,10 +18,7 @@ from .model import X_PHI, Y_U1, Y_U2, sign_rate
 
 # Events are located to 4 ulp of tau, where the bracket cannot shrink further, with this floor near
 # tau = 0. The restart point is the bracket's right end, so each event restarts up to the tolerance
-# past its root: a one-sided error that no rtol removes. At the former tolerance of 1e-12 tau it
-# summed, over the 2159 events of a harness scene (a disk rocking near upright, alpha at tau 300 =
-# -6.4e-4 rad), to 4.7e-11 rad, 7e-8 of the value, on which the kernel's runs at rtol 1e-12..1e-14
-# agreed to 3e-12 (docs/model.md, 'Modes, signs and sticking').
+# past its root: a one-sided error that no rtol removes.
 EVENT_TOL_TAU = 1e-15
 EPS = 2.220446049250313e-16
 # Step (tau) of the forward difference that gives the rate of an event function without a closed form.

@@ -77,7 +77,7 @@ the bracket's post-event end). A new solver (default initial step) starts at eve
 continued from the last accepted step end (never from a rejected stage).
 
 Usage:
-    from scipy_driver import run_scipy
+    from tests.reference.scipy_driver import run_scipy
     res = run_scipy(cfg_dict, method="DOP853", rtol=1e-12, atol=1e-14, sample_tau=np.linspace(0, 100, 101))
 """
 from __future__ import annotations
