@@ -575,7 +575,7 @@ def test_compile_shows_a_ticking_elapsed_time_and_the_estimate(monkeypatch, caps
     took = frontdoor.warm_numba(frontdoor.StatusLine(sys.stdout, every_tty=0.0, every_log=0.0, heartbeat=0.9),
                                 label="sweep tiny: compile")
     out = capsys.readouterr().out.splitlines()
-    assert 2.3 <= took < 10
+    assert took >= 2.3              # the time it measured covers the stand-in's
     assert out[0] == frontdoor.COMPILE_LINE and frontdoor.COMPILE_ESTIMATE in out[0]
     ticks = [line for line in out if line.startswith("sweep tiny: compile | ")]
     assert ticks[:3] == ["sweep tiny: compile | 0:00", "sweep tiny: compile | 0:01", "sweep tiny: compile | 0:02"]
