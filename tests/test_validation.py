@@ -76,6 +76,10 @@ BAD_VALUES = {
 CASES = [(f, v) for f, vals in BAD_VALUES.items() for v in vals]
 
 
+def _a_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 def _with(field, value):
     cfg = copy.deepcopy(DEFAULTS)
     parts = field.split(".")
@@ -93,7 +97,7 @@ def test_each_bad_value_is_rejected_naming_the_field(field, value):
     msg = str(ei.value)
     assert ei.value.field.startswith(field), (ei.value.field, field)
     assert "allowed" in msg
-    if field in RANGES:
+    if field in RANGES and _a_number(ei.value.value):    # a number (or a list's item) out of its range
         assert RANGES[field].text() in msg, msg
 
 
@@ -116,7 +120,7 @@ def test_random_values_either_load_or_name_the_field(field, value):
         msg = str(exc)
         assert "allowed" in msg, msg
         if exc.field == field or exc.field.startswith(field + "["):
-            if field in RANGES:
+            if field in RANGES and _a_number(exc.value):
                 assert RANGES[field].text() in msg, msg
         else:
             assert exc.field in RELATIVE_TO.get(field, ()), (exc.field, field, msg)
