@@ -134,6 +134,13 @@ def test_slip_tolerance_convergence():
 
 
 def test_fixed_step_converges_to_adaptive_at_its_order():
+    """DOP853 with a fixed step h: order 8 between events, so O(h^8) globally. The 23 sign events of
+    this run (omega.a_i through 0, where the moment's sign term jumps) are located on the 7th-order
+    dense output, which places each to O(h^8) in time; a time error dt across a jump of the
+    right-hand side leaves a state error O(dt), so each event costs O(h^8) too and their fixed
+    number keeps the global error O(h^8). The pairwise orders scatter (6.9 and 9.7 here: terms of
+    either sign from the events), so the one measured order is the least-squares slope over the
+    three halvings' errors, and the bound is 8 less one for that scatter (measured: 8.3)."""
     base = dict(contact__mu_s=100.0, stop__t_max=2.0, stop__levels=[0.05])
     # a loose tolerance: fixed steps are then never halved, so this measures the pure fixed step
     loose = dict(solver__rtol=1e-2, solver__atol=1e-2)
@@ -143,10 +150,10 @@ def test_fixed_step_converges_to_adaptive_at_its_order():
     for dt in dts:
         s = sweep.simulate(make_scene(**base, **loose, solver__method="fixed", solver__dt=dt), sample_times=[2.0]).samples
         errs.append(abs(s["alpha"][0] - ref["alpha"][0]) + CHI_PAPER * np.max(np.abs(s["omega"][0] - ref["omega"][0])))
-    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
-    print("fixed-step errors", errs, "orders", orders)
+    order = np.polyfit(np.log(dts), np.log(errs), 1)[0]
+    print("fixed-step errors", errs, "order", order)
     assert errs[-1] < 1e-9
-    assert orders.max() > 6.5          # order 8 in the asymptotic range (events cost ~1 order)
+    assert order >= 7.0, order
 
 
 def test_paper_case_reaches_flat_with_positive_normal_force_and_rising_frequency():
