@@ -367,12 +367,15 @@ def test_a_stick_test_in_a_slaved_slip_reads_the_moment_along_the_slips_directio
 
 
 @pytest.mark.slow
-def test_the_peer_counts_the_stick_phases_of_that_slaved_slip_alike():
-    """The SciPy peer, its contact rules written independently, at rtol 1e-12 on harness scene 70
-    (seed 20261128): the kernel's outcome and event counts at the same rtol."""
+@pytest.mark.parametrize("seed, index", [(20261128, 70), (20261124, 246)])
+def test_the_peer_counts_the_stick_phases_alike(seed, index):
+    """The SciPy peer, its contact rules written independently, at rtol 1e-12 on the harness scenes
+    above whose stick phases hinge on a slaved slip's moment (scene 70) and on the slaved
+    direction's error (scene 246, ~70 s of the peer): the kernel's outcome and event counts at
+    the same rtol."""
     from conftest import peer_run
 
-    cfg = harness._valid_levels(harness.harness_scene(20261128, 70))
+    cfg = harness._valid_levels(harness.harness_scene(seed, index))
     kernel = harness._one_run(cfg, 1e-12)
     peer, _ = peer_run(cfg, 1e-12)
     assert peer["outcome"] == kernel["outcome"] == "halted"
