@@ -1,6 +1,7 @@
 import copy
 import math
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -37,3 +38,21 @@ def copy_workflow(dest: Path) -> Path:
     for d in ("workflow", "config"):
         shutil.copytree(ROOT / d, dest / d, ignore=ignore)
     return dest
+
+
+def scipy_peer():
+    """The independent SciPy reference model (its own contact rules and event logic):
+    tests.reference.scipy_driver."""
+    from tests.reference import scipy_driver
+    return scipy_driver
+
+
+def peer_run(cfg: dict, rtol: float) -> tuple[dict, float]:
+    """The SciPy peer's run of scene `cfg` at rtol (atol rtol/100): its result dict (times in tau)
+    and chi (s), to convert them."""
+    from sweep.scene import load_scene
+
+    c = copy.deepcopy(cfg)
+    c["solver"] = {"rtol": rtol, "atol": rtol * 1e-2}
+    sc = load_scene(c)
+    return scipy_peer().run_scipy(sc, "DOP853", rtol, rtol * 1e-2), sc.chi

@@ -1,7 +1,10 @@
 """The layering of src/sweep, read from the source with `ast` (nothing is imported or run):
 
-* no import cycle among the modules, and no module imports one on a higher floor (the floors are
-  the longest import chain below each module, so this is the same as: the graph is a DAG);
+* no import cycle among the modules;
+* the layers (TIERS): the shared definitions at the bottom, then the numerical core, the scene and
+  output definitions, the runners, the drivers and the front door on top; a module imports only
+  from its own tier or below (the kernel knows no file, config or command line; nothing but the
+  front door imports the front door);
 * no kernel of the core takes more than MAX_PARAMS parameters.
 
 Run as a script it prints the import graph of src/sweep/core, the floors, the functions over the
@@ -108,17 +111,64 @@ def settings_path(mods: dict[str, ast.Module]) -> list[str]:
     return sorted(f"{m.rpartition('.')[2]}.{f}" for m, f, ps in kernel_functions(mods) if "settings" in ps)
 
 
+# The package's layers, bottom first. Every module of src/sweep has a tier (sweep.core.* all the
+# core's); an import may go down or stay in its tier, never up.
+TIERS = (
+    ("definitions", {"sweep.errors", "sweep.outcomes", "sweep.reasons", "sweep.fields", "sweep.yamlio",
+                     "sweep.plate"}),
+    ("core", {"sweep.core"}),
+    ("scene and outputs", {"sweep.scene", "sweep.outputs", "sweep.diagnostics", "sweep.refine"}),
+    ("runners", {"sweep.simulate", "sweep.grid", "sweep.io"}),
+    ("drivers", {"sweep", "sweep.batch", "sweep.ensemble", "sweep.animate", "sweep.audio", "sweep.plots",
+                 "sweep.adaptive"}),
+    ("front door", {"sweep.frontdoor", "sweep.cli", "sweep.__main__"}),
+)
+
+
+def tier(module: str) -> int:
+    """The index in TIERS of `module` (a core module: the core's); KeyError for a module in none."""
+    name = "sweep.core" if module.startswith("sweep.core.") else module
+    for i, (_, members) in enumerate(TIERS):
+        if name in members:
+            return i
+    raise KeyError(f"{module} is in no tier of tests/test_architecture.py's TIERS: give it one")
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """(importer, imported) for every import of a module on a higher tier (a package's __init__
+    imported by its own modules on the way in aside)."""
+    return sorted((m, t) for m, targets in graph.items() for t in targets
+                  if not _is_parent(t, m) and tier(t) > tier(m))
+
+
 def test_the_package_has_no_import_cycle():
     floors(import_graph(modules()))
 
 
-def test_no_module_imports_upwards():
+def test_the_import_graph_finds_what_a_module_imports():
     graph = import_graph(modules())
-    fl = floors(graph)
-    for m, targets in graph.items():
-        for t in targets:
-            if not _is_parent(t, m):
-                assert fl[t] < fl[m], (m, t)
+    assert "sweep.core.model" in graph["sweep.core.contact"]          # `from .model import ...`
+    assert "sweep.core.integrate" in graph["sweep.simulate"]          # `from .core.integrate import ...`
+    assert "sweep.errors" in graph["sweep.scene"]
+
+
+def test_every_module_has_a_tier_and_imports_none_above_it():
+    graph = import_graph(modules())
+    for m in graph:
+        tier(m)
+    assert upward_imports(graph) == []
+
+
+def test_an_upward_import_is_caught():
+    """The check can fail: the kernel reading a scene, or a runner calling the command line."""
+    graph = import_graph(modules())
+    graph["sweep.core.model"] = graph["sweep.core.model"] | {"sweep.scene"}
+    graph["sweep.io"] = graph["sweep.io"] | {"sweep.cli"}
+    assert upward_imports(graph) == [("sweep.core.model", "sweep.scene"), ("sweep.io", "sweep.cli")]
+    with pytest.raises(KeyError, match="sweep.newthing is in no tier"):
+        tier("sweep.newthing")
+    with pytest.raises(ValueError, match="import cycle"):
+        floors({"a": {"b"}, "b": {"a"}})
 
 
 def test_no_core_kernel_takes_more_than_eight_parameters():

@@ -243,3 +243,25 @@ def test_a_long_scene_shows_a_ticking_elapsed_time_on_a_terminal():
             time.sleep(0.2)
     assert os.read(r, 100) == b""
     os.close(r)
+
+
+def test_a_kernel_that_raises_exits_non_zero_with_its_exception_and_prints_no_summary(tmp_path):
+    """An exception out of the integrator (here injected: the kernel entry raises
+    ZeroDivisionError, as a division on a Painleve pole once did) is not a result: the command
+    exits 1 with the exception named on stderr, prints no summary and writes none of the files
+    it was asked for, and its elapsed-time ticker (a process of its own) does not keep it alive."""
+    scene = short_scene(tmp_path)
+    traj = tmp_path / "traj.nc"
+    # (the module from sys.modules: the package's attribute `simulate` is the function)
+    boom = ("import sys, sweep\n"
+            "def integrate(*args):\n"
+            "    raise ZeroDivisionError('float division by zero (injected into the kernel)')\n"
+            "sys.modules['sweep.simulate'].integrate = integrate\n"
+            "from sweep.cli import main\n"
+            "sys.exit(main(sys.argv[1:]))\n")
+    proc = subprocess.run([sys.executable, "-c", boom, "scene", str(scene), "--json", "--trajectory", str(traj)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert proc.returncode == 1, (proc.returncode, proc.stderr[-2000:])
+    assert "ZeroDivisionError: float division by zero (injected into the kernel)" in proc.stderr, proc.stderr[-2000:]
+    assert proc.stdout == ""
+    assert not traj.exists()

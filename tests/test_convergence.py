@@ -221,7 +221,7 @@ def test_an_unstick_only_the_dense_output_shows_is_confirmed_by_the_integrated_s
     rng = np.random.default_rng(20261124)
     cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(247)][246])
     res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-10, 1e-11, 1e-12)}
-    assert {tuple(r["events"]) for r in res.values()} == {(118, 69, 0)}, {k: r["events"] for k, r in res.items()}
+    assert len({tuple(r["events"]) for r in res.values()}) == 1, {k: r["events"] for k, r in res.items()}
     t12 = res[1e-12]["q"]["t_halt"]
     assert abs(res[1e-10]["q"]["t_halt"] - t12) < 1e-6 * t12
 
@@ -237,7 +237,7 @@ def test_the_default_slave_tol_gives_the_counts_of_its_limit_in_a_micro_stick_sc
     res = {st: harness._one_run(cfg, 1e-10, knobs={} if st is None else {"slave_tol": st}) for st in (None, 1e-4, 0.0)}
     default = res.pop(None)
     for st, r in res.items():
-        assert r["events"] == default["events"] == [118, 69, 0], (st, r["events"], default["events"])
+        assert r["events"] == default["events"], (st, r["events"], default["events"])
         assert abs(r["q"]["t_halt"] - default["q"]["t_halt"]) < 1e-8 * r["q"]["t_halt"], st
 
 
@@ -361,9 +361,25 @@ def test_a_stick_test_in_a_slaved_slip_reads_the_moment_along_the_slips_directio
     with the friction along the slip's direction at that instant (contact.decision_rhs): the
     peer's count, 51, at rtol 1e-12 and 1e-13 (benchmarks/scipy_agreement.py)."""
     cfg = harness._valid_levels(harness.harness_scene(20261128, 70))
-    for rtol in (1e-10, 1e-12):
-        r = harness._one_run(cfg, rtol)
-        assert r["outcome"] == "halted" and r["events"] == [113, 51, 0], (rtol, r["events"])
+    res = {rtol: harness._one_run(cfg, rtol) for rtol in (1e-10, 1e-12)}
+    assert {r["outcome"] for r in res.values()} == {"halted"}, {k: r["outcome"] for k, r in res.items()}
+    assert res[1e-10]["events"] == res[1e-12]["events"], {k: r["events"] for k, r in res.items()}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed, index", [(20261128, 70), (20261124, 246)])
+def test_the_peer_counts_the_stick_phases_alike(seed, index):
+    """The SciPy peer, its contact rules written independently, at rtol 1e-12 on the harness scenes
+    above whose stick phases hinge on a slaved slip's moment (scene 70) and on the slaved
+    direction's error (scene 246, ~70 s of the peer): the kernel's outcome and event counts at
+    the same rtol."""
+    from conftest import peer_run
+
+    cfg = harness._valid_levels(harness.harness_scene(seed, index))
+    kernel = harness._one_run(cfg, 1e-12)
+    peer, _ = peer_run(cfg, 1e-12)
+    assert peer["outcome"] == kernel["outcome"] == "halted"
+    assert [peer["n_transitions"], peer["n_stick"], peer["n_impacts"]] == kernel["events"], kernel["events"]
 
 
 FOIL_DISK = {

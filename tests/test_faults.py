@@ -347,9 +347,7 @@ def test_a_costly_scene_stops_at_its_budget(solver):
     # budget (steps + rejected steps) ends the scene, with outcome step_limit.
     cfg = fault_config(solver=solver, stop={"t_max": 1e5, "max_steps": 3000})
     s = settings_of(cfg)
-    t0 = time.perf_counter()
     r = sweep.simulate(grid.scene(s, tuple(s["grid"][a][0] for a in grid.AXES))).summary
-    assert time.perf_counter() - t0 < 30
     assert r["outcome"] == "step_limit" and r["n_steps"] + r["n_rejected"] == 3000
 
 

@@ -261,7 +261,10 @@ def test_a_level_near_the_end_gets_the_cycle_before_it_within_its_error():
     full = sweep.simulate(make_scene(**base)).summary["levels"][1]
     assert full["precession_window"] == 0.0 and np.isfinite(full["ringing_hz"])
     t_cut = full["t"] + 0.2 / full["precession_hz"]
-    cut = sweep.simulate(make_scene(**base, stop__t_max=t_cut)).summary
+    # Phi sampled from the level to the end, to tell independently whether a maximum after it exists
+    after = np.linspace(full["t"], t_cut, 201)
+    run = sweep.simulate(make_scene(**base, stop__t_max=t_cut), sample_times=after)
+    cut = run.summary
     lv = cut["levels"][1]
     assert cut["outcome"] == "t_max" and lv["precession_window"] == -1.0
     assert math.isnan(lv["ringing_hz"])
@@ -269,10 +272,16 @@ def test_a_level_near_the_end_gets_the_cycle_before_it_within_its_error():
     # window's bias, which near 0.1 rad, where the precession ramps up, is the larger one)
     assert abs(lv["precession_hz"] - full["precession_hz"]) <= lv["precession_hz_error"] + full["precession_hz_error"]
     assert lv["precession_hz_error"] < 0.05 * lv["precession_hz"]
+    # f_hat at a level is 2/T over the three counted maxima at or before it, known once a counted
+    # maximum after it confirms the last (tracking.py); here Phi falls all the way from the level
+    # to t_max (0.013 s, a third of the 0.042 s between its counted maxima): no maximum follows, too_few_maxima
+    phi_after = run.samples["normal_force"][after > lv["t"]]
+    assert np.all(np.diff(phi_after) < 0), phi_after
+    assert math.isnan(lv["normal_force_hz"])
     from sweep import reasons
-    assert reasons.level_flags(cut, lv) == {"t_level_flag": 0, "precession_hz_flag": 0,
+    assert reasons.level_flags(cut, lv) == {"t_level_flag": reasons.VALUE, "precession_hz_flag": reasons.VALUE,
                                             "ringing_hz_flag": reasons.NO_WHOLE_CYCLE_WINDOW,
-                                            "normal_force_hz_flag": reasons.level_flags(cut, lv)["normal_force_hz_flag"]}
+                                            "normal_force_hz_flag": reasons.TOO_FEW_MAXIMA}
 
 
 def test_the_last_levels_frequencies_do_not_depend_on_a_step_count_after_the_halt():

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from hypothesis import given, settings as hsettings, strategies as st
+from hypothesis import assume, given, settings as hsettings, strategies as st
 
 from sweep import grid
 
@@ -264,8 +264,8 @@ def test_inner_insertion_keeps_chunks_away_from_it(n_alpha, n_omega, chunk_size,
     vals = cfg["grid"][axis]
     lo, hi = vals[0] - 0.05, vals[-1] + 0.05
     new_value = round(lo + where * (hi - lo), 6)
-    if new_value in vals or (axis == "alpha0" and not 0 < new_value < 1.5):
-        return
+    # an existing value is no insertion, and alpha0 must stay a valid initial angle
+    assume(new_value not in vals and (axis != "alpha0" or 0 < new_value < 1.5))
     cfg["grid"][axis] = vals + [new_value]
     new_s = norm(cfg)
     new = grid.plan_chunks(new_s)

@@ -594,3 +594,76 @@ def test_the_output_registry_generates_the_summary_its_template_the_cube_and_the
     renamed = tuple(dataclasses.replace(v, units="ms") if v.name == "t_end" else v for v in outputs.VARIABLES)
     assert outputs.chunk_format(renamed) != outputs.CHUNK_FORMAT
     assert outputs.chunk_format() == outputs.CHUNK_FORMAT
+
+
+# ------------------------------------------------------------------------------- chunk checks, branch by branch
+
+def _retag(path: Path, chunk) -> None:
+    """Give a chunk file `chunk`'s id and spec attributes (its values, and so its checksum, stay)."""
+    import netCDF4
+    with netCDF4.Dataset(path, "a") as nc:
+        nc.setncattr("sweep_chunk_id", chunk.id)
+        nc.setncattr("sweep_chunk_spec", chunk.spec_json)
+
+
+def _other_levels(settings: dict) -> dict:
+    """The same grid with one more level: the same points in chunks of other ids and specs."""
+    more = json.loads(json.dumps(settings))
+    more["levels"] = sorted(set(more["levels"]) | {min(more["levels"]) / 10.0}, reverse=True)
+    return more
+
+
+def test_a_chunk_file_with_the_right_id_but_another_spec_is_rejected(tmp_path, tiny):
+    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    path = io.write_chunk(chunk, [fake_summary(p, tiny["levels"]) for p in chunk.points], tmp_path / f"{chunk.id}.nc")
+    import netCDF4
+    with netCDF4.Dataset(path, "a") as nc:
+        nc.setncattr("sweep_chunk_spec", chunk.spec_json.replace('"points"', '"points" ', 1))
+    assert io.verify_chunk(path, chunk) == "chunk spec differs from the expected one"
+    # without the plan's spec text: the spec attribute must hash to the id
+    assert io.read_chunk_file(path, expect_id=chunk.id)[0] == "chunk spec differs from the expected one"
+    _retag(path, chunk)
+    assert io.verify_chunk(path, chunk) is None and io.read_chunk_file(path, expect_id=chunk.id)[0] is None
+
+
+def test_a_chunk_file_with_too_few_points_is_rejected(tmp_path, tiny):
+    chunk = max(grid.plan_chunks(tiny).values(), key=lambda c: len(c.points))
+    assert len(chunk.points) >= 2
+    short = grid.Chunk(chunk.id, chunk.points[:-1], chunk.spec_json)
+    path = io.write_chunk(short, [fake_summary(p, tiny["levels"]) for p in short.points], tmp_path / f"{chunk.id}.nc")
+    want = f"{len(chunk.points) - 1} points, expected {len(chunk.points)}"
+    assert io.verify_chunk(path, chunk) == want
+    assert io.read_chunk_file(path, expect_id=chunk.id)[0] == want
+
+
+def test_a_chunk_file_with_another_number_of_levels_is_rejected(tmp_path, tiny):
+    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    more = _other_levels(tiny)
+    twin = next(c for c in grid.plan_chunks(more).values() if c.points == chunk.points)
+    path = io.write_chunk(twin, [fake_summary(p, more["levels"]) for p in twin.points], tmp_path / f"{chunk.id}.nc")
+    _retag(path, chunk)
+    assert io.verify_chunk(path, chunk) == "wrong number of levels"
+
+
+def test_gather_refuses_a_point_off_the_grid_axes(tmp_path, tiny):
+    paths = write_all(tiny, tmp_path)
+    shifted = settings_for(mu_d=[0.1, 0.3], k3=[1e-4, 3e-4, 5e-4], alpha0=[0.6, 1.2], omega0=[10.0, 20.0, 31.0])
+    stray = write_all(shifted, tmp_path / "stray")
+    off = next(p for p in stray if any(pt[grid.AXES.index("omega0")] == 31.0
+                                       for pt in grid.plan_chunks(shifted)[p.stem].points))
+    with pytest.raises(RuntimeError, match=r"a chunk holds omega0 = 31\.0, not on the grid axis"):
+        io.gather(paths + [off], tiny, tmp_path / "cube.nc")
+    assert not (tmp_path / "cube.nc").exists()
+
+
+def test_gather_refuses_a_point_held_twice(tmp_path, tiny):
+    paths = write_all(tiny, tmp_path)
+    n = math.prod(len(tiny["grid"][a]) for a in grid.AXES)
+    dup = grid.plan_chunks(tiny)[paths[0].stem]
+    copy = tmp_path / "copy" / paths[0].name
+    copy.parent.mkdir()
+    copy.write_bytes(paths[0].read_bytes())
+    with pytest.raises(RuntimeError, match=rf"chunks hold {n + len(dup.points)} points with {n} distinct grid "
+                                           rf"positions; the grid has {n}"):
+        io.gather(paths + [copy], tiny, tmp_path / "cube.nc")
+    assert not (tmp_path / "cube.nc").exists()

@@ -235,23 +235,31 @@ def rhs_errors(rolling, stuckset, seed, n_valid=N_VALID):
     return err, stats
 
 
-# the fast tier (`python3 run.py test`) checks a free rolling disk and a sliding one with every
-# moment component stuck; the other combinations run in the whole suite (`--all`)
-FAST_RHS = {(True, ()), (False, (0, 1, 2))}
-RHS_CASES = [pytest.param(rolling, stuckset, marks=() if (rolling, stuckset) in FAST_RHS else pytest.mark.slow,
-                          id=("roll" if rolling else "slide") + "-" + ("stuck" + "".join(str(i + 1) for i in stuckset)
-                                                                       if stuckset else "free"))
-             for stuckset in STUCK_SETS for rolling in (True, False)]
+# Every mode (ROLL, SLIDE) with every subset of the three moment components stuck: 16 right-hand
+# sides. The fast tier (`python3 run.py test`) checks each at N_VALID_FAST states (~0.25 s each),
+# the whole suite (`--all`) each at N_VALID more, drawn from other seeds.
+N_VALID_FAST = 200
+RHS_COMBINATIONS = [(rolling, stuckset) for stuckset in STUCK_SETS for rolling in (True, False)]
 
 
-@pytest.mark.parametrize("rolling, stuckset", RHS_CASES)
-def test_rhs_against_newton_euler(rolling, stuckset):
-    seed = 1000 + 100 * int(rolling) + sum(1 << i for i in stuckset)
-    err, stats = rhs_errors(rolling, stuckset, seed)
+def _rhs_id(rolling, stuckset):
+    return ("roll" if rolling else "slide") + "-" + ("stuck" + "".join(str(i + 1) for i in stuckset) if stuckset else "free")
+
+
+RHS_CASES = [pytest.param(rolling, stuckset, N_VALID_FAST, 50000, id=_rhs_id(rolling, stuckset) + "-fast")
+             for rolling, stuckset in RHS_COMBINATIONS]
+RHS_CASES += [pytest.param(rolling, stuckset, N_VALID, 0, marks=pytest.mark.slow, id=_rhs_id(rolling, stuckset))
+              for rolling, stuckset in RHS_COMBINATIONS]
+
+
+@pytest.mark.parametrize("rolling, stuckset, n_valid, seed_offset", RHS_CASES)
+def test_rhs_against_newton_euler(rolling, stuckset, n_valid, seed_offset):
+    seed = seed_offset + 1000 + 100 * int(rolling) + sum(1 << i for i in stuckset)
+    err, stats = rhs_errors(rolling, stuckset, seed, n_valid)
     skipped = stats["skip_den"] + stats["skip_phi"]
     print(f"\n{'roll' if rolling else 'slide'} stuck={stuckset}: {stats}")
     print("  " + ", ".join(f"{k}={v:.1e}" for k, v in err.items()))
-    assert stats["valid"] >= N_VALID
+    assert stats["valid"] >= n_valid
     assert skipped / stats["drawn"] < MAX_SKIP_FRACTION
     assert stats["ok_flag_mismatch"] == 0
     bad = {k: v for k, v in err.items() if not k.endswith("_plain") and not v <= RTOL}

@@ -80,16 +80,21 @@ def simulate_in_snapshot(settings: dict, points) -> list[dict]:
     return json.loads(out.stdout)
 
 
-def smk(wd: Path, *args: str, check: bool = True) -> str:
-    """Run snakemake in `wd`; return its merged stdout/stderr."""
+def smk_code(wd: Path, *args: str) -> tuple[int, str]:
+    """Run snakemake in `wd`; return its exit status and its merged stdout/stderr."""
     env = dict(os.environ, PYTHONPATH=str(SNAPSHOT))
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
     cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(wd / "Snakefile"), "--directory", str(wd),
            *args]
     p = subprocess.run(cmd, cwd=wd, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
-    out = p.stdout + p.stderr
-    if check and p.returncode != 0:
-        raise AssertionError(f"{' '.join(cmd)} exited {p.returncode}:\n{out[-6000:]}")
+    return p.returncode, p.stdout + p.stderr
+
+
+def smk(wd: Path, *args: str, check: bool = True) -> str:
+    """Run snakemake in `wd`; return its merged stdout/stderr (raise on a non-zero exit if `check`)."""
+    code, out = smk_code(wd, *args)
+    if check and code != 0:
+        raise AssertionError(f"snakemake {' '.join(args)} in {wd} exited {code}:\n{out[-6000:]}")
     return out
 
 
@@ -164,7 +169,8 @@ def test_invalid_config_fails_before_any_job(tmp_path, mutate, fragment):
     d = copy_workflow(tmp_path / "wf")
     cfg = tiny_config()
     mutate(cfg)
-    out = smk(d, "-j1", "--configfile", write_config(d, "bad.yaml", cfg), check=False)
+    code, out = smk_code(d, "-j1", "--configfile", write_config(d, "bad.yaml", cfg))
+    assert code != 0, out                       # a failed run, not a message beside a success
     assert fragment in out and "allowed" in out, out
     assert not (d / "results").exists()
 

@@ -122,7 +122,9 @@ def _flow_fate(y, p, cs, u):
 def test_the_slip_fate_is_the_direction_flows():
     """contact.slip_fate (the first root of cross followed in the sense of the direction's motion,
     the sign of rad there; a spiral's change of ln|u| per turn) against the flow integrated by SciPy,
-    at random slow slides of random disks: every fate the same, and all three fates seen."""
+    at random slow slides of random disks: every fate the same, ending and passing slips both seen
+    (a spiral is not: random states have none; test_a_narrow_root_pair_of_cross_is_not_taken_for_a_spiral
+    says why, and where slip_fate's spiral is not one)."""
     rng = np.random.default_rng(40)
     seen = {}
     tested = 0
@@ -156,6 +158,54 @@ def test_the_slip_fate_is_the_direction_flows():
         tested += 1
     assert tested >= 200, tested
     assert seen.get("ends", 0) > 10 and seen.get("passes", 0) > 10, seen
+
+
+# A slow slide whose cross has two narrow root pairs, each 0.025 rad wide (at 0.0 and pi): a thick
+# solid disk (L/R 1.54) with dry-friction moments k_i/R 0.62, 0.91, 0.57, mu_d 0.5, in a state whose
+# slip acceleration without friction vanishes (omega_1, omega_2 solved for it).
+NARROW_ROOTS = {
+    "y": [-1.0661870708871428, 1.529336448076924, 2.8760078437397656, -0.04740696192120808,
+          -9.921679139143197e-10, 1.2491129091842393e-10, 0.0, 0.0, 0.0, 0.0],
+    "p": [1.25, 0.9598307600991998, 0.5570916960108692, 0.5, 0.6156122497722349, 0.9107912717769985,
+          0.5704274337464185, 1.5, 0.3849311956572609, 0.0, 0.0, 0.0],
+    "cs": [1.0, -1.0, -1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+}
+
+
+@pytest.mark.xfail(strict=True, reason="contact.attracting_direction follows cross in 64 steps of 2 pi/64 "
+                                        "and steps over a root pair narrower than one step: it reports a "
+                                        "spiral where the direction settles (a defect of the core, reported)")
+def test_a_narrow_root_pair_of_cross_is_not_taken_for_a_spiral():
+    """Why the slip-fate test sees no spiral: with the friction -mu_d Phi s, Phi = beta/D(s),
+    D = W_nn - mu_d w.s > 0, the slip acceleration is b + Phi (v - mu_d W s) (b: without contact
+    forces; v: per unit Phi; W: per unit friction force; w: the normal acceleration per unit friction
+    force), so D cross = s_perp.c - mu_d s_perp.K s with c = W_nn b + beta v and K = b w^T + beta W:
+    mean mu_d (b x w)/2 over the circle, first harmonic of amplitude |c|. Without moments v = w, the
+    mean is below |c|/2, and a first harmonic twice the mean forces a root: no spiral (0 of 3000
+    random slow slides). The dry-friction moments k_i Phi add to v alone, which lets the mean win
+    where c ~ 0 and k_i ~ R. States built so (this one) have cross's roots in narrow pairs: the
+    flow settles at a root and the slip passes by u = 0, while slip_fate, stepping over the pairs,
+    calls it a spiral out."""
+    y = np.zeros(M.N_FULL)
+    y[:M.N_CORE] = NARROW_ROOTS["y"]
+    p, cs = np.array(NARROW_ROOTS["p"]), np.array(NARROW_ROOTS["cs"])
+    u = math.hypot(y[M.Y_U1], y[M.Y_U2])
+    # the roots, on a grid 256 times finer than the kernel's steps (the model valid all round)
+    n, dy, aux = M.N_CORE, np.zeros(M.N_FULL), np.zeros(M.N_AUX)
+    cross = []
+    for nu in np.linspace(0.0, 2.0 * math.pi, 64 * 256, endpoint=False):
+        ys = y[:n].copy()
+        ys[M.Y_U1], ys[M.Y_U2] = u * math.cos(nu), u * math.sin(nu)
+        M.rhs(0.0, ys, p, M.Contact(M.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3],
+                                    cs[L.CS_STUCK:L.CS_STUCK + 3], math.cos(nu), math.sin(nu)), n, dy, aux)
+        assert aux[M.X_OK] == 1.0
+        cross.append(dy[M.Y_U2] * math.cos(nu) - dy[M.Y_U1] * math.sin(nu))
+    assert np.count_nonzero(np.sign(cross) != np.sign(np.roll(cross, -1))) == 4
+    assert _flow_fate(y, p, cs, u) == "passes"
+    wk = np.zeros((L.N_WORK, L.N_WCOLS))
+    istats = np.zeros(L.N_ISTATS, np.int64)
+    fate, _ = C.slip_fate(0.0, y, L.System(p, cs, M.N_CORE, wk, istats))
+    assert fate == C.FATE_PASSES, fate
 
 
 @pytest.mark.parametrize("coeffs, reaches", [

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 import sweep
 from sweep.errors import ConfigError
+from sweep.fields import RANGES
 from sweep.scene import DEFAULTS, load_scene
 
 finite = dict(allow_nan=False, allow_infinity=False)
@@ -75,6 +76,10 @@ BAD_VALUES = {
 CASES = [(f, v) for f, vals in BAD_VALUES.items() for v in vals]
 
 
+def _a_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 def _with(field, value):
     cfg = copy.deepcopy(DEFAULTS)
     parts = field.split(".")
@@ -92,6 +97,12 @@ def test_each_bad_value_is_rejected_naming_the_field(field, value):
     msg = str(ei.value)
     assert ei.value.field.startswith(field), (ei.value.field, field)
     assert "allowed" in msg
+    if field in RANGES and _a_number(ei.value.value):    # a number (or a list's item) out of its range
+        assert RANGES[field].text() in msg, msg
+
+
+# field -> the fields whose relative bound it is (contact.mu_s -> contact.mu_d; disk.radius -> k_i, thickness)
+RELATIVE_TO = {f: {g for g, r in RANGES.items() if r.relative is not None and r.relative.field == f} for f in RANGES}
 
 
 @settings(max_examples=200, deadline=None)
@@ -99,11 +110,22 @@ def test_each_bad_value_is_rejected_naming_the_field(field, value):
        value=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=3), st.none(),
                        st.booleans(), st.lists(st.floats(), max_size=4)))
 def test_random_values_either_load_or_name_the_field(field, value):
-    """Any value in any field: either a valid scene, or a ConfigError that names that field."""
+    """Any value in any field: either a valid scene, or a ConfigError that names that field (or one
+    of its items) and its allowed range; or, where the value is valid but moves another field's
+    relative bound (mu_s below the default mu_d, a radius below the default k_i or thickness / 4),
+    that field and the bound it now exceeds."""
     try:
         sc = load_scene(_with(field, value))
     except ConfigError as exc:
-        assert exc.field.startswith(field) or exc.field.startswith(field.split(".")[0]), (exc.field, field)
+        msg = str(exc)
+        assert "allowed" in msg, msg
+        if exc.field == field or exc.field.startswith(field + "["):
+            if field in RANGES and _a_number(exc.value):
+                assert RANGES[field].text() in msg, msg
+        else:
+            assert exc.field in RELATIVE_TO.get(field, ()), (exc.field, field, msg)
+            assert RANGES[field].problem(value) is None, (field, value)      # the value itself is valid
+            assert f"exceeds {RANGES[exc.field].relative.label} = " in msg and RANGES[exc.field].text() in msg, msg
     else:
         assert np.all(np.isfinite(sc.params))
 
