@@ -172,9 +172,6 @@ NARROW_ROOTS = {
 }
 
 
-@pytest.mark.xfail(strict=True, reason="contact.attracting_direction follows cross in 64 steps of 2 pi/64 "
-                                        "and steps over a root pair narrower than one step: it reports a "
-                                        "spiral where the direction settles (a defect of the core, reported)")
 def test_a_narrow_root_pair_of_cross_is_not_taken_for_a_spiral():
     """Why the slip-fate test sees no spiral: with the friction -mu_d Phi s, Phi = beta/D(s),
     D = W_nn - mu_d w.s > 0, the slip acceleration is b + Phi (v - mu_d W s) (b: without contact
@@ -183,9 +180,10 @@ def test_a_narrow_root_pair_of_cross_is_not_taken_for_a_spiral():
     mean mu_d (b x w)/2 over the circle, first harmonic of amplitude |c|. Without moments v = w, the
     mean is below |c|/2, and a first harmonic twice the mean forces a root: no spiral (0 of 3000
     random slow slides). The dry-friction moments k_i Phi add to v alone, which lets the mean win
-    where c ~ 0 and k_i ~ R. States built so (this one) have cross's roots in narrow pairs: the
-    flow settles at a root and the slip passes by u = 0, while slip_fate, stepping over the pairs,
-    calls it a spiral out."""
+    where c ~ 0 and k_i ~ R. States built so (this one) have cross's roots in narrow pairs, each
+    narrower than a step of attracting_direction's scan: the flow settles at a root and the slip
+    passes by u = 0, and slip_fate must find the pair (contact.dip_crosses), not call it a spiral
+    out; the SciPy peer alike."""
     y = np.zeros(M.N_FULL)
     y[:M.N_CORE] = NARROW_ROOTS["y"]
     p, cs = np.array(NARROW_ROOTS["p"]), np.array(NARROW_ROOTS["cs"])
@@ -204,8 +202,23 @@ def test_a_narrow_root_pair_of_cross_is_not_taken_for_a_spiral():
     assert _flow_fate(y, p, cs, u) == "passes"
     wk = np.zeros((L.N_WORK, L.N_WCOLS))
     istats = np.zeros(L.N_ISTATS, np.int64)
-    fate, _ = C.slip_fate(0.0, y, L.System(p, cs, M.N_CORE, wk, istats))
+    fate, nu_exit = C.slip_fate(0.0, y, L.System(p, cs, M.N_CORE, wk, istats))
     assert fate == C.FATE_PASSES, fate
+    # the root reached is a root of cross, the first one in the sense in which the direction turns
+    roots = np.linspace(0.0, 2.0 * math.pi, 64 * 256, endpoint=False)[np.sign(cross) != np.sign(np.roll(cross, -1))]
+    nu0 = math.atan2(y[M.Y_U2], y[M.Y_U1]) % (2.0 * math.pi)
+    sense = 1.0 if np.interp(nu0, np.linspace(0.0, 2.0 * math.pi, 64 * 256, endpoint=False), cross) > 0.0 else -1.0
+    ahead = min(((r - nu0) * sense) % (2.0 * math.pi) for r in roots)
+    assert ((nu_exit - nu0) * sense) % (2.0 * math.pi) == pytest.approx(ahead, abs=2.0 * math.pi / (64 * 256))
+    # the SciPy peer's scan (128 steps, its own dip search) finds the same root
+    from tests.reference.scipy_driver import Contact, Disk, numba_backend
+
+    c = Contact(int(cs[L.CS_SIDE]))
+    c.mode = 1
+    c.sig = list(cs[L.CS_SIG:L.CS_SIG + 3])
+    peer_root = Disk(numba_backend(), p, M.N_CORE, p[M.P_UTOL], {}).attracting_direction(
+        math.atan2(y[M.Y_U2], y[M.Y_U1]), u, 0.0, y, c)
+    assert peer_root == pytest.approx(nu_exit, abs=1e-9)
 
 
 @pytest.mark.parametrize("coeffs, reaches", [

@@ -491,12 +491,24 @@ class Disk:
         def passed(x):
             return self.no_solution(x, u, t, y, c) or (self.cross_dot(x, u, t, y, c)[0] > 0.0) != (c0 > 0.0)
 
-        step = (2.0 * math.pi / 128) * (1.0 if c0 > 0.0 else -1.0)
-        xa = nu
+        sense = 1.0 if c0 > 0.0 else -1.0
+        step = (2.0 * math.pi / 128) * sense
+        xa, ca, x_prev, c_prev = nu, abs(c0), nu, math.inf
         for j in range(1, 129):
             xb = nu + j * step
-            if passed(xb):
-                lo, hi = xa, xb
+            crossed = passed(xb)
+            lo, hi = xa, xb
+            cb = abs(self.cross_dot(xb, u, t, y, c)[0]) if not crossed else 0.0
+            if not crossed and ca < c_prev and ca <= cb:
+                # |cross| dips at xa: a root pair narrower than a step may hide between its neighbours
+                from scipy.optimize import minimize_scalar
+
+                a, b = sorted((x_prev, xb))
+                res = minimize_scalar(lambda x: sense * self.cross_dot(x, u, t, y, c)[0], bounds=(a, b),
+                                      method="bounded", options={"xatol": 1e-12})
+                if res.fun <= 0.0 or self.no_solution(res.x, u, t, y, c):
+                    crossed, lo, hi = True, x_prev, res.x
+            if crossed:
                 for _ in range(100):
                     mid = 0.5 * (lo + hi)
                     if abs(hi - lo) < 1e-15 or mid in (lo, hi):
@@ -506,7 +518,7 @@ class Disk:
                     else:
                         lo = mid
                 return math.inf if self.no_solution(hi, u, t, y, c) else 0.5 * (lo + hi)
-            xa = xb
+            x_prev, c_prev, xa, ca = xa, ca, xb, cb
         return math.nan
 
     # -- discrete rules --

@@ -439,8 +439,10 @@ def set_slip(t, y, sys):
 def attracting_direction(nu, u, t, y, sys):
     """The quasi-static slip direction that the direction dynamics d nu/d tau = cross(nu)/u carry nu
     to: followed from nu in the direction of sign(cross) to the first sign change (64 steps on the
-    circle), then bisected to 1e-13 rad. NaN if cross keeps its sign on the whole circle (the slip
-    spirals into u = 0); JAMMED (inf) if what stops it is not a root of cross but the Painleve
+    circle; where |cross| has a local minimum among the steps, its minimum between the neighbouring
+    steps is found (dip_crosses), so a pair of roots closer than a step is not stepped over), then
+    bisected to 1e-13 rad. NaN if cross keeps its sign on the whole circle (the slip spirals into
+    u = 0); JAMMED (inf) if what stops it is not a root of cross but the Painleve
     singularity, where the e1 balance's coefficient of Phi falls to 0 and Phi grows without bound
     (cross changes sign through a pole; beyond it the contact law has no solution)."""
     wk = sys.wk
@@ -452,17 +454,26 @@ def attracting_direction(nu, u, t, y, sys):
         return JAMMED
     if ca == 0.0:
         return nu
-    step = (2.0 * math.pi / 64) * (1.0 if ca > 0.0 else -1.0)
+    sense = 1.0 if ca > 0.0 else -1.0
+    step = (2.0 * math.pi / 64) * sense
+    x_prev, c_prev = nu, math.inf     # the step before xa (none before nu)
     xa = nu
     for j in range(1, 65):
         xb = nu + j * step
         cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
-        if (cb > 0.0) != (ca > 0.0) or aux[X_OK] < 0.0:
-            lo, hi = xa, xb
+        crossed = (cb > 0.0) != (ca > 0.0) or aux[X_OK] < 0.0
+        lo, hi = xa, xb
+        if not crossed and abs(ca) < c_prev and abs(ca) <= abs(cb):
+            # |cross| dips at xa: a root pair may lie between the neighbouring steps
+            x_min = dip_crosses(x_prev if c_prev < math.inf else xa, xb, sense, u, t, y, sys)
+            if not math.isnan(x_min):
+                crossed = True
+                lo, hi = (x_prev if c_prev < math.inf else xa), x_min
+        if crossed:
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
                 cm, dm = slip_rates(mid, u, t, y, sys, dy, aux, ys)
-                if (cm > 0.0) == (ca > 0.0) and aux[X_OK] >= 0.0:
+                if (cm > 0.0) == (sense > 0.0) and aux[X_OK] >= 0.0:
                     lo = mid
                 else:
                     hi = mid
@@ -472,7 +483,44 @@ def attracting_direction(nu, u, t, y, sys):
             if aux[X_OK] < 0.0:
                 return JAMMED
             return 0.5 * (lo + hi)
-        xa = xb
+        x_prev, c_prev = xa, abs(ca)
+        xa, ca = xb, cb
+    return math.nan
+
+
+# Golden-section iterations of dip_crosses: the minimum located to 0.618^48 ~ 1e-10 of its bracket
+DIP_ITERATIONS = 48
+
+
+@kernel
+def dip_crosses(lo, hi, sense, u, t, y, sys):
+    """Where sense x cross has its minimum on [lo, hi] (golden section), if it is <= 0 there or the
+    contact law has no solution (a root pair, or the Painleve pole, between two scan steps of
+    attracting_direction whose cross has the sign sense): that point, else NaN."""
+    wk = sys.wk
+    dy, aux, ys = wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP]
+    g = 0.5 * (math.sqrt(5.0) - 1.0)
+    x1 = hi - g * (hi - lo)
+    x2 = lo + g * (hi - lo)
+    f1, _ = slip_rates(x1, u, t, y, sys, dy, aux, ys)
+    if aux[X_OK] < 0.0 or sense * f1 <= 0.0:
+        return x1
+    f2, _ = slip_rates(x2, u, t, y, sys, dy, aux, ys)
+    if aux[X_OK] < 0.0 or sense * f2 <= 0.0:
+        return x2
+    for _ in range(DIP_ITERATIONS):
+        if sense * f1 < sense * f2:
+            hi, x2, f2 = x2, x1, f1
+            x1 = hi - g * (hi - lo)
+            f1, _ = slip_rates(x1, u, t, y, sys, dy, aux, ys)
+            if aux[X_OK] < 0.0 or sense * f1 <= 0.0:
+                return x1
+        else:
+            lo, x1, f1 = x1, x2, f2
+            x2 = lo + g * (hi - lo)
+            f2, _ = slip_rates(x2, u, t, y, sys, dy, aux, ys)
+            if aux[X_OK] < 0.0 or sense * f2 <= 0.0:
+                return x2
     return math.nan
 
 
