@@ -404,13 +404,18 @@ def test_a_slaved_slip_carried_past_its_exit_by_a_stop_at_spin_tol_slides():
     transitions, 584 stick phases). The update now hands such a slip to SLIDE
     (contact.settle_event): the disk slaps down onto its face at t = 8.3996035479 s, the same at
     every rtol and with slip_tol and spin_tol 100x smaller. (The stick phases: 788 at the default
-    spin_tol, 787 below it, where omega.a_3 reaches rest only after the slip has left SLAVED.)"""
+    spin_tol, 787 below it, where omega.a_3 reaches rest only after the slip has left SLAVED.) The
+    runs slave the direction only below the floor (slave_tol 0), where this hand-over happened; at
+    the default slave_tol the halt time stays within the issue's 1e-7 of that limit."""
     runs = {}
     for name, solver in (("default", {}), ("rtol 1e-12", {"rtol": 1e-12, "atol": 1e-14}),
                          ("knobs", {"slip_tol": 1e-11, "spin_tol": 1e-9})):
         cfg = copy.deepcopy(FOIL_DISK)
-        cfg["solver"] = solver
+        cfg["solver"] = {**solver, "slave_tol": 0.0}
         runs[name] = sweep.simulate(cfg).summary
+    default_tol = sweep.simulate(copy.deepcopy(FOIL_DISK)).summary
+    assert default_tol["outcome"] == "halted" and default_tol["lay_flat"]
+    assert abs(default_tol["t_halt"] - runs["rtol 1e-12"]["t_halt"]) < 1e-7 * runs["rtol 1e-12"]["t_halt"]
     for name, s in runs.items():
         assert s["outcome"] == "halted" and s["lay_flat"], (name, s["outcome"], s["t_end"])
         budget = abs(s["energy_initial"] - s["energy_final"] - sum(s["dissipation"].values()))
