@@ -39,19 +39,24 @@ from . import outcomes
 
 # Outcomes that are a numerical failure, not physics: the cells around them are refined.
 FAILED = frozenset({outcomes.STEP_LIMIT, outcomes.STEP_SIZE_UNDERFLOW, outcomes.NUMERICAL_ERROR, outcomes.NOT_RUN})
-# Bar of a smooth cell: its corners' |surplus| times the observed convergence factor (error of this
-# stride / error of the parent's), at least KAPPA: second-order interpolation errs 1/4 of the
-# surplus at most in the limit, KAPPA = 1/2 is that with a factor 2 of margin.
+# The planning estimate of a cell's error: its corners' |surplus| (the error at twice its side)
+# times KAPPA: second-order interpolation errs 1/4 of the surplus at most in the limit, KAPPA =
+# 1/2 is that with a factor 2 of margin. (The map's error bars are calibrated: bar_factors.)
 KAPPA = 0.5
-# A cell is rough when its error fell by less than 1/ROUGH_RATIO over the last halving, or per
-# halving over the last two (its grandparent's error over its own below 1/ROUGH_RATIO^2 = 4); a
-# smooth function's falls 4x per halving, 16x over two.
+# A cell is rough when its error fell by less than 1/ROUGH_RATIO per halving over the last two
+# (its grandparent's error over its own below 1/ROUGH_RATIO^2 = 4); a smooth function's falls 4x
+# per halving, 16x over two. One halving is not evidence enough: the ratio of two maxima of a few
+# surpluses scatters by 2x in smooth regions too, and a region judged rough at stride 4 on one
+# halving errs ~4x less at stride 2 (benchmarks/adaptive_map.py).
 ROUGH_RATIO = 0.5
 SPACINGS = ("linear", "log")
 # A round before the last spends at most this share of the budget left on cells flagged for their
 # error (outcome boundaries and failures first, without this cap).
 ERROR_SHARE = 0.5
-ROUGH_ONE_HALVING = True
+# The share of reconstructed nodes whose error bar should hold (issue #52: >= 90 %), and the
+# fewest tests (computed nodes with a surplus) a calibration class needs (bar_factors).
+COVERAGE = 0.9
+MIN_CALIBRATION = 20
 
 
 def is_lattice_size(n: int) -> bool:
@@ -329,8 +334,8 @@ def cell_states(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.nda
                 surs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """For the cells of `level` at `lower`: disagree (corner outcomes differ), failed (a corner
     failed), error (driving error in tolerances, times KAPPA: the bar), ratio (error / the
-    parent's, NaN at level 0), rough (over the last two halvings the error fell by less than
-    1/ROUGH_RATIO^2, and the cell would be refined for it)."""
+    parent's, NaN at level 0), rough (level >= 2: over the last two halvings the error fell by
+    less than 1/ROUGH_RATIO^2, and the cell would be refined for it)."""
     cidx = _corner_idx(lat, lower, lat.stride(level))
     oc = f.outcome[cidx]
     disagree = (oc != oc[:, :1]).any(axis=1)
@@ -343,9 +348,6 @@ def cell_states(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.nda
         ep = driving_error(lat, f, st, level - 1, pl, surs)
         with np.errstate(all="ignore"):
             ratio = e / ep
-        if ROUGH_ONE_HALVING:
-            with np.errstate(all="ignore"):
-                rough = (ratio > ROUGH_RATIO) & (KAPPA * e > 1.0)
         if level >= 2:
             gl = parent_lower(lat, level - 1, pl)
             eg = driving_error(lat, f, st, level - 2, gl, surs)
@@ -440,6 +442,104 @@ def leaf_of(lat: Lattice, computed: np.ndarray, nodes: np.ndarray) -> tuple[np.n
     return level, lower
 
 
+def _box_max(lat: Lattice, level: int, lower: np.ndarray, sur: np.ndarray, pad: int) -> np.ndarray:
+    """Per cell of `level` (lower corners (n, d)), the largest |surplus| (n, m) of the nodes
+    computed at that level (level 0: also the virtual lattice's) in the box of the cell widened
+    by `pad` cells on every side (pad 0: its own corners, cell_error); NaN where there is none."""
+    s = lat.stride(level)
+    nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    r = node_round(lat, nodes)
+    own = (r == level) | ((level == 0) & (r == -1))
+    m = sur.shape[1]
+    v = np.where(own[:, None] & np.isfinite(sur), sur, -np.inf).reshape(lat.shape + (m,))
+    sub = v[tuple(slice(None, None, s) for _ in lat.shape)]              # the stride-s sub-lattice
+    # sliding max over a window of 2 + 2 pad sub-lattice points per axis, starting pad before the cell
+    width = 2 + 2 * pad
+    for a in range(lat.ndim):
+        padded = np.concatenate([np.full(sub.shape[:a] + (pad,) + sub.shape[a + 1:], -np.inf), sub,
+                                 np.full(sub.shape[:a] + (pad,) + sub.shape[a + 1:], -np.inf)], axis=a)
+        n_out = sub.shape[a] - 1
+        acc = np.full(sub.shape[:a] + (n_out,) + sub.shape[a + 1:], -np.inf)
+        for j in range(width):
+            acc = np.maximum(acc, np.take(padded, np.arange(j, j + n_out), axis=a))
+        sub = acc
+    out = sub[tuple((lower // s).T)]                                         # (n, m)
+    return np.where(np.isfinite(out), out, np.nan)
+
+
+def bar_indicator(lat: Lattice, level: int, lower: np.ndarray, sur: np.ndarray) -> np.ndarray:
+    """A cell's error indicator (n, m): the geometric mean of the largest |surplus| at its own
+    corners and in its neighbourhood (the cell widened by one cell each side), both at its level.
+    The surpluses there are errors of interpolation at twice the cell's side; the neighbourhood
+    catches roughness that the cell's few corners happen to miss."""
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(_box_max(lat, level, lower, sur, 0) * _box_max(lat, level, lower, sur, 1))
+
+
+# Calibration classes of a cell (bar_factors): split by an outcome boundary or a missing value
+# (MIXED), rough (ROUGH), neither (SMOOTH).
+SMOOTH, ROUGH, MIXED = 0, 1, 2
+
+
+def cell_class(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.ndarray, g: np.ndarray,
+               driving: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Per cell and component of an output (values g (size, m) in their interpolation space), its
+    calibration class (n, m): MIXED where its corners differ in outcome or one has no value,
+    else ROUGH or SMOOTH by cell_states."""
+    cidx = _corner_idx(lat, lower, lat.stride(level))
+    oc = f.outcome[cidx]
+    disagree = (oc != oc[:, :1]).any(axis=1)
+    missing = ~np.isfinite(g[cidx]).all(axis=1)                                 # (n, m)
+    rough = cell_states(lat, f, st, level, lower, driving)["rough"]
+    base = np.broadcast_to(np.where(rough, ROUGH, SMOOTH)[:, None], missing.shape)
+    return np.where(disagree[:, None] | missing, MIXED, base)
+
+
+def bar_factors(lat: Lattice, f: Fields, st: Settings, name: str, sur: np.ndarray,
+                driving: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The factors (3, m) that turn bar_indicator into an error bar of output `name`, per
+    calibration class (SMOOTH, ROUGH, MIXED) and component, calibrated on the map itself
+    (split-conformal): every node computed at round j >= 1 is a test of interpolation in the cell
+    of round j - 1 it lies in, whose error is its |surplus|; the factor is the COVERAGE quantile
+    (finite-sample corrected) of |surplus| / that cell's indicator over the tests of the class.
+    A class with fewer than MIN_CALIBRATION tests takes the pooled factor; with fewer in all, 1
+    (the bar is then the error at twice the side, a bound where interpolation converges)."""
+    nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    r = node_round(lat, nodes)
+    g = f.transformed(name)
+    ratios, classes = [], []
+    for j in range(1, lat.rounds + 1):
+        sel = np.nonzero((r == j) & f.computed)[0]
+        if not sel.size:
+            continue
+        low = cell_lower(lat, nodes[sel], lat.stride(j - 1))
+        ucells, inv = np.unique(low, axis=0, return_inverse=True)
+        inv = inv.ravel()
+        ind = bar_indicator(lat, j - 1, ucells, sur)[inv]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratios.append(sur[sel] / ind)
+        classes.append(cell_class(lat, f, st, j - 1, ucells, g, driving)[inv])
+    m = sur.shape[1]
+    if not ratios:
+        return np.ones((3, m))
+    x, cl = np.concatenate(ratios), np.concatenate(classes)
+
+    def q(sample: np.ndarray) -> float:
+        sample = np.sort(sample[np.isfinite(sample)])
+        if len(sample) < MIN_CALIBRATION:
+            return math.nan
+        i = min(len(sample) - 1, math.ceil((len(sample) + 1) * COVERAGE) - 1)
+        return float(sample[i])
+
+    out = np.ones((3, m))
+    for c in range(m):
+        pooled = q(x[:, c])
+        for k in (SMOOTH, ROUGH, MIXED):
+            v = q(x[cl[:, c] == k, c])
+            out[k, c] = v if math.isfinite(v) else (pooled if math.isfinite(pooled) else 1.0)
+    return out
+
+
 def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
     """The full map from the computed nodes (see the module's docstring for the bars)."""
     n = lat.size
@@ -457,6 +557,8 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
     level, lower = leaf_of(lat, f.computed, nodes)
     cell_level[miss] = level
     surs = {k: surpluses(lat, f, k) for k in f.values}
+    driving = {o: surs[o] for o in st.outputs}
+    factors = {k: bar_factors(lat, f, st, k, surs[k], driving) for k in f.values}
     for k in np.unique(level):
         sel = np.nonzero(level == k)[0]
         s = lat.stride(int(k))
@@ -477,7 +579,6 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
         inv = inv.ravel()
         cs = cell_states(lat, f, st, int(k), ucells, {o: surs[o] for o in st.outputs})
         rough = cs["rough"][inv]
-        ratio = cs["ratio"][inv]
         rough_node[tgt] = rough
         same = used & (oc == out[:, None])
         for name, g_all in ((nm, f.transformed(nm)) for nm in f.values):
@@ -491,12 +592,11 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
             lo = np.where(ok, gv, np.inf).min(axis=1)
             hi = np.where(ok, gv, -np.inf).max(axis=1)
             spread = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, np.nan)
-            e = cell_error(lat, int(k), ucells, surs[name])[inv]            # (n, m)
-            factor = np.clip(np.nan_to_num(ratio, nan=KAPPA), KAPPA, 1.0)[:, None]
-            bar = e * factor
-            mixed = (~agree | ~ok.all(axis=1).all(axis=1) | rough)[:, None]
-            with np.errstate(invalid="ignore"):
-                bar = np.where(mixed, np.fmax(np.where(rough[:, None], e, bar), spread), bar)
+            ind = bar_indicator(lat, int(k), ucells, surs[name])[inv]            # (n, m)
+            cls = cell_class(lat, f, st, int(k), ucells, g_all, driving)[inv]    # (n, m)
+            fac = np.take_along_axis(factors[name].T[None, :, :].repeat(len(cls), 0), cls[:, :, None], 2)[:, :, 0]
+            # no indicator (no surplus at this level around): the corners' spread
+            bar = np.where(np.isfinite(ind), fac * ind, spread)
             if f.is_log(name):
                 x = np.exp(est)
                 absbar = x * np.expm1(bar)
