@@ -209,3 +209,48 @@ def test_a_three_axis_map():
     assert (m.outcome[rec] != oc[rec]).mean() < 0.01
     ok = rec & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
     assert (np.abs(m.values["t"][ok, 0] - val[ok]) <= m.bars["t"][ok, 0]).mean() >= 0.9
+
+
+def test_bars_are_calibrated_on_the_maps_own_surpluses():
+    # the factor of a class is the 90 % quantile of |surplus| / indicator over the nodes computed
+    # at rounds >= 1 whose parent cell is of that class: derived here on its own
+    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    oc, val, rough = synthetic(lat)
+    f, st, _ = run_rounds(lat, oc, val)
+    sur = refine.surpluses(lat, f, "t")
+    fac = refine.bar_factors(lat, f, st, "t", sur, {"t": sur})
+    nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    r = refine.node_round(lat, nodes)
+    ratios = {refine.SMOOTH: [], refine.ROUGH: [], refine.MIXED: []}
+    for i in np.nonzero(f.computed & (r >= 1))[0]:
+        j = r[i]
+        low = refine.cell_lower(lat, nodes[i:i + 1], lat.stride(j - 1))
+        ind = refine.bar_indicator(lat, j - 1, low, sur)[0, 0]
+        cls = refine.cell_class(lat, f, st, j - 1, low, f.transformed("t"), {"t": sur})[0, 0]
+        if np.isfinite(sur[i, 0]) and ind > 0:
+            ratios[cls].append(sur[i, 0] / ind)
+    q90 = lambda x: np.sort(x)[int(np.ceil((len(x) + 1) * 0.9)) - 1]
+    pooled = q90(np.concatenate([np.array(x) for x in ratios.values()]))
+    for cls, x in ratios.items():   # a class with too few tests takes the pooled factor
+        assert fac[cls, 0] == (q90(np.array(x)) if len(x) >= refine.MIN_CALIBRATION else pooled)
+    assert max(len(x) for x in ratios.values()) >= refine.MIN_CALIBRATION
+    m = refine.reconstruct(lat, f, st)
+    ok = ~f.computed & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
+    err = np.abs(m.values["t"][:, 0] - val)
+    bar = m.bars["t"][:, 0]
+    # honest in the rough patch and outside it, not only over all
+    assert (err <= bar)[ok & rough].mean() >= 0.85 and (err <= bar)[ok & ~rough].mean() >= 0.9
+
+
+def test_rough_leaves_count_the_finished_maps_rough_cells():
+    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    oc, val, rough = synthetic(lat)
+    f, st, plans = run_rounds(lat, oc, val)
+    n = refine.rough_leaves(lat, f, st)
+    assert n > 0
+    # without the rough patch there is none
+    smooth = np.where(rough, np.exp(1.0 + 2.0 * xy(lat)[0] + np.sin(3.0 * xy(lat)[1])), val)
+    f2, st2, _ = run_rounds(lat, oc, smooth)
+    assert refine.rough_leaves(lat, f2, st2) == 0

@@ -408,6 +408,23 @@ def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
     return Plan(k, nodes.reshape(-1, lat.ndim), flagged, refined, skipped, int((cs["rough"] & ~by_outcome).sum()))
 
 
+def rough_leaves(lat: Lattice, f: Fields, st: Settings) -> int:
+    """How many cells of the finished map are rough: leaf cells (not refined) that cell_states
+    flags rough and no outcome boundary or failure runs through (the rough regions the map
+    reports, what a last round's progress line counts)."""
+    out = 0
+    surs = {name: surpluses(lat, f, name) for name in st.outputs}
+    for level, low in cells(lat, f.computed).items():
+        if level >= lat.rounds or not len(low):
+            continue
+        leaf = ~f.computed[_flat(lat, low + lat.stride(level) // 2)]
+        if not leaf.any():
+            continue
+        cs = cell_states(lat, f, st, level, low[leaf], surs)
+        out += int((cs["rough"] & ~cs["disagree"] & ~cs["failed"]).sum())
+    return out
+
+
 # ---------------------------------------------------------------------------------- the full map
 
 @dataclass
