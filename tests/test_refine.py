@@ -212,29 +212,42 @@ def test_a_three_axis_map():
 
 
 def test_bars_are_calibrated_on_the_maps_own_surpluses():
-    # the factor of a class is the 90 % quantile of |surplus| / indicator over the nodes computed
-    # at rounds >= 1 whose parent cell is of that class: derived here on its own
+    # every node computed at a round >= 1 tests the interpolation of the cell it was refined
+    # from; per class and bin of the indicator the factor is the conformal 90 % quantile of
+    # |surplus| / indicator: exactly ceil(0.9 (n + 1)) of the bin's n tests lie within it
     lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
                                "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
     oc, val, rough = synthetic(lat)
     f, st, _ = run_rounds(lat, oc, val)
     sur = refine.surpluses(lat, f, "t")
-    fac = refine.bar_factors(lat, f, st, "t", sur, {"t": sur})
+    cal = refine.bar_factors(lat, f, st, "t", sur, {"t": sur})
     nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
     r = refine.node_round(lat, nodes)
-    ratios = {refine.SMOOTH: [], refine.ROUGH: [], refine.MIXED: []}
+    tests = {refine.SMOOTH: [], refine.ROUGH: [], refine.MIXED: []}
     for i in np.nonzero(f.computed & (r >= 1))[0]:
         j = r[i]
         low = refine.cell_lower(lat, nodes[i:i + 1], lat.stride(j - 1))
         ind = refine.bar_indicator(lat, j - 1, low, sur)[0, 0]
         cls = refine.cell_class(lat, f, st, j - 1, low, f.transformed("t"), {"t": sur})[0, 0]
         if np.isfinite(sur[i, 0]) and ind > 0:
-            ratios[cls].append(sur[i, 0] / ind)
-    q90 = lambda x: np.sort(x)[int(np.ceil((len(x) + 1) * 0.9)) - 1]
-    pooled = q90(np.concatenate([np.array(x) for x in ratios.values()]))
-    for cls, x in ratios.items():   # a class with too few tests takes the pooled factor
-        assert fac[cls, 0] == (q90(np.array(x)) if len(x) >= refine.MIN_CALIBRATION else pooled)
-    assert max(len(x) for x in ratios.values()) >= refine.MIN_CALIBRATION
+            tests[cls].append((ind, sur[i, 0] / ind))
+    pooled = sum(tests.values(), [])
+    checked = 0
+    for cls, t in tests.items():
+        t = np.array(t if len(t) >= refine.MIN_CALIBRATION else pooled)
+        edges, factors = cal.edges[cls, 0], cal.factors[cls, 0]
+        assert len(factors) == max(1, len(t) // refine.BIN_TESTS) == len(edges) + 1
+        b = np.searchsorted(edges, np.log10(t[:, 0]))
+        for k, fac in enumerate(factors):
+            x = t[b == k, 1]
+            assert len(x) >= refine.BIN_TESTS or len(factors) == 1
+            assert (x <= fac).sum() == min(len(x), int(np.ceil(0.9 * (len(x) + 1))))
+            checked += 1
+        # below the tested range the bar does not shrink with the indicator
+        lo = cal.lowest[cls, 0]
+        cl = np.full((2, 1), cls)
+        np.testing.assert_array_equal(cal.bar(cl, np.array([[lo / 10], [lo]])), cal.bar(cl, np.array([[lo], [lo]])))
+    assert checked >= 3
     m = refine.reconstruct(lat, f, st)
     ok = ~f.computed & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
     err = np.abs(m.values["t"][:, 0] - val)

@@ -57,6 +57,7 @@ ERROR_SHARE = 0.5
 # fewest tests (computed nodes with a surplus) a calibration class needs (bar_factors).
 COVERAGE = 0.9
 MIN_CALIBRATION = 20
+BIN_TESTS = 200
 
 
 def is_lattice_size(n: int) -> bool:
@@ -512,19 +513,63 @@ def cell_class(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.ndar
     return np.where(disagree[:, None] | missing, MIXED, base)
 
 
+@dataclass
+class Calibration:
+    """Per calibration class and component of an output, the bins of the indicator (log10 edges
+    between them), each bin's factor, and the smallest indicator tested: bar = factor(class,
+    indicator) x max(indicator, the tests' 1 - COVERAGE quantile of it). Below what was tested
+    there is no evidence that the error keeps shrinking with the indicator (an output's noise
+    floor, or cells never refined because their error looked small), so none is assumed."""
+    edges: dict[tuple[int, int], np.ndarray]
+    factors: dict[tuple[int, int], np.ndarray]
+    lowest: dict[tuple[int, int], float]
+
+    def bar(self, cls: np.ndarray, ind: np.ndarray) -> np.ndarray:
+        """The bars (n, m) of cells of classes `cls` (n, m) with indicators `ind` (n, m)."""
+        out = ind.astype(float).copy()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lg = np.log10(ind)
+        for (k, c), edges in self.edges.items():
+            sel = cls[:, c] == k
+            if sel.any():
+                fac = self.factors[k, c][np.searchsorted(edges, np.nan_to_num(lg[sel, c], nan=-np.inf))]
+                out[sel, c] = fac * np.fmax(ind[sel, c], self.lowest[k, c])
+        return out
+
+
+def _quantile(sample: np.ndarray) -> float:
+    """The COVERAGE quantile of a sample with the split-conformal finite-sample correction
+    (the ceil((n + 1) COVERAGE)-th smallest)."""
+    sample = np.sort(sample)
+    return float(sample[min(len(sample) - 1, math.ceil((len(sample) + 1) * COVERAGE) - 1)])
+
+
+def _binned(ind: np.ndarray, ratio: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(log10 edges, factors) of tests with indicators `ind` and ratios |surplus| / ind: equal-count
+    bins of the indicator of BIN_TESTS tests at least, each bin's factor its _quantile."""
+    order = np.argsort(ind, kind="stable")
+    ind, ratio = ind[order], ratio[order]
+    n_bins = max(1, len(ind) // BIN_TESTS)
+    cuts = [round(i * len(ind) / n_bins) for i in range(n_bins + 1)]
+    factors = np.array([_quantile(ratio[a:b]) for a, b in zip(cuts[:-1], cuts[1:])])
+    edges = np.array([0.5 * (np.log10(ind[c - 1]) + np.log10(ind[c])) for c in cuts[1:-1]])
+    return edges, factors
+
+
 def bar_factors(lat: Lattice, f: Fields, st: Settings, name: str, sur: np.ndarray,
-                driving: Mapping[str, np.ndarray]) -> np.ndarray:
-    """The factors (3, m) that turn bar_indicator into an error bar of output `name`, per
-    calibration class (SMOOTH, ROUGH, MIXED) and component, calibrated on the map itself
-    (split-conformal): every node computed at round j >= 1 is a test of interpolation in the cell
-    of round j - 1 it lies in, whose error is its |surplus|; the factor is the COVERAGE quantile
-    (finite-sample corrected) of |surplus| / that cell's indicator over the tests of the class.
-    A class with fewer than MIN_CALIBRATION tests takes the pooled factor; with fewer in all, 1
-    (the bar is then the error at twice the side, a bound where interpolation converges)."""
+                driving: Mapping[str, np.ndarray]) -> Calibration:
+    """The factors that turn bar_indicator into an error bar of output `name`, calibrated on the
+    map itself (split-conformal): every node computed at round j >= 1 is a test of interpolation
+    in the cell of round j - 1 it lies in, whose error is its |surplus|; per calibration class
+    (SMOOTH, ROUGH, MIXED) and component, the tests are binned by their cell's indicator (a small
+    indicator is often the output's own noise floor, where the error no longer falls with the
+    side) and each bin's factor is the COVERAGE quantile of |surplus| / indicator in it. A class
+    with fewer than MIN_CALIBRATION tests takes the pooled tests; with fewer in all, factor 1 (the
+    bar is then the error at twice the side, a bound where interpolation converges)."""
     nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
     r = node_round(lat, nodes)
     g = f.transformed(name)
-    ratios, classes = [], []
+    inds, errs, classes = [], [], []
     for j in range(1, lat.rounds + 1):
         sel = np.nonzero((r == j) & f.computed)[0]
         if not sel.size:
@@ -532,29 +577,26 @@ def bar_factors(lat: Lattice, f: Fields, st: Settings, name: str, sur: np.ndarra
         low = cell_lower(lat, nodes[sel], lat.stride(j - 1))
         ucells, inv = np.unique(low, axis=0, return_inverse=True)
         inv = inv.ravel()
-        ind = bar_indicator(lat, j - 1, ucells, sur)[inv]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ratios.append(sur[sel] / ind)
+        inds.append(bar_indicator(lat, j - 1, ucells, sur)[inv])
+        errs.append(sur[sel])
         classes.append(cell_class(lat, f, st, j - 1, ucells, g, driving)[inv])
     m = sur.shape[1]
-    if not ratios:
-        return np.ones((3, m))
-    x, cl = np.concatenate(ratios), np.concatenate(classes)
-
-    def q(sample: np.ndarray) -> float:
-        sample = np.sort(sample[np.isfinite(sample)])
-        if len(sample) < MIN_CALIBRATION:
-            return math.nan
-        i = min(len(sample) - 1, math.ceil((len(sample) + 1) * COVERAGE) - 1)
-        return float(sample[i])
-
-    out = np.ones((3, m))
+    cal = Calibration({}, {}, {})
+    ind = np.concatenate(inds) if inds else np.zeros((0, m))
+    err = np.concatenate(errs) if errs else np.zeros((0, m))
+    cl = np.concatenate(classes) if classes else np.zeros((0, m), np.int64)
     for c in range(m):
-        pooled = q(x[:, c])
+        ok = np.isfinite(err[:, c]) & np.isfinite(ind[:, c]) & (ind[:, c] > 0)
         for k in (SMOOTH, ROUGH, MIXED):
-            v = q(x[cl[:, c] == k, c])
-            out[k, c] = v if math.isfinite(v) else (pooled if math.isfinite(pooled) else 1.0)
-    return out
+            sel = ok & (cl[:, c] == k)
+            if sel.sum() < MIN_CALIBRATION:
+                sel = ok
+            if sel.sum() < MIN_CALIBRATION:
+                cal.edges[k, c], cal.factors[k, c], cal.lowest[k, c] = np.zeros(0), np.ones(1), 0.0
+                continue
+            cal.edges[k, c], cal.factors[k, c] = _binned(ind[sel, c], err[sel, c] / ind[sel, c])
+            cal.lowest[k, c] = float(np.quantile(ind[sel, c], 1.0 - COVERAGE))
+    return cal
 
 
 def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
@@ -611,9 +653,8 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
             spread = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, np.nan)
             ind = bar_indicator(lat, int(k), ucells, surs[name])[inv]            # (n, m)
             cls = cell_class(lat, f, st, int(k), ucells, g_all, driving)[inv]    # (n, m)
-            fac = np.take_along_axis(factors[name].T[None, :, :].repeat(len(cls), 0), cls[:, :, None], 2)[:, :, 0]
             # no indicator (no surplus at this level around): the corners' spread
-            bar = np.where(np.isfinite(ind), fac * ind, spread)
+            bar = np.where(np.isfinite(ind), factors[name].bar(cls, ind), spread)
             if f.is_log(name):
                 x = np.exp(est)
                 absbar = x * np.expm1(bar)
