@@ -55,6 +55,10 @@ PLANES = {
 }
 
 
+# The dense lattices' chunk layout (their cache's chunk ids), whatever config.yaml's chunk_size.
+DENSE_CHUNK_SIZE = 16
+
+
 def settings_of(plane: str, points: int, start: int, share: float, tol: float) -> dict:
     import yaml
 
@@ -65,6 +69,7 @@ def settings_of(plane: str, points: int, start: int, share: float, tol: float) -
     cfg["refine"] = {"axes": {a: dict(spec, points=points) for a, spec in axes.items()},
                      "start_points": start, "max_share": share, "tolerance": tol}
     cfg["outputs"] = {"notebooks": []}
+    cfg["chunk_size"] = DENSE_CHUNK_SIZE
     return grid.normalize(cfg)
 
 
