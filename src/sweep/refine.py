@@ -19,8 +19,13 @@ The error estimate is the hierarchical surplus: a node computed at round k is al
 multilinear interpolation from the corners of the cell of round k - 1 it lies in (log values for
 positive times and frequencies); the difference, |surplus|, is what interpolation at the coarser
 stride missed there. For a smooth function it falls 4x per halving (second order); a cell's
-interpolation error is estimated from the surpluses at its own corners (`cell_bar`). Round 0's
-nodes get surpluses too, against the lattice of stride 2S (every other node of round 0).
+error, for planning, is the largest surplus at its own corners (`cell_error`). Round 0's nodes
+get surpluses too, against the lattice of stride 2S (every other node of round 0).
+
+The reconstructed map's error bars are calibrated on the map itself (`bar_factors`): every node
+computed after round 0 is a test of interpolation in the coarser cell it lies in (its surplus is
+that interpolation's true error), so the share of tests within factor x indicator fixes the
+factor, per class of cell and bin of the indicator (split-conformal prediction).
 
 Everything is a function of the set of computed nodes and their values, so the same config
 computes the same nodes (determinism: ties are broken by node index), and a round can be planned
@@ -500,15 +505,16 @@ SMOOTH, ROUGH, MIXED = 0, 1, 2
 
 
 def cell_class(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.ndarray, g: np.ndarray,
-               driving: Mapping[str, np.ndarray]) -> np.ndarray:
+               driving: Mapping[str, np.ndarray], rough: np.ndarray | None = None) -> np.ndarray:
     """Per cell and component of an output (values g (size, m) in their interpolation space), its
     calibration class (n, m): MIXED where its corners differ in outcome or one has no value,
-    else ROUGH or SMOOTH by cell_states."""
+    else ROUGH or SMOOTH by cell_states (or the cells' `rough` flags where given)."""
     cidx = _corner_idx(lat, lower, lat.stride(level))
     oc = f.outcome[cidx]
     disagree = (oc != oc[:, :1]).any(axis=1)
     missing = ~np.isfinite(g[cidx]).all(axis=1)                                 # (n, m)
-    rough = cell_states(lat, f, st, level, lower, driving)["rough"]
+    if rough is None:
+        rough = cell_states(lat, f, st, level, lower, driving)["rough"]
     base = np.broadcast_to(np.where(rough, ROUGH, SMOOTH)[:, None], missing.shape)
     return np.where(disagree[:, None] | missing, MIXED, base)
 
@@ -628,17 +634,15 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
         near = cidx[np.arange(len(sel)), np.argmax(w, axis=1)]
         oc = f.outcome[cidx]
         used = w > 0
-        agree = np.where(used, oc == oc[np.arange(len(sel)), np.argmax(w, axis=1)][:, None], True).all(axis=1)
         out = f.outcome[near]
         tgt = miss[sel]
         outcome[tgt] = out
         source[tgt] = near
-        # cell flags for the bars: the cell's own states (rough uses the driving outputs)
+        # the cells' rough flags (by the driving outputs): reported, and a calibration class
         ucells, inv = np.unique(lower[sel], axis=0, return_inverse=True)
         inv = inv.ravel()
-        cs = cell_states(lat, f, st, int(k), ucells, {o: surs[o] for o in st.outputs})
-        rough = cs["rough"][inv]
-        rough_node[tgt] = rough
+        cell_rough = cell_states(lat, f, st, int(k), ucells, driving)["rough"]
+        rough_node[tgt] = cell_rough[inv]
         same = used & (oc == out[:, None])
         for name, g_all in ((nm, f.transformed(nm)) for nm in f.values):
             gv = g_all[cidx]                                            # (n, 2^d, m)
@@ -652,7 +656,7 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
             hi = np.where(ok, gv, -np.inf).max(axis=1)
             spread = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, np.nan)
             ind = bar_indicator(lat, int(k), ucells, surs[name])[inv]            # (n, m)
-            cls = cell_class(lat, f, st, int(k), ucells, g_all, driving)[inv]    # (n, m)
+            cls = cell_class(lat, f, st, int(k), ucells, g_all, driving, cell_rough)[inv]    # (n, m)
             # no indicator (no surplus at this level around): the corners' spread
             bar = np.where(np.isfinite(ind), factors[name].bar(cls, ind), spread)
             if f.is_log(name):
