@@ -106,10 +106,52 @@ def test_every_variable_and_coordinate_has_cf_attributes(tmp_path, tiny):
 
 
 def _fail_midway(monkeypatch):
-    def broken(self, path, *args, **kwargs):
+    def broken(path, *args, **kwargs):
         Path(path).write_bytes(b"\x89HDF\r\n partial")
         raise OSError("disk full")
-    monkeypatch.setattr(xr.Dataset, "to_netcdf", broken)
+    monkeypatch.setattr(io, "_write_chunk_nc", broken)
+
+
+def _raw(path):
+    import netCDF4
+
+    with netCDF4.Dataset(path, "r") as nc:
+        nc.set_auto_maskandscale(False)
+        dims = {k: len(v) for k, v in nc.dimensions.items()}
+        gattrs = {k: nc.getncattr(k) for k in nc.ncattrs()}
+        out = {}
+        for name, v in nc.variables.items():
+            attrs = {k: v.getncattr(k) for k in v.ncattrs()}
+            out[name] = (v.dimensions, v.dtype, {k: np.asarray(a).tolist() for k, a in attrs.items()},
+                         np.asarray(v[...]))
+    return dims, gattrs, out
+
+
+def test_chunk_file_is_what_xarray_writes(tmp_path, tiny):
+    """write_chunk writes with netCDF4 alone (no xarray import in a chunk job): the file must
+    hold what xarray's writer makes of chunk_dataset with the chunk fills."""
+    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    sums = [fake_summary(p, tiny["levels"]) for p in chunk.points]
+    sums[0] = io.error_summary(len(tiny["levels"]))
+    new = io.write_chunk(chunk, sums, tmp_path / "new.nc")
+    ds = io.chunk_dataset(chunk, sums)
+    enc = {name: {"_FillValue": io._fill_of(name, np.asarray(ds[name].values))} for name in ds.variables}
+    ref = io.write_atomic(ds, tmp_path / "ref.nc", enc,
+                          finish=lambda tmp: _rechecksum(tmp))
+    d_new, g_new, v_new = _raw(new)
+    d_ref, g_ref, v_ref = _raw(ref)
+    assert d_new == d_ref
+    assert g_new == g_ref          # the checksum included: the same stored values
+    assert sorted(v_new) == sorted(v_ref)
+    for name in v_ref:
+        dims, dt, attrs, vals = v_new[name]
+        assert (dims, dt) == v_ref[name][:2], name
+        assert json.dumps(attrs, sort_keys=True, default=str) == json.dumps(v_ref[name][2], sort_keys=True,
+                                                                             default=str), name
+        np.testing.assert_array_equal(vals, v_ref[name][3], err_msg=name)
+    with xr.open_dataset(new) as a, xr.open_dataset(ref) as b:
+        xr.testing.assert_identical(a, b)
+    assert io.verify_chunk(new, chunk) is None
 
 
 def test_atomic_write_leaves_no_partial_file(tmp_path, tiny, monkeypatch):

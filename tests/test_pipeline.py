@@ -471,3 +471,40 @@ def test_adaptive_map_slurm_dry_run(tmp_path):
               "--configfile", "config/tiny_adaptive.yaml", "--dry-run")
     assert job_count(out, "refine_round") == adaptive.lattice(settings_of(adaptive_config())).rounds + 1
     assert job_count(out, "gather") == 1
+
+
+def test_adaptive_map_recomputes_a_lost_chunk_of_a_finished_round(adaptive_run, tmp_path):
+    from sweep import adaptive
+
+    d0, _ = adaptive_run
+    d = copy_workflow(tmp_path / "wf")
+    shutil.copytree(d0 / "results" / "tiny_adaptive", d / "results" / "tiny_adaptive")
+    res = d / "results" / "tiny_adaptive"
+    settings = settings_of(adaptive_config())
+    (map_id,) = adaptive.maps(settings)
+    rounds = sorted((res / "rounds" / map_id).glob("round*.json"))
+    before = {p.name: p.read_text() for p in rounds}
+    lost = res / "chunks" / f"{json.loads(rounds[0].read_text())['chunks'][0]}.nc"
+    lost.unlink()
+    # the gather alone (the cube still there: the front door sees the lost file and remakes it)
+    out = smk(d, "-j2", "--configfile", "config/tiny_adaptive.yaml")
+    assert "of a finished round is missing" in out and "refine_round" not in out
+    assert lost.exists()
+    assert {p.name: p.read_text() for p in rounds} == before      # no round ran again
+    log = (res / "logs" / "gather.log").read_text()
+    assert "1 chunk file(s) to compute again" in log
+    a, b = cube_values(d0 / "results" / "tiny_adaptive" / "cube.nc"), cube_values(res / "cube.nc")
+    for k in a:
+        if not k.startswith("wall_time"):
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    assert "Nothing to be done" in smk(d, "-j2", "--configfile", "config/tiny_adaptive.yaml", "--dry-run")
+
+
+def test_last_round_line_reports_the_finished_maps_rough_cells():
+    from sweep import adaptive
+
+    rec = {"round": 3, "rounds": 3, "scenes": 10, "computed": 100, "lattice": 400, "share": 0.25,
+           "max_share": 0.25, "next": None, "rough_final": 7}
+    assert adaptive.round_line("x", "mu_d 0.3", rec).endswith("no round left; rough 7 cells")
+    rec["next"] = {"outcome": 1, "failed": 0, "error": 2, "rough": 4}
+    assert adaptive.round_line("x", "mu_d 0.3", rec).endswith("rough 4 cells")

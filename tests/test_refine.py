@@ -209,3 +209,61 @@ def test_a_three_axis_map():
     assert (m.outcome[rec] != oc[rec]).mean() < 0.01
     ok = rec & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
     assert (np.abs(m.values["t"][ok, 0] - val[ok]) <= m.bars["t"][ok, 0]).mean() >= 0.9
+
+
+def test_bars_are_calibrated_on_the_maps_own_surpluses():
+    # every node computed at a round >= 1 tests the interpolation of the cell it was refined
+    # from; per class and bin of the indicator the factor is the conformal 90 % quantile of
+    # |surplus| / indicator: exactly ceil(0.9 (n + 1)) of the bin's n tests lie within it
+    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    oc, val, rough = synthetic(lat)
+    f, st, _ = run_rounds(lat, oc, val)
+    sur = refine.surpluses(lat, f, "t")
+    cal = refine.bar_factors(lat, f, st, "t", sur, {"t": sur})
+    nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    r = refine.node_round(lat, nodes)
+    tests = {refine.SMOOTH: [], refine.ROUGH: [], refine.MIXED: []}
+    for i in np.nonzero(f.computed & (r >= 1))[0]:
+        j = r[i]
+        low = refine.cell_lower(lat, nodes[i:i + 1], lat.stride(j - 1))
+        ind = refine.bar_indicator(lat, j - 1, low, sur)[0, 0]
+        cls = refine.cell_class(lat, f, st, j - 1, low, f.transformed("t"), {"t": sur})[0, 0]
+        if np.isfinite(sur[i, 0]) and ind > 0:
+            tests[cls].append((ind, sur[i, 0] / ind))
+    pooled = sum(tests.values(), [])
+    checked = 0
+    for cls, t in tests.items():
+        t = np.array(t if len(t) >= refine.MIN_CALIBRATION else pooled)
+        edges, factors = cal.edges[cls, 0], cal.factors[cls, 0]
+        assert len(factors) == max(1, len(t) // refine.BIN_TESTS) == len(edges) + 1
+        b = np.searchsorted(edges, np.log10(t[:, 0]))
+        for k, fac in enumerate(factors):
+            x = t[b == k, 1]
+            assert len(x) >= refine.BIN_TESTS or len(factors) == 1
+            assert (x <= fac).sum() == min(len(x), int(np.ceil(0.9 * (len(x) + 1))))
+            checked += 1
+        # below the tested range the bar does not shrink with the indicator
+        lo = cal.lowest[cls, 0]
+        cl = np.full((2, 1), cls)
+        np.testing.assert_array_equal(cal.bar(cl, np.array([[lo / 10], [lo]])), cal.bar(cl, np.array([[lo], [lo]])))
+    assert checked >= 3
+    m = refine.reconstruct(lat, f, st)
+    ok = ~f.computed & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
+    err = np.abs(m.values["t"][:, 0] - val)
+    bar = m.bars["t"][:, 0]
+    # honest in the rough patch and outside it, not only over all
+    assert (err <= bar)[ok & rough].mean() >= 0.85 and (err <= bar)[ok & ~rough].mean() >= 0.9
+
+
+def test_rough_leaves_count_the_finished_maps_rough_cells():
+    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    oc, val, rough = synthetic(lat)
+    f, st, plans = run_rounds(lat, oc, val)
+    n = refine.rough_leaves(lat, f, st)
+    assert n > 0
+    # without the rough patch there is none
+    smooth = np.where(rough, np.exp(1.0 + 2.0 * xy(lat)[0] + np.sin(3.0 * xy(lat)[1])), val)
+    f2, st2, _ = run_rounds(lat, oc, smooth)
+    assert refine.rough_leaves(lat, f2, st2) == 0

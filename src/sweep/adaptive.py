@@ -211,13 +211,57 @@ def run_chunks(chunks: Sequence[_grid.Chunk], chunk_dir: Path, threads: int) -> 
 
 # ----------------------------------------------------------------------------------- round jobs
 
-def load_rounds(settings: Mapping, results: str | Path, map_id: str, upto: int) -> tuple[MapState, list[dict]]:
-    """The map's state after rounds 0..upto-1, from their round files and chunk files."""
+def chunk_problem(path: Path, cid: str) -> str | None:
+    """Why the chunk file of a finished round cannot be read as it is (missing, damaged, another
+    chunk's), or None."""
+    if not path.exists():
+        return "missing"
+    return _io.read_chunk_file(path, expect_id=cid)[0]
+
+
+def stale_chunks(settings: Mapping, results: str | Path) -> dict[str, str]:
+    """{chunk path: problem} over the chunk files named by the round files on disk: what a
+    finished round needs again (the front door's check before Snakemake decides what to run)."""
+    out = {}
+    rdir = Path(results) / ROUNDS_DIR
+    for map_id in maps(settings):
+        for rfile in sorted((rdir / map_id).glob("round*.json")):
+            try:
+                rec = json.loads(rfile.read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                continue
+            for cid in rec.get("chunks", []):
+                p = Path(results) / "chunks" / f"{cid}.nc"
+                why = chunk_problem(p, cid)
+                if why is not None:
+                    out[str(p)] = why
+    return out
+
+
+def load_rounds(settings: Mapping, results: str | Path, map_id: str, upto: int,
+                threads: int = 1) -> tuple[MapState, list[dict]]:
+    """The map's state after rounds 0..upto-1, from their round files and chunk files. A chunk
+    file of a finished round that is missing or damaged is computed again (damaged ones
+    quarantined first): the round is planned again from the rounds before it, which gives the
+    same chunks (deterministic; checked against the round file), and only those run."""
+    results = Path(results)
     state = MapState(settings)
     records = []
     for j in range(upto):
         rec = json.loads(round_path(results, map_id, j).read_text(encoding="utf-8"))
-        state.add_chunks([Path(results) / "chunks" / f"{cid}.nc" for cid in rec["chunks"]], j)
+        paths = [results / "chunks" / f"{cid}.nc" for cid in rec["chunks"]]
+        bad = {p.name: why for p, cid in zip(paths, rec["chunks"]) if (why := chunk_problem(p, cid)) is not None}
+        if bad:
+            st = refine_settings(settings, state.lat)
+            plan = _refine.plan_round(state.lat, state.fields, st, j)
+            chunks = chunks_of_round(settings, maps(settings)[map_id], state.lat, plan.nodes)
+            if [c.id for c in chunks] != list(rec["chunks"]):
+                raise RuntimeError(f"{round_path(results, map_id, j)} names other chunks than its round plans now "
+                                   "(a round file from other settings or code?): delete it and rerun")
+            log.warning("map %s round %d: %d chunk file(s) to compute again (%s)", map_id, j, len(bad),
+                        ", ".join(f"{n}: {w}" for n, w in sorted(bad.items())))
+            run_chunks(chunks, results / "chunks", threads)
+        state.add_chunks(paths, j)
         records.append(rec)
     return state, records
 
@@ -227,9 +271,11 @@ def round_line(name: str, label: str, rec: Mapping) -> str:
     nxt = rec.get("next") or {}
     still = (f"still flagged {nxt['outcome']} outcome / {nxt['failed']} failed / {nxt['error']} error cells"
              if nxt else "no round left")
+    # after the last round: the rough cells of the finished map
+    rough = nxt["rough"] if nxt else rec.get("rough_final", 0)
     return (f"sweep {name}: map {label}: round {rec['round']}/{rec['rounds']}: {rec['scenes']} scenes "
             f"({rec['computed']} of {rec['lattice']}, {100 * rec['share']:.1f} %, budget "
-            f"{100 * rec['max_share']:.0f} %); {still}; rough {nxt.get('rough', 0)} cells")
+            f"{100 * rec['max_share']:.0f} %); {still}; rough {rough} cells")
 
 
 def run_round(settings: Mapping, map_id: str, k: int, results: str | Path, out_path: str | Path,
@@ -238,7 +284,7 @@ def run_round(settings: Mapping, map_id: str, k: int, results: str | Path, out_p
     its round file (atomically, last). Returns the round's record."""
     results = Path(results)
     outer = maps(settings)[map_id]
-    state, _ = load_rounds(settings, results, map_id, k)
+    state, _ = load_rounds(settings, results, map_id, k, threads)
     lat, st = state.lat, refine_settings(settings, state.lat)
     t0 = time.perf_counter()
     plan = _refine.plan_round(lat, state.fields, st, k)
@@ -257,6 +303,8 @@ def run_round(settings: Mapping, map_id: str, k: int, results: str | Path, out_p
                  if nxt is not None else None),
         "seconds": round(time.perf_counter() - t0, 3),
     }
+    if nxt is None:
+        rec["rough_final"] = _refine.rough_leaves(lat, state.fields, st)
     rec["line"] = round_line(name, map_label(outer), rec)
     log.info("%s", rec["line"])
     _io.write_text_atomic(out_path, json.dumps(rec, indent=1))

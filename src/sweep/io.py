@@ -188,17 +188,16 @@ def _fsync_path(path: Path) -> None:
         os.close(fd)
 
 
-def write_atomic(ds, path: str | Path, encoding: Mapping | None = None,
-                 finish: Callable[[Path], None] | None = None) -> Path:
-    """Write `ds` to netCDF-4 at `path` atomically (temp file in the same dir, fsync, os.replace).
-
-    `finish(tmp_path)` may amend the temporary file (e.g. add a checksum) before the rename.
-    """
+def write_file_atomic(path: str | Path, write: Callable[[Path], None],
+                      finish: Callable[[Path], None] | None = None) -> Path:
+    """Make the file at `path` atomically: `write(tmp)` writes a temporary file in the same
+    directory, `finish(tmp)` may amend it (e.g. add a checksum), then fsync and os.replace; on any
+    error the temporary file is removed and `path` is untouched."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=dict(encoding or {}))
+        write(tmp)
         if finish is not None:
             finish(tmp)
         _fsync_path(tmp)
@@ -210,14 +209,21 @@ def write_atomic(ds, path: str | Path, encoding: Mapping | None = None,
     return path
 
 
+def write_atomic(ds, path: str | Path, encoding: Mapping | None = None,
+                 finish: Callable[[Path], None] | None = None) -> Path:
+    """Write the xarray Dataset `ds` to netCDF-4 at `path` atomically (write_file_atomic)."""
+    return write_file_atomic(
+        path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=dict(encoding or {})),
+        finish)
+
+
 # --------------------------------------------------------------------------------------------
 # chunk files
 # --------------------------------------------------------------------------------------------
 
-def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
-    """The xarray Dataset of one chunk from its scenes' summaries (in chunk point order)."""
-    import xarray as xr
-
+def chunk_content(chunk: _grid.Chunk, summaries: Sequence[Mapping]) -> tuple[dict, dict, dict]:
+    """What a chunk file holds, from its scenes' summaries (in chunk point order): (coordinates
+    {name: (dims, values, attrs)}, data variables likewise, global attributes)."""
     spec = chunk.spec
     levels = spec["settings"]["levels"]
     if len(summaries) != len(chunk.points):
@@ -227,8 +233,8 @@ def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
         if len(got) != len(levels) or any(g == g and g != w for g, w in zip(got, levels)):
             raise ValueError(f"chunk {chunk.id}: summary levels {got} do not match the configured {levels}")
     pts = np.array(chunk.points, dtype=np.float64).reshape(len(chunk.points), len(_grid.AXES))
-    coords = {a: ("point", pts[:, i], _coord_attrs(a)) for i, a in enumerate(_grid.AXES)}
-    coords["level"] = ("level", np.array(levels, dtype=np.float64), dict(LEVEL_ATTRS))
+    coords = {a: (("point",), pts[:, i], _coord_attrs(a)) for i, a in enumerate(_grid.AXES)}
+    coords["level"] = (("level",), np.array(levels, dtype=np.float64), dict(LEVEL_ATTRS))
     summaries = [reasons.add_flags(s) for s in summaries]   # why each missing value is missing
     data = {}
     for var in variables(bool(spec["settings"].get("error_estimate", False))):
@@ -238,34 +244,63 @@ def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
     attrs = {"Conventions": "CF-1.10", "title": "Euler's disk sweep chunk",
              "sweep_chunk_id": chunk.id, "sweep_chunk_spec": chunk.spec_json,
              "sweep_chunk_format": _outputs.CHUNK_FORMAT, "sweep_version": __version__}
+    return coords, data, attrs
+
+
+def chunk_dataset(chunk: _grid.Chunk, summaries: Sequence[Mapping]):
+    """The xarray Dataset of one chunk from its scenes' summaries (in chunk point order)."""
+    import xarray as xr
+
+    coords, data, attrs = chunk_content(chunk, summaries)
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
-def _chunk_encoding(ds) -> dict:
-    enc = {}
-    for name in ds.variables:
-        dt = ds[name].dtype
-        if dt.kind == "f":
-            enc[name] = {"_FillValue": np.nan}
-        elif dt.kind == "i" and name in VARIABLE_NAMES and next(v for v in VARIABLES if v.name == name).kind == "int":
-            enc[name] = {"_FillValue": np.int32(INT_FILL)}
-        else:
-            enc[name] = {"_FillValue": None}
-    return enc
+def _fill_of(name: str, values: np.ndarray):
+    """A chunk variable's _FillValue: NaN for floats, INT_FILL for the counts, none otherwise."""
+    if values.dtype.kind == "f":
+        return np.nan
+    if values.dtype.kind == "i" and name in VARIABLE_NAMES and next(v for v in VARIABLES if v.name == name).kind == "int":
+        return np.int32(INT_FILL)
+    return None
+
+
+def _write_chunk_nc(tmp: Path, coords: Mapping, data: Mapping, attrs: Mapping) -> dict[str, np.ndarray]:
+    """Write a chunk file with netCDF4 alone, as xarray writes chunk_dataset with these fills
+    (same dimensions, variables, dtypes, fills, attributes; booleans as int8 with dtype 'bool'),
+    so a chunk job need not import xarray and dask (~1 s a process). Returns the raw arrays
+    stored ({name: values}, what file_checksum reads back)."""
+    import netCDF4
+
+    coord_names = " ".join(sorted(a for a in coords if a != "level"))
+    stored = {}
+    with netCDF4.Dataset(tmp, "w", format="NETCDF4") as nc:
+        nc.createDimension("point", len(coords[_grid.AXES[0]][1]))
+        nc.createDimension("level", len(coords["level"][1]))
+        for name, (dims, values, vattrs) in list(data.items()) + list(coords.items()):
+            values = np.asarray(values)
+            vattrs = dict(vattrs)
+            if values.dtype == bool:
+                values = values.astype(np.int8)
+                vattrs["dtype"] = "bool"
+            if name in data:
+                vattrs["coordinates"] = coord_names
+            fill = _fill_of(name, values)
+            v = nc.createVariable(name, values.dtype, tuple(dims), fill_value=fill if fill is not None else False)
+            v.set_auto_maskandscale(False)
+            for k, a in vattrs.items():
+                v.setncattr(k, a)
+            v[...] = values
+            stored[name] = values
+        for k, a in attrs.items():
+            nc.setncattr(k, a)
+        nc.setncattr("sweep_checksum", _checksum_of(stored))
+    return stored
 
 
 def write_chunk(chunk: _grid.Chunk, summaries: Sequence[Mapping], path: str | Path) -> Path:
     """Write a chunk file atomically, with the checksum of its content as `sweep_checksum`."""
-    import netCDF4
-
-    ds = chunk_dataset(chunk, summaries)
-
-    def add_checksum(tmp: Path) -> None:
-        digest = file_checksum(tmp)
-        with netCDF4.Dataset(tmp, "a") as nc:
-            nc.setncattr("sweep_checksum", digest)
-
-    return write_atomic(ds, path, _chunk_encoding(ds), finish=add_checksum)
+    coords, data, attrs = chunk_content(chunk, summaries)
+    return write_file_atomic(path, lambda tmp: _write_chunk_nc(tmp, coords, data, attrs))
 
 
 def _checksum_of(arrays: Mapping[str, np.ndarray]) -> str:

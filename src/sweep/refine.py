@@ -19,8 +19,13 @@ The error estimate is the hierarchical surplus: a node computed at round k is al
 multilinear interpolation from the corners of the cell of round k - 1 it lies in (log values for
 positive times and frequencies); the difference, |surplus|, is what interpolation at the coarser
 stride missed there. For a smooth function it falls 4x per halving (second order); a cell's
-interpolation error is estimated from the surpluses at its own corners (`cell_bar`). Round 0's
-nodes get surpluses too, against the lattice of stride 2S (every other node of round 0).
+error, for planning, is the largest surplus at its own corners (`cell_error`). Round 0's nodes
+get surpluses too, against the lattice of stride 2S (every other node of round 0).
+
+The reconstructed map's error bars are calibrated on the map itself (`bar_factors`): every node
+computed after round 0 is a test of interpolation in the coarser cell it lies in (its surplus is
+that interpolation's true error), so the share of tests within factor x indicator fixes the
+factor, per class of cell and bin of the indicator (split-conformal prediction).
 
 Everything is a function of the set of computed nodes and their values, so the same config
 computes the same nodes (determinism: ties are broken by node index), and a round can be planned
@@ -39,19 +44,25 @@ from . import outcomes
 
 # Outcomes that are a numerical failure, not physics: the cells around them are refined.
 FAILED = frozenset({outcomes.STEP_LIMIT, outcomes.STEP_SIZE_UNDERFLOW, outcomes.NUMERICAL_ERROR, outcomes.NOT_RUN})
-# Bar of a smooth cell: its corners' |surplus| times the observed convergence factor (error of this
-# stride / error of the parent's), at least KAPPA: second-order interpolation errs 1/4 of the
-# surplus at most in the limit, KAPPA = 1/2 is that with a factor 2 of margin.
+# The planning estimate of a cell's error: its corners' |surplus| (the error at twice its side)
+# times KAPPA: second-order interpolation errs 1/4 of the surplus at most in the limit, KAPPA =
+# 1/2 is that with a factor 2 of margin. (The map's error bars are calibrated: bar_factors.)
 KAPPA = 0.5
-# A cell is rough when its error fell by less than 1/ROUGH_RATIO over the last halving, or per
-# halving over the last two (its grandparent's error over its own below 1/ROUGH_RATIO^2 = 4); a
-# smooth function's falls 4x per halving, 16x over two.
+# A cell is rough when its error fell by less than 1/ROUGH_RATIO per halving over the last two
+# (its grandparent's error over its own below 1/ROUGH_RATIO^2 = 4); a smooth function's falls 4x
+# per halving, 16x over two. One halving is not evidence enough: the ratio of two maxima of a few
+# surpluses scatters by 2x in smooth regions too, and a region judged rough at stride 4 on one
+# halving errs ~4x less at stride 2 (benchmarks/adaptive_map.py).
 ROUGH_RATIO = 0.5
 SPACINGS = ("linear", "log")
 # A round before the last spends at most this share of the budget left on cells flagged for their
 # error (outcome boundaries and failures first, without this cap).
 ERROR_SHARE = 0.5
-ROUGH_ONE_HALVING = True
+# The share of reconstructed nodes whose error bar should hold (issue #52: >= 90 %), and the
+# fewest tests (computed nodes with a surplus) a calibration class needs (bar_factors).
+COVERAGE = 0.9
+MIN_CALIBRATION = 20
+BIN_TESTS = 200
 
 
 def is_lattice_size(n: int) -> bool:
@@ -329,8 +340,8 @@ def cell_states(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.nda
                 surs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """For the cells of `level` at `lower`: disagree (corner outcomes differ), failed (a corner
     failed), error (driving error in tolerances, times KAPPA: the bar), ratio (error / the
-    parent's, NaN at level 0), rough (over the last two halvings the error fell by less than
-    1/ROUGH_RATIO^2, and the cell would be refined for it)."""
+    parent's, NaN at level 0), rough (level >= 2: over the last two halvings the error fell by
+    less than 1/ROUGH_RATIO^2, and the cell would be refined for it)."""
     cidx = _corner_idx(lat, lower, lat.stride(level))
     oc = f.outcome[cidx]
     disagree = (oc != oc[:, :1]).any(axis=1)
@@ -343,9 +354,6 @@ def cell_states(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.nda
         ep = driving_error(lat, f, st, level - 1, pl, surs)
         with np.errstate(all="ignore"):
             ratio = e / ep
-        if ROUGH_ONE_HALVING:
-            with np.errstate(all="ignore"):
-                rough = (ratio > ROUGH_RATIO) & (KAPPA * e > 1.0)
         if level >= 2:
             gl = parent_lower(lat, level - 1, pl)
             eg = driving_error(lat, f, st, level - 2, gl, surs)
@@ -406,6 +414,23 @@ def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
     return Plan(k, nodes.reshape(-1, lat.ndim), flagged, refined, skipped, int((cs["rough"] & ~by_outcome).sum()))
 
 
+def rough_leaves(lat: Lattice, f: Fields, st: Settings) -> int:
+    """How many cells of the finished map are rough: leaf cells (not refined) that cell_states
+    flags rough and no outcome boundary or failure runs through (the rough regions the map
+    reports, what a last round's progress line counts)."""
+    out = 0
+    surs = {name: surpluses(lat, f, name) for name in st.outputs}
+    for level, low in cells(lat, f.computed).items():
+        if level >= lat.rounds or not len(low):
+            continue
+        leaf = ~f.computed[_flat(lat, low + lat.stride(level) // 2)]
+        if not leaf.any():
+            continue
+        cs = cell_states(lat, f, st, level, low[leaf], surs)
+        out += int((cs["rough"] & ~cs["disagree"] & ~cs["failed"]).sum())
+    return out
+
+
 # ---------------------------------------------------------------------------------- the full map
 
 @dataclass
@@ -440,6 +465,146 @@ def leaf_of(lat: Lattice, computed: np.ndarray, nodes: np.ndarray) -> tuple[np.n
     return level, lower
 
 
+def _box_max(lat: Lattice, level: int, lower: np.ndarray, sur: np.ndarray, pad: int) -> np.ndarray:
+    """Per cell of `level` (lower corners (n, d)), the largest |surplus| (n, m) of the nodes
+    computed at that level (level 0: also the virtual lattice's) in the box of the cell widened
+    by `pad` cells on every side (pad 0: its own corners, cell_error); NaN where there is none."""
+    s = lat.stride(level)
+    nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    r = node_round(lat, nodes)
+    own = (r == level) | ((level == 0) & (r == -1))
+    m = sur.shape[1]
+    v = np.where(own[:, None] & np.isfinite(sur), sur, -np.inf).reshape(lat.shape + (m,))
+    sub = v[tuple(slice(None, None, s) for _ in lat.shape)]              # the stride-s sub-lattice
+    # sliding max over a window of 2 + 2 pad sub-lattice points per axis, starting pad before the cell
+    width = 2 + 2 * pad
+    for a in range(lat.ndim):
+        padded = np.concatenate([np.full(sub.shape[:a] + (pad,) + sub.shape[a + 1:], -np.inf), sub,
+                                 np.full(sub.shape[:a] + (pad,) + sub.shape[a + 1:], -np.inf)], axis=a)
+        n_out = sub.shape[a] - 1
+        acc = np.full(sub.shape[:a] + (n_out,) + sub.shape[a + 1:], -np.inf)
+        for j in range(width):
+            acc = np.maximum(acc, np.take(padded, np.arange(j, j + n_out), axis=a))
+        sub = acc
+    out = sub[tuple((lower // s).T)]                                         # (n, m)
+    return np.where(np.isfinite(out), out, np.nan)
+
+
+def bar_indicator(lat: Lattice, level: int, lower: np.ndarray, sur: np.ndarray) -> np.ndarray:
+    """A cell's error indicator (n, m): the geometric mean of the largest |surplus| at its own
+    corners and in its neighbourhood (the cell widened by one cell each side), both at its level.
+    The surpluses there are errors of interpolation at twice the cell's side; the neighbourhood
+    catches roughness that the cell's few corners happen to miss."""
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(_box_max(lat, level, lower, sur, 0) * _box_max(lat, level, lower, sur, 1))
+
+
+# Calibration classes of a cell (bar_factors): split by an outcome boundary or a missing value
+# (MIXED), rough (ROUGH), neither (SMOOTH).
+SMOOTH, ROUGH, MIXED = 0, 1, 2
+
+
+def cell_class(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.ndarray, g: np.ndarray,
+               driving: Mapping[str, np.ndarray], rough: np.ndarray | None = None) -> np.ndarray:
+    """Per cell and component of an output (values g (size, m) in their interpolation space), its
+    calibration class (n, m): MIXED where its corners differ in outcome or one has no value,
+    else ROUGH or SMOOTH by cell_states (or the cells' `rough` flags where given)."""
+    cidx = _corner_idx(lat, lower, lat.stride(level))
+    oc = f.outcome[cidx]
+    disagree = (oc != oc[:, :1]).any(axis=1)
+    missing = ~np.isfinite(g[cidx]).all(axis=1)                                 # (n, m)
+    if rough is None:
+        rough = cell_states(lat, f, st, level, lower, driving)["rough"]
+    base = np.broadcast_to(np.where(rough, ROUGH, SMOOTH)[:, None], missing.shape)
+    return np.where(disagree[:, None] | missing, MIXED, base)
+
+
+@dataclass
+class Calibration:
+    """Per calibration class and component of an output, the bins of the indicator (log10 edges
+    between them), each bin's factor, and the smallest indicator tested: bar = factor(class,
+    indicator) x max(indicator, the tests' 1 - COVERAGE quantile of it). Below what was tested
+    there is no evidence that the error keeps shrinking with the indicator (an output's noise
+    floor, or cells never refined because their error looked small), so none is assumed."""
+    edges: dict[tuple[int, int], np.ndarray]
+    factors: dict[tuple[int, int], np.ndarray]
+    lowest: dict[tuple[int, int], float]
+
+    def bar(self, cls: np.ndarray, ind: np.ndarray) -> np.ndarray:
+        """The bars (n, m) of cells of classes `cls` (n, m) with indicators `ind` (n, m)."""
+        out = ind.astype(float).copy()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lg = np.log10(ind)
+        for (k, c), edges in self.edges.items():
+            sel = cls[:, c] == k
+            if sel.any():
+                fac = self.factors[k, c][np.searchsorted(edges, np.nan_to_num(lg[sel, c], nan=-np.inf))]
+                out[sel, c] = fac * np.fmax(ind[sel, c], self.lowest[k, c])
+        return out
+
+
+def _quantile(sample: np.ndarray) -> float:
+    """The COVERAGE quantile of a sample with the split-conformal finite-sample correction
+    (the ceil((n + 1) COVERAGE)-th smallest)."""
+    sample = np.sort(sample)
+    return float(sample[min(len(sample) - 1, math.ceil((len(sample) + 1) * COVERAGE) - 1)])
+
+
+def _binned(ind: np.ndarray, ratio: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(log10 edges, factors) of tests with indicators `ind` and ratios |surplus| / ind: equal-count
+    bins of the indicator of BIN_TESTS tests at least, each bin's factor its _quantile."""
+    order = np.argsort(ind, kind="stable")
+    ind, ratio = ind[order], ratio[order]
+    n_bins = max(1, len(ind) // BIN_TESTS)
+    cuts = [round(i * len(ind) / n_bins) for i in range(n_bins + 1)]
+    factors = np.array([_quantile(ratio[a:b]) for a, b in zip(cuts[:-1], cuts[1:])])
+    edges = np.array([0.5 * (np.log10(ind[c - 1]) + np.log10(ind[c])) for c in cuts[1:-1]])
+    return edges, factors
+
+
+def bar_factors(lat: Lattice, f: Fields, st: Settings, name: str, sur: np.ndarray,
+                driving: Mapping[str, np.ndarray]) -> Calibration:
+    """The factors that turn bar_indicator into an error bar of output `name`, calibrated on the
+    map itself (split-conformal): every node computed at round j >= 1 is a test of interpolation
+    in the cell of round j - 1 it lies in, whose error is its |surplus|; per calibration class
+    (SMOOTH, ROUGH, MIXED) and component, the tests are binned by their cell's indicator (a small
+    indicator is often the output's own noise floor, where the error no longer falls with the
+    side) and each bin's factor is the COVERAGE quantile of |surplus| / indicator in it. A class
+    with fewer than MIN_CALIBRATION tests takes the pooled tests; with fewer in all, factor 1 (the
+    bar is then the error at twice the side, a bound where interpolation converges)."""
+    nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
+    r = node_round(lat, nodes)
+    g = f.transformed(name)
+    inds, errs, classes = [], [], []
+    for j in range(1, lat.rounds + 1):
+        sel = np.nonzero((r == j) & f.computed)[0]
+        if not sel.size:
+            continue
+        low = cell_lower(lat, nodes[sel], lat.stride(j - 1))
+        ucells, inv = np.unique(low, axis=0, return_inverse=True)
+        inv = inv.ravel()
+        inds.append(bar_indicator(lat, j - 1, ucells, sur)[inv])
+        errs.append(sur[sel])
+        classes.append(cell_class(lat, f, st, j - 1, ucells, g, driving)[inv])
+    m = sur.shape[1]
+    cal = Calibration({}, {}, {})
+    ind = np.concatenate(inds) if inds else np.zeros((0, m))
+    err = np.concatenate(errs) if errs else np.zeros((0, m))
+    cl = np.concatenate(classes) if classes else np.zeros((0, m), np.int64)
+    for c in range(m):
+        ok = np.isfinite(err[:, c]) & np.isfinite(ind[:, c]) & (ind[:, c] > 0)
+        for k in (SMOOTH, ROUGH, MIXED):
+            sel = ok & (cl[:, c] == k)
+            if sel.sum() < MIN_CALIBRATION:
+                sel = ok
+            if sel.sum() < MIN_CALIBRATION:
+                cal.edges[k, c], cal.factors[k, c], cal.lowest[k, c] = np.zeros(0), np.ones(1), 0.0
+                continue
+            cal.edges[k, c], cal.factors[k, c] = _binned(ind[sel, c], err[sel, c] / ind[sel, c])
+            cal.lowest[k, c] = float(np.quantile(ind[sel, c], 1.0 - COVERAGE))
+    return cal
+
+
 def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
     """The full map from the computed nodes (see the module's docstring for the bars)."""
     n = lat.size
@@ -457,6 +622,8 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
     level, lower = leaf_of(lat, f.computed, nodes)
     cell_level[miss] = level
     surs = {k: surpluses(lat, f, k) for k in f.values}
+    driving = {o: surs[o] for o in st.outputs}
+    factors = {k: bar_factors(lat, f, st, k, surs[k], driving) for k in f.values}
     for k in np.unique(level):
         sel = np.nonzero(level == k)[0]
         s = lat.stride(int(k))
@@ -467,18 +634,15 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
         near = cidx[np.arange(len(sel)), np.argmax(w, axis=1)]
         oc = f.outcome[cidx]
         used = w > 0
-        agree = np.where(used, oc == oc[np.arange(len(sel)), np.argmax(w, axis=1)][:, None], True).all(axis=1)
         out = f.outcome[near]
         tgt = miss[sel]
         outcome[tgt] = out
         source[tgt] = near
-        # cell flags for the bars: the cell's own states (rough uses the driving outputs)
+        # the cells' rough flags (by the driving outputs): reported, and a calibration class
         ucells, inv = np.unique(lower[sel], axis=0, return_inverse=True)
         inv = inv.ravel()
-        cs = cell_states(lat, f, st, int(k), ucells, {o: surs[o] for o in st.outputs})
-        rough = cs["rough"][inv]
-        ratio = cs["ratio"][inv]
-        rough_node[tgt] = rough
+        cell_rough = cell_states(lat, f, st, int(k), ucells, driving)["rough"]
+        rough_node[tgt] = cell_rough[inv]
         same = used & (oc == out[:, None])
         for name, g_all in ((nm, f.transformed(nm)) for nm in f.values):
             gv = g_all[cidx]                                            # (n, 2^d, m)
@@ -491,12 +655,10 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
             lo = np.where(ok, gv, np.inf).min(axis=1)
             hi = np.where(ok, gv, -np.inf).max(axis=1)
             spread = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, np.nan)
-            e = cell_error(lat, int(k), ucells, surs[name])[inv]            # (n, m)
-            factor = np.clip(np.nan_to_num(ratio, nan=KAPPA), KAPPA, 1.0)[:, None]
-            bar = e * factor
-            mixed = (~agree | ~ok.all(axis=1).all(axis=1) | rough)[:, None]
-            with np.errstate(invalid="ignore"):
-                bar = np.where(mixed, np.fmax(np.where(rough[:, None], e, bar), spread), bar)
+            ind = bar_indicator(lat, int(k), ucells, surs[name])[inv]            # (n, m)
+            cls = cell_class(lat, f, st, int(k), ucells, g_all, driving, cell_rough)[inv]    # (n, m)
+            # no indicator (no surplus at this level around): the corners' spread
+            bar = np.where(np.isfinite(ind), factors[name].bar(cls, ind), spread)
             if f.is_log(name):
                 x = np.exp(est)
                 absbar = x * np.expm1(bar)

@@ -56,6 +56,16 @@ if workflow.is_main_process:
               + ("a real run will quarantine and recompute it" if DRYRUN
                  else f"moved to {CHUNK_DIR}/quarantine/, it will be recomputed"),
               file=sys.stderr)
+    if ADAPTIVE:
+        # a chunk file of a finished round gone or damaged: the gather computes it again
+        # (sweep.adaptive.load_rounds), so a finished cube is out of date and made again
+        _stale = sweep_adaptive.stale_chunks(SETTINGS, RESULTS)
+        for _path, _reason in sorted(_stale.items()):
+            print(f"sweep: chunk {_path} of a finished round is {_reason}; "
+                  + ("a real run will compute it again" if DRYRUN else "it will be computed again"),
+                  file=sys.stderr)
+        if _stale and not DRYRUN and os.path.exists(f"{RESULTS}/cube.nc"):
+            os.remove(f"{RESULTS}/cube.nc")
     if not DRYRUN:
         # what this run will compute, for the progress line of `python3 run.py sweep`
         sweep_io.write_plan(f"{RESULTS}/plan.json", SWEEP_NAME, PLAN,
