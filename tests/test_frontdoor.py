@@ -412,6 +412,8 @@ BAD_CONFIGS = {
         "grid.mu_d[2] = 0.3 is invalid: exceeds mu_s = 0.25; allowed [0, mu_s] = [0, 0.25] (with mu_d > mu_s the "
         "slip onset is inconsistent)",
         "grid.mu_d[3] = 0.4 is invalid: exceeds mu_s = 0.25; allowed [0, mu_s] = [0, 0.25] (with mu_d > mu_s the "
+        "slip onset is inconsistent)",
+        "grid.mu_d[4] = 0.5 is invalid: exceeds mu_s = 0.25; allowed [0, mu_s] = [0, 0.25] (with mu_d > mu_s the "
         "slip onset is inconsistent)"]),
     "empty.yaml": ("# nothing yet\n", [
         "the file is empty; allowed a YAML mapping of sweep config keys (grid, levels, solver, ...: docs/pipeline.md)"]),
