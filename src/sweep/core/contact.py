@@ -530,7 +530,8 @@ def try_slave(t, y, sys):
     (a spiralling slip), or where the slip points against it (a slip passing by u = 0), it stays in
     SLIDE, and this hand-over is off until the slip is fast again (EV_SLIP_FAST re-arms it).
     Returns the outcome that ends the scene (PAINLEVE where the direction dynamics carry the slip
-    into the Painleve singularity: see attracting_direction), else -1."""
+    into the Painleve singularity: see attracting_direction; above the floor's speed with slave_tol
+    > 0 that is decided at the floor's, AT_FLOOR), else -1."""
     p, cs, wk = sys.p, sys.cs, sys.wk
     u = math.hypot(y[Y_U1], y[Y_U2])
     eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
@@ -561,8 +562,9 @@ def settle_onto(root, t, y, sys, strict):
     """SLIDE -> SLAVED at the quasi-static direction root: the slip component across the slow
     manifold's direction there (root plus the lag, root_lag) is removed by a plastic impulse
     (O(u^2) loss), if that leaves the slip along it and, strict (the hand-over at the slaving
-    speed above the floor's), the slaved direction's error there is within slave_tol (slaved_slip);
-    else the state is left as it was. Returns SETTLED, AGAINST or INACCURATE."""
+    speed above the floor's), the slaved direction's error there is within slave_tol (slaved_slip)
+    and the slip's own direction within slave_tol rad of it (relaxed onto it); else the state is
+    left as it was. Returns SETTLED, AGAINST or INACCURATE."""
     p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     side = int(cs[CS_SIDE])
     lag, _, err = root_lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
