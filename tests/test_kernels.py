@@ -936,7 +936,7 @@ def test_an_update_that_leaves_a_slaved_slip_past_its_exit_hands_it_to_slide(set
         code = C.settle_event(0.0, y, _sys(p, cs, n, wk, ist), M.moment_axes_rates(y), -1)
         assert code == -1
         assert cs[L.CS_MODE] == mode, factor
-        assert cs[L.CS_SLAVE_OFF] == 0.0
+        assert cs[L.CS_SLAVE_OFF] == CN.HANDOVER_ARMED
         assert math.hypot(y[M.Y_U1], y[M.Y_U2]) == pytest.approx(factor * u_exit, rel=1e-15)
 
 
