@@ -400,11 +400,21 @@ def try_step(t, h, consts, work, sys):
         err = math.inf
     if err == 0.0:
         defect = max(power_defect(y, f, aux, p, cs), power_defect(y_new, wk[W_FNEW], aux_new, p, cs))
-        nc = min(n, N_CORE)
+        nc = norm_size(n)
         error_scale(y, y_new, nc, rtol, atol, slip_atol(y, y_new, p, rtol, atol), wk[W_ESCALE])
         err = max(error_norm(K, h, wk[W_ESCALE], nc), balance_error(y, aux, wk[W_DELTA], h, defect, p, cs, consts))
     tally_step(cs, sys.istats, err <= 1.0, 1)
     return err
+
+
+@kernel
+def norm_size(n):
+    """The components 0..norm_size(n) - 1 of a state of size n that the step's error norms run over
+    (dop853.error_norm, initial_step): the dynamics and the dissipation books (model.N_CORE). theta,
+    psi, x, y (when integrated) are passive quadratures that never feed back into the dynamics;
+    leaving them out keeps the step sequence, and so every result, identical whether or not a scene
+    asks for them."""
+    return min(n, N_CORE)
 
 
 @kernel
@@ -415,11 +425,7 @@ def error_scale(y, y_new, n, rtol, atol, u_atol, sc):
     (slip_atol) instead of atol. The inclination's error is relative to its distance from the
     nearer of upright and flat, min(|alpha|, pi/2 - |alpha|): near flat the dynamics and the face
     event depend on beta = pi/2 - |alpha| (the face contact lies at beta = 1e-6 rad), which an
-    error relative to |alpha| ~ 1.57 would resolve only to rtol * 1.57.
-
-    n is model.N_CORE at most: theta, psi, x, y (when integrated) are passive quadratures that never
-    feed back into the dynamics; leaving them out keeps the step sequence, and so every result,
-    identical whether or not a scene asks for them."""
+    error relative to |alpha| ~ 1.57 would resolve only to rtol * 1.57 (n: norm_size)."""
     for i in range(n):
         mag = max(abs(y[i]), abs(y_new[i]))
         if i == Y_ALPHA:
@@ -527,7 +533,7 @@ def record_start(consts, work, rec, sys):
     trk[T_RATES_OLD] = 0.0
     if consts.peaks_on:
         freq_start(y[Y_THETA], aux[X_PHI], rec.fq)
-    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, consts.rtol, consts.atol, min(n, N_CORE))
+    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, consts.rtol, consts.atol, norm_size(n))
 
 
 @kernel
