@@ -804,8 +804,9 @@ def _contact_states():
 
 def test_the_event_ids_are_the_rows_of_one_table():
     """events.py: ids 0 .. N_EVENT_IDS - 1, each a row of EVENTS with a known class, a moment
-    component exactly for the moment events; the dynamic events first, the level's event right after
-    them (integrate.carry_step_end and first_event rely on it), the update-only ids last."""
+    component exactly for the moment events, a dip rule exactly for the events of the dynamics; the
+    dynamic events first, the level's event right after them (integrate.carry_step_end and
+    first_event rely on it), the update-only ids last."""
     ids = {v: k for k, v in vars(EV).items() if k.startswith("EV_")}
     assert sorted(ids) == list(range(EV.N_EVENT_IDS)) == list(range(EV.EVENTS.shape[0]))
     assert EV.N_DYN_EVENTS == EV.EV_LEVEL < EV.N_EVENTS == EV.EV_LEVEL + 1 <= EV.EV_AGAINST1
@@ -815,6 +816,13 @@ def test_the_event_ids_are_the_rows_of_one_table():
         assert cls in classes, ids[k]
         assert (EV.EVENTS[k, EV.E_COMPONENT] in (0, 1, 2)) == (cls == EV.C_MOMENT), ids[k]
     assert [k for k in range(EV.N_EVENT_IDS) if EV.EVENTS[k, EV.E_CLASS] == EV.C_LEVEL] == [EV.EV_LEVEL]
+    # every event of the dynamics has a way to bracket a dip inside a step (integrate.dip_bracket
+    # raises for any other) and a restart rule; the others are never scanned
+    for k in range(EV.N_EVENT_IDS):
+        dip = EV.EVENTS[k, EV.E_DIP]
+        assert (dip in (EV.D_RATES, EV.D_SIGN, EV.D_SIDE, EV.D_SLIP)) == (k < EV.N_DYN_EVENTS), ids[k]
+        assert EV.EVENTS[k, EV.E_RESTART] in (EV.R_NONE, EV.R_SURFACE, EV.R_SPIN), ids[k]
+        assert dip != EV.D_SIGN or EV.EVENTS[k, EV.E_COMPONENT] in (0, 1, 2), ids[k]
 
 
 def test_every_event_has_its_value_and_its_update(setup):

@@ -17,7 +17,7 @@ from .. import outcomes as oc
 from .contact import (apply_event, count_transition, confirm_slaved, spin_sticks,
                       consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, reads_forces, set_slip, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
-from .events import (C_MOMENT, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
+from .events import (C_MOMENT, D_RATES, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
                      EV_LEVEL, EVENTS, N_DYN_EVENTS, R_SPIN, R_SURFACE)
 from .constants import EPS, ROLL, SLAVED
 from .controller import accepted_step_factor, step_factor
@@ -289,7 +289,7 @@ def dip_bracket(k, span, lev, work, have_dense):
         # |u| less a speed: a V where the slip passes by u = 0, placed from the slip's own smooth
         # components (a cubic in g, or its difference quotient, can step over it)
         dip = slip_closest_approach(y, f, y_new, f_new, h)
-    else:
+    elif how == D_RATES:
         if trk[T_RATES_OLD] == 0.0:
             event_rates(t, y, f, wk[W_GOLD], wk[W_RATEOLD], lev, span.sys)
             trk[T_RATES_OLD] = 1.0
@@ -297,6 +297,8 @@ def dip_bracket(k, span, lev, work, have_dense):
             event_rates(t + h, y_new, f_new, wk[W_GNEW], wk[W_RATENEW], lev, span.sys)
             trk[T_RATES_NEW] = 1.0
         dip = hermite_dip(g0, wk[W_RATEOLD, k] * h, g1, wk[W_RATENEW, k] * h)
+    else:
+        raise ValueError("dip_bracket: an event of the dynamics with no way to bracket a dip (E_DIP)")
     if not dip > 0.0:
         return -1.0, 0.0, have_dense
     have_dense = dense_built(have_dense, span, work)
