@@ -5,7 +5,11 @@
   output definitions, the runners, the drivers and the front door on top; a module imports only
   from its own tier or below (the kernel knows no file, config or command line; nothing but the
   front door imports the front door);
-* no kernel of the core takes more than MAX_PARAMS parameters.
+* no kernel of the core takes more than MAX_PARAMS parameters;
+* the stepper (dop853.py) and the step-size controller (controller.py) know no state layout;
+* a shared name of the core (EPS, the contact modes, the hand-over states) has one home, and no
+  module imports a core module's name through another core module that only imports it (no
+  re-exports).
 
 Run as a script it prints the import graph of src/sweep/core, the floors, the functions over the
 parameter limit, and the functions that the run's settings vector passes through on its way into
@@ -174,6 +178,106 @@ def test_an_upward_import_is_caught():
 def test_no_core_kernel_takes_more_than_eight_parameters():
     wide = [(m, f, len(ps)) for m, f, ps in kernel_functions(modules()) if len(ps) > MAX_PARAMS]
     assert not wide, wide
+
+
+def top_level_names(tree: ast.Module) -> set[str]:
+    """The names a module defines at its top level (functions, classes, assignments)."""
+    out: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            out.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            for target in (node.targets if isinstance(node, ast.Assign) else [node.target]):
+                for n in ast.walk(target):
+                    if isinstance(n, ast.Name):
+                        out.add(n.id)
+    return out
+
+
+def core_imports(mods: dict[str, ast.Module]):
+    """(importer, imported module, name) of every `from ... import name` of a core module's names,
+    anywhere in the package."""
+    for m, tree in mods.items():
+        is_pkg = (SRC.parent / Path(*m.split("."))).is_dir()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                base = _resolve(m, node, is_pkg)
+                if base.startswith("sweep.core.") and base in mods:
+                    for a in node.names:
+                        yield m, base, a.name
+
+
+def reexports(mods: dict[str, ast.Module]) -> list[tuple[str, str, str]]:
+    """(importer, module, name) where a module imports `name` from a core module that does not
+    define it (it only imports it in turn)."""
+    return sorted((m, base, name) for m, base, name in core_imports(mods)
+                  if name not in top_level_names(mods[base]))
+
+
+def homes(mods: dict[str, ast.Module], name: str) -> list[str]:
+    """The modules of the package that define `name` at their top level."""
+    return sorted(m for m, tree in mods.items() if name in top_level_names(tree))
+
+
+SHARED_NAMES = ("EPS", "ROLL", "SLIDE", "SLAVED", "HANDOVER_ARMED", "HANDOVER_OFF", "SLOW_OFF", "BELOW", "AT_FLOOR")
+
+
+def test_a_shared_core_name_has_one_home():
+    mods = modules()
+    for name in SHARED_NAMES:
+        assert homes(mods, name) == ["sweep.core.constants"], name
+
+
+def test_machine_epsilon_is_written_out_only_in_its_home():
+    eps = 2.220446049250313e-16
+    found = sorted({m for m, tree in modules().items() for n in ast.walk(tree)
+                    if isinstance(n, ast.Constant) and n.value == eps})
+    assert found == ["sweep.core.constants"], found
+
+
+def test_no_module_imports_a_core_name_through_another():
+    assert reexports(modules()) == []
+
+
+def test_a_reexport_is_caught():
+    mods = modules()
+    mods["sweep.core.roots"] = ast.parse("from .contact import N_EVENTS\n")
+    assert ("sweep.core.roots", "sweep.core.contact", "N_EVENTS") in reexports(mods)
+
+
+STEPPER_MODULES = {"sweep.core.jit", "sweep.core.dop853_sums", "sweep.core.layout", "sweep.core.tableau", "sweep.core"}
+STATE_NAMES = ("Y_", "X_", "CS_", "EV_", "P_", "N_CORE", "N_FULL", "N_THETA")
+
+
+def stepper_layout_leaks(mods: dict[str, ast.Module]) -> list[str]:
+    """What dop853.py or controller.py knows of the state's layout: an import of a core module
+    beyond the compiler, the tableau, its generated sums and layout.py's work-buffer rows (W_*, its
+    scratch), or a name of a state, aux, contact-state, event or parameter slot."""
+    graph = import_graph(mods)
+    out = [f"dop853 imports {t}" for t in sorted(graph["sweep.core.dop853"] - STEPPER_MODULES)]
+    out += [f"controller imports {t}" for t in sorted(graph["sweep.core.controller"] - {"sweep.core.jit", "sweep.core"})]
+    out += [f"dop853 imports layout.{name}" for m, base, name in core_imports(mods)
+            if m == "sweep.core.dop853" and base == "sweep.core.layout" and not name.startswith("W_")]
+    for m in ("sweep.core.dop853", "sweep.core.controller"):
+        out += sorted({f"{m.rpartition('.')[2]} names {n.id}" for n in ast.walk(mods[m])
+                       if isinstance(n, ast.Name) and n.id.startswith(STATE_NAMES)})
+    return out
+
+
+def test_the_stepper_and_its_controller_know_no_state_layout():
+    """dop853.py takes its error scales from its caller (integrate.error_scale): it imports nothing
+    of the model, the events, the contact state or the integrator; controller.py only the compiler."""
+    assert stepper_layout_leaks(modules()) == []
+
+
+def test_a_stepper_that_knows_the_state_is_caught():
+    mods = modules()
+    tree = mods["sweep.core.dop853"]
+    mods["sweep.core.dop853"] = ast.Module(body=list(tree.body) + ast.parse(
+        "from .model import N_CORE, Y_ALPHA\nfrom .layout import CS_MODE\n").body, type_ignores=[])
+    leaks = stepper_layout_leaks(mods)
+    assert "dop853 imports sweep.core.model" in leaks
+    assert "dop853 imports layout.CS_MODE" in leaks
 
 
 def main() -> int:

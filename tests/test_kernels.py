@@ -8,6 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from sweep import outcomes as oc
+from sweep.core import constants as CN
+from sweep.core import events as EV
 from sweep.core import contact as C
 from sweep.core import dop853 as D
 from sweep.core import layout as L
@@ -64,7 +67,7 @@ def _step(t, y, f, h, sys, K, y_new, f_new=None):
 def _f(t, y, p, cs, n=M.N_CORE):
     dy = np.zeros(M.N_FULL)
     aux = np.zeros(M.N_AUX)
-    contact = M.Contact(M.ROLL, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3], 1.0, 0.0)
+    contact = M.Contact(CN.ROLL, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3], 1.0, 0.0)
     M.rhs(t, y, p, contact, n, dy, aux)
     return dy[:n].copy(), aux
 
@@ -172,7 +175,7 @@ def test_energy_increment_is_exact_to_the_round_off_of_the_change(setup, alpha):
             assert abs(ld(change) - exact) <= abs(ld(naive) - exact) + 4 * np.finfo(float).eps * scale + ref_err
 
 
-@pytest.mark.parametrize("mode", [M.ROLL, M.SLIDE])
+@pytest.mark.parametrize("mode", [CN.ROLL, CN.SLIDE])
 def test_energy_rate_is_the_gradient_of_the_energy_and_the_power_defect_is_round_off(setup, mode):
     """model.energy_rate(y, v) is dE/dtau along v: against a central difference of
     energy_with_slip along random v (the gradient written independently of the energy's own
@@ -183,7 +186,7 @@ def test_energy_rate_is_the_gradient_of_the_energy_and_the_power_defect_is_round
     from sweep.core import integrate as I
     p, _, cs0 = setup
     rng = np.random.default_rng(5)
-    slip = mode == M.SLIDE
+    slip = mode == CN.SLIDE
     defects_far, defects_flat = [], []
     for trial in range(200):
         beta = 1e-6 if trial % 4 == 0 else rng.uniform(0.05, 1.5)
@@ -229,20 +232,20 @@ def test_energy_kernels_from_the_rhs_trig_are_the_plain_ones_to_the_bit(setup):
     rng = np.random.default_rng(11)
     wk, ist = _work()
     for trial in range(60):
-        mode = (L.ROLL, L.SLIDE, L.SLAVED)[trial % 3]
+        mode = (CN.ROLL, CN.SLIDE, CN.SLAVED)[trial % 3]
         y = np.zeros(M.N_FULL)
         side = float(rng.choice([-1.0, 1.0]))
         y[M.Y_ALPHA] = side * (rng.uniform(1e-3, 1.5) if trial % 5 else math.pi / 2 - 1e-6)
         y[M.Y_W1:M.Y_W3 + 1] = rng.normal(size=3) * [0.3, 1.0, 0.3]
-        if mode != L.ROLL:
-            y[M.Y_U1:M.Y_U2 + 1] = rng.normal(size=2) * (1e-9 if mode == L.SLAVED else 0.1)
+        if mode != CN.ROLL:
+            y[M.Y_U1:M.Y_U2 + 1] = rng.normal(size=2) * (1e-9 if mode == CN.SLAVED else 0.1)
         cs = cs0.copy()
         cs[L.CS_MODE], cs[L.CS_SIDE] = mode, side
         cs[L.CS_NU] = math.atan2(y[M.Y_U2], y[M.Y_U1])
         dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
         C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
         assert aux[M.X_SINA] == math.sin(y[M.Y_ALPHA]) and aux[M.X_COSA] == math.cos(y[M.Y_ALPHA])
-        slip = mode != L.ROLL
+        slip = mode != CN.ROLL
         assert C.mode_energy_at(y, aux, p, cs) == C.mode_energy(y, p, cs)
         v = rng.normal(size=M.N_FULL) * 1e-3
         assert (M.energy_rate_trig(y, v, p, side, slip, aux[M.X_SINA], aux[M.X_COSA])
@@ -251,26 +254,47 @@ def test_energy_kernels_from_the_rhs_trig_are_the_plain_ones_to_the_bit(setup):
                 == M.energy_increment(y, v, p, side, slip))
 
 
+def test_error_norm_is_hairers_dop853_norm_in_the_callers_scales():
+    """dop853.error_norm knows no state: Hairer's norm over the first n components, each in units
+    of the scale the caller gives it."""
+    rng = np.random.default_rng(3)
+    n = 7
+    K = rng.normal(size=(T.N_STAGES_EXTENDED, M.N_FULL))
+    sc = 10.0 ** rng.uniform(-12, -6, size=M.N_FULL)
+    h = 0.01
+    e5 = np.sum(((T.E5 @ K[:13, :n]) / sc[:n]) ** 2)
+    e3 = np.sum(((T.E3 @ K[:13, :n]) / sc[:n]) ** 2)
+    ref = h * e5 / math.sqrt((e5 + 0.01 * e3) * n)
+    assert D.error_norm(K, h, sc, n) == pytest.approx(ref, rel=1e-12)
+    sc2 = sc.copy()
+    sc2[n:] = np.nan           # components past n are not read
+    assert D.error_norm(K, h, sc2, n) == D.error_norm(K, h, sc, n)
+    sc2[n - 1] *= 2.0          # ... component n - 1 is
+    assert D.error_norm(K, h, sc2, n) < D.error_norm(K, h, sc, n)
+    assert D.error_norm(np.zeros_like(K), h, sc, n) == 0.0
+
+
 @pytest.mark.parametrize("alpha", [0.3, 1.0, -1.5707, 1.5707963])
-def test_error_norm_is_hairers_dop853_norm(alpha):
-    """Hairer's norm, with the inclination's error relative to min(|alpha|, pi/2 - |alpha|)."""
+def test_error_scale_is_hairers_with_the_inclination_and_slip_rules(alpha):
+    """integrate.error_scale: atol + rtol max(|y|, |y_new|), the inclination's magnitude
+    min(|alpha|, pi/2 - |alpha|), the slip components' absolute tolerance u_atol."""
+    from sweep.core.integrate import error_scale
     rng = np.random.default_rng(3)
     n = M.N_CORE
-    K = rng.normal(size=(T.N_STAGES_EXTENDED, M.N_FULL))
     y = rng.normal(size=M.N_FULL)
     y[M.Y_ALPHA] = alpha
     y_new = y + 1e-3 * rng.normal(size=M.N_FULL)
     y_new[M.Y_ALPHA] = alpha * (1.0 - 1e-8)
-    h, rtol, atol = 0.01, 1e-8, 1e-10
+    rtol, atol = 1e-8, 1e-10
     mag = np.maximum(np.abs(y[:n]), np.abs(y_new[:n]))
     mag[M.Y_ALPHA] = min(abs(alpha), 0.5 * math.pi - abs(alpha) * (1.0 - 1e-8))
     for u_atol in (atol, 1e-16):     # the slip components' own absolute tolerance
-        sc = atol + rtol * mag
-        sc[M.Y_U1:M.Y_U2 + 1] = u_atol + rtol * mag[M.Y_U1:M.Y_U2 + 1]
-        e5 = np.sum(((T.E5 @ K[:13, :n]) / sc) ** 2)
-        e3 = np.sum(((T.E3 @ K[:13, :n]) / sc) ** 2)
-        ref = h * e5 / math.sqrt((e5 + 0.01 * e3) * n)
-        assert D.error_norm(K, h, y, y_new, M.N_FULL, rtol, atol, u_atol) == pytest.approx(ref, rel=1e-12)
+        ref = atol + rtol * mag
+        ref[M.Y_U1:M.Y_U2 + 1] = u_atol + rtol * mag[M.Y_U1:M.Y_U2 + 1]
+        sc = np.full(M.N_FULL, -1.0)
+        error_scale(y, y_new, n, rtol, atol, u_atol, sc)
+        np.testing.assert_allclose(sc[:n], ref, rtol=1e-12)
+        assert np.all(sc[n:] == -1.0)
 
 
 def test_dense_output_interpolates_the_step_at_seventh_order(setup):
@@ -358,7 +382,7 @@ def _dense_step(p, y, cs, h, n=M.N_CORE, t0=0.0, y_end=None):
 def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
     p, y, cs = setup
     n, h = M.N_CORE, 0.3
-    k = C.EV_SIGN1        # g = sigma_1 w1 = 0.05 > 0; w1 rises through 0 within the step
+    k = EV.EV_SIGN1        # g = sigma_1 w1 = 0.05 > 0; w1 rises through 0 within the step
     y = y.copy()
     y[M.Y_W1] = -0.05
     cs = cs.copy()
@@ -387,7 +411,7 @@ def test_locate_closes_a_force_event_bracket_superlinearly(setup):
     y[M.Y_W1] = -0.2      # |F|/Phi rises from 0.393 to 0.413 over the step
     p = p.copy()
     p[M.P_MUS] = 0.403
-    k = C.EV_CONE
+    k = EV.EV_CONE
     F, wk, ist = _dense_step(p, y, cs, h)
     span = L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist))
     g0 = R.event_value_at(k, 0.0, span, math.nan)
@@ -500,7 +524,7 @@ def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
     n = M.N_CORE
     wk, ist = _work()
     sl = cs.copy()
-    sl[L.CS_MODE] = L.SLAVED
+    sl[L.CS_MODE] = CN.SLAVED
     u = 1e-9
     dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
     for nu0 in np.linspace(-3.0, 3.0, 7):
@@ -548,7 +572,7 @@ def test_onset_direction_takes_a_root_with_a_solution_and_never_a_painleve_pole(
             continue
         F1, F2 = aux[M.X_F1], aux[M.X_F2]
         guess = math.atan2(-F2, -F1)
-        cs[L.CS_MODE] = L.SLAVED
+        cs[L.CS_MODE] = CN.SLAVED
         sys_ = _sys(p, cs, n, wk, ist)
         scan = np.array([C.slip_rates(x, 0.0, 0.0, y, sys_, dy, aux, ys) + (aux[M.X_OK],) for x in grid])
         flips = np.nonzero((scan[:-1, 0] > 0.0) != (scan[1:, 0] > 0.0))[0]
@@ -576,14 +600,14 @@ def test_slaved_direction_near_a_fold_converges_at_the_round_off_floor():
     y[:10] = [-1.5673133196188795, -0.017820889609631227, 0.07771254845175782, -0.12143037310535122,
               3.8996640035269233e-10, 2.1236463939109588e-09, 0.2996915475916652, 0.00011133469101795674,
               0.049821969536914465, 0.22653401920898733]
-    cs = np.array([L.SLIDE, -1.0, -1.0, -1.0, -1.0, 0.0, 0.0, 0.0, -1.5431398827001483, 0.0])
+    cs = np.array([CN.SLIDE, -1.0, -1.0, -1.0, -1.0, 0.0, 0.0, 0.0, -1.5431398827001483, 0.0])
     p = np.array([1.25, 0.7147500458389359, 0.42028920934225367, 0.5, 5.2941088582301325e-06,
                   0.0003773901681763095, 0.0024557175535302304, 0.06604195186843453, 0.013401783317111789,
                   9.988368229478843e-10, 0.0, 0.0])   # spin_tol 0; slave_tol 0: slaved from the slip_tol
     n, t = M.N_FULL, 283.5429130271587
     wk, ist = _work()
     C.try_slave(t, y, _sys(p, cs, n, wk, ist))
-    assert cs[L.CS_MODE] == L.SLAVED
+    assert cs[L.CS_MODE] == CN.SLAVED
     u = math.hypot(y[M.Y_U1], y[M.Y_U2])
     dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
     root = C.slaved_direction(cs[L.CS_NU], u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
@@ -621,7 +645,7 @@ def test_settle_signs_releases_a_stuck_component_the_moment_cannot_hold(setup, k
     y1[M.Y_W1] = w1
     for held in (-1, 0):
         cs = cs0.copy()
-        cs[L.CS_MODE] = L.ROLL
+        cs[L.CS_MODE] = CN.ROLL
         cs[L.CS_STUCK] = 1.0
         wk, ist = _work()
         C.eval_rhs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
@@ -647,7 +671,7 @@ def test_an_impulse_carrying_a_free_component_past_its_surface(setup, w1_after):
     y1 = y.copy()
     y1[M.Y_W1] = w1_after
     cs = cs0.copy()
-    cs[L.CS_MODE] = L.ROLL
+    cs[L.CS_MODE] = CN.ROLL
     wk, ist = _work()
     need = C.needed_sigma(0, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
     assert abs(need) < 1.0
@@ -671,7 +695,7 @@ def test_settle_signs_tests_every_component_on_its_surface(setup):
     y1[M.Y_W1] = 0.0
     g = M.moment_axes_rates(y1)
     cs = cs0.copy()
-    cs[L.CS_MODE] = L.ROLL
+    cs[L.CS_MODE] = CN.ROLL
     cs[L.CS_SIG + 1] = math.copysign(1.0, g[1])
     cs[L.CS_SIG + 2] = -math.copysign(1.0, g[2])
     wk, ist = _work()
@@ -703,8 +727,8 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
     R.event_rates(0.0, y, f, g, rates, math.nan, _sys(p, cs, n, wk, ist))
     for k in range(3):
         exact = cs[L.CS_SIG + k] * R.sign_rate(k, y, f)
-        assert rates[C.EV_SIGN1 + k] == pytest.approx(exact, rel=1e-6, abs=1e-7)
-    assert rates[C.EV_SIDE] == pytest.approx(cs[L.CS_SIDE] * y[M.Y_W1], rel=1e-6, abs=1e-7)
+        assert rates[EV.EV_SIGN1 + k] == pytest.approx(exact, rel=1e-6, abs=1e-7)
+    assert rates[EV.EV_SIDE] == pytest.approx(cs[L.CS_SIDE] * y[M.Y_W1], rel=1e-6, abs=1e-7)
 
     def g_at(eps):
         ys = y.copy()
@@ -715,16 +739,16 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
         return gg
 
     g_plus, g_minus = g_at(1e-5), g_at(-1e-5)
-    for k in (C.EV_CONE, C.EV_CONTACT, C.EV_FACE):
+    for k in (EV.EV_CONE, EV.EV_CONTACT, EV.EV_FACE):
         assert math.isfinite(g[k])
         central = (g_plus[k] - g_minus[k]) / 2e-5
         assert rates[k] == pytest.approx(central, rel=1e-6, abs=1e-7), k
-    for k in range(C.N_DYN_EVENTS):
+    for k in range(EV.N_DYN_EVENTS):
         if g[k] == math.inf:
             assert rates[k] == 0.0      # inactive in this mode: no slope
 
 
-@pytest.mark.parametrize("mode", [L.ROLL, L.SLIDE, L.SLAVED])
+@pytest.mark.parametrize("mode", [CN.ROLL, CN.SLIDE, CN.SLAVED])
 def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
     """roots.event_value_at skips the right-hand side for events with not reads_forces(k): their
     value from the state alone (state_event_value) must be, bit for bit, the one event_values gives
@@ -739,7 +763,7 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
         y = np.zeros(M.N_FULL)
         y[M.Y_ALPHA] = rng.uniform(-1.5, 1.5)
         y[M.Y_W1:M.Y_W3 + 1] = rng.normal(size=3)
-        if mode != L.ROLL:
+        if mode != CN.ROLL:
             y[M.Y_U1:M.Y_U2 + 1] = rng.normal(scale=1e-3, size=2)
         cs = np.zeros(L.N_CS)
         cs[L.CS_MODE] = mode
@@ -753,7 +777,7 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
         C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
         g_true = np.zeros(L.N_WCOLS)
         C.event_values(0.0, y, aux, p, cs, level, g_true)
-        for k in range(C.N_EVENTS):
+        for k in range(EV.N_EVENTS):
             if C.reads_forces(k) or g_true[k] == math.inf:
                 continue
             checked.add(k)
@@ -764,10 +788,93 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
             span = L.Span(F, 0, y, 0.0, 1.0, _sys(p, cs, M.N_CORE, wk, ist))
             assert R.event_value_at(k, 0.3, span, level) == g_true[k]
             assert ist[L.I_RHS] == rhs_before
-    expected = {C.EV_SIDE, C.EV_FACE, C.EV_LEVEL} | (
-        {C.EV_SIGN1, C.EV_SIGN2, C.EV_SIGN3, C.EV_SPIN1, C.EV_SPIN2, C.EV_SPIN3} if mode == L.ROLL
+    expected = {EV.EV_SIDE, EV.EV_FACE, EV.EV_LEVEL} | (
+        {EV.EV_SIGN1, EV.EV_SIGN2, EV.EV_SIGN3, EV.EV_SPIN1, EV.EV_SPIN2, EV.EV_SPIN3} if mode == CN.ROLL
         else set())
     assert expected <= checked
+
+
+def _contact_states():
+    """A contact state of every kind: each mode x each hand-over state x no or all components stuck."""
+    for mode in (CN.ROLL, CN.SLIDE, CN.SLAVED):
+        for handover in (CN.HANDOVER_ARMED, CN.HANDOVER_OFF, CN.SLOW_OFF, CN.BELOW, CN.AT_FLOOR):
+            for stuck in (0.0, 1.0):
+                yield mode, handover, stuck
+
+
+def test_the_event_ids_are_the_rows_of_one_table():
+    """events.py: ids 0 .. N_EVENT_IDS - 1, each a row of EVENTS with a known class, a moment
+    component exactly for the moment events, a dip rule exactly for the events of the dynamics; the
+    dynamic events first, the level's event right after them (integrate.carry_step_end and
+    first_event rely on it), the update-only ids last."""
+    ids = {v: k for k, v in vars(EV).items() if k.startswith("EV_")}
+    assert sorted(ids) == list(range(EV.N_EVENT_IDS)) == list(range(EV.EVENTS.shape[0]))
+    assert EV.N_DYN_EVENTS == EV.EV_LEVEL < EV.N_EVENTS == EV.EV_LEVEL + 1 <= EV.EV_AGAINST1
+    classes = {EV.C_MOMENT, EV.C_SLIP, EV.C_CONTACT_LOST, EV.C_FACE, EV.C_SIDE, EV.C_LEVEL}
+    for k in range(EV.N_EVENT_IDS):
+        cls = EV.EVENTS[k, EV.E_CLASS]
+        assert cls in classes, ids[k]
+        assert (EV.EVENTS[k, EV.E_COMPONENT] in (0, 1, 2)) == (cls == EV.C_MOMENT), ids[k]
+    assert [k for k in range(EV.N_EVENT_IDS) if EV.EVENTS[k, EV.E_CLASS] == EV.C_LEVEL] == [EV.EV_LEVEL]
+    # every event of the dynamics has a way to bracket a dip inside a step (integrate.dip_bracket
+    # raises for any other) and a restart rule; the others are never scanned
+    for k in range(EV.N_EVENT_IDS):
+        dip = EV.EVENTS[k, EV.E_DIP]
+        assert (dip in (EV.D_RATES, EV.D_SIGN, EV.D_SIDE, EV.D_SLIP)) == (k < EV.N_DYN_EVENTS), ids[k]
+        assert EV.EVENTS[k, EV.E_RESTART] in (EV.R_NONE, EV.R_SURFACE, EV.R_SPIN), ids[k]
+        assert dip != EV.D_SIGN or EV.EVENTS[k, EV.E_COMPONENT] in (0, 1, 2), ids[k]
+
+
+def test_every_event_has_its_value_and_its_update(setup):
+    """Every event id against the dispatches, none of which has a default: each event function
+    (k < N_EVENTS) is computed by event_values in some contact state, and one of the state alone
+    (not reads_forces) by state_event_value, which raises for an id without one; every id but the
+    level's runs its discrete update in apply_event, which raises for the level (no update) and an
+    unknown class."""
+    p0, y0, _ = setup
+    p = p0.copy()
+    p[M.P_WTOL] = 1e-7
+    assert min(p[M.P_K1], p[M.P_K2], p[M.P_K3]) > 0.0
+    y = y0.copy()
+    y[M.Y_U1], y[M.Y_U2] = 1e-4, -2e-4
+    active = set()
+    for mode, handover, stuck in _contact_states():
+        cs = np.zeros(L.N_CS)
+        cs[L.CS_MODE], cs[L.CS_SLAVE_OFF], cs[L.CS_FLOOR] = mode, handover, 1e-12
+        cs[L.CS_SIDE] = 1.0
+        cs[L.CS_SIG:L.CS_SIG + 3] = [1.0, -1.0, 1.0]
+        cs[L.CS_STUCK:L.CS_STUCK + 3] = stuck
+        wk, ist = _work()
+        dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
+        C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
+        g = np.zeros(L.N_WCOLS)
+        C.event_values(0.0, y, aux, p, cs, 0.5, g)
+        active |= {k for k in range(EV.N_EVENTS) if g[k] != math.inf}
+        for k in range(EV.N_EVENTS):
+            if not C.reads_forces(k) and g[k] != math.inf:
+                assert C.state_event_value(k, 0.0, y, p, cs, 0.5) == g[k], k
+    assert active == set(range(EV.N_EVENTS))
+    cs = np.zeros(L.N_CS)
+    cs[L.CS_SIDE] = 1.0
+    for k in range(EV.N_EVENT_IDS):
+        if not C.reads_forces(k) and EV.EVENTS[k, EV.E_DIP] == EV.D_NONE and k != EV.EV_LEVEL:
+            with pytest.raises(ValueError, match="no value of the state alone"):
+                C.state_event_value(k, 0.0, y, p, cs, 0.5)      # EV_AGAINST*: not event functions
+    for k in range(EV.N_EVENT_IDS):
+        for mode in (CN.ROLL, CN.SLIDE, CN.SLAVED):
+            cs = np.zeros(L.N_CS)
+            cs[L.CS_MODE] = mode
+            cs[L.CS_SIDE] = 1.0
+            cs[L.CS_SIG:L.CS_SIG + 3] = [1.0, -1.0, 1.0]
+            wk, ist = _work()
+            yk = y.copy()
+            sys = _sys(p, cs, M.N_CORE, wk, ist)
+            if k == EV.EV_LEVEL:
+                with pytest.raises(ValueError, match="no discrete update"):
+                    C.apply_event(k, 0.0, yk, sys, np.zeros(L.N_FSTATS))
+            else:
+                code = C.apply_event(k, 0.0, yk, sys, np.zeros(L.N_FSTATS))
+                assert code == -1 or code in oc.NAMES, (k, mode, code)
 
 
 def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
@@ -779,7 +886,7 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
     n = M.N_CORE
     wk, ist = _work()
     sl = cs0.copy()
-    sl[L.CS_MODE] = L.SLAVED
+    sl[L.CS_MODE] = CN.SLAVED
     u = 1e-9
     root = C.attracting_direction(0.3, u, 0.0, y0, _sys(p, sl, n, wk, ist))
     assert math.isfinite(root)
@@ -794,9 +901,9 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
         C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
         assert aux[M.X_OK] == 1.0
         C.event_values(0.0, y, aux, p, cs, math.nan, g)
-        values.append(g[C.EV_SLIP_STOP])
+        values.append(g[EV.EV_SLIP_STOP])
         # the stored direction would have given another value
-        assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[C.EV_SLIP_STOP]) > 1e-3 * u
+        assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[EV.EV_SLIP_STOP]) > 1e-3 * u
     sl[L.CS_NU] = root
     nu, lag, _, ok, _ = C.slaved_slip(root, 0.0, y, _sys(p, sl, n, wk, ist), np.zeros(M.N_FULL), np.zeros(M.N_AUX))
     assert ok == 1.0
@@ -815,7 +922,7 @@ def test_an_update_that_leaves_a_slaved_slip_past_its_exit_hands_it_to_slide(set
     n = M.N_CORE
     wk, ist = _work()
     sl = cs0.copy()
-    sl[L.CS_MODE] = L.SLAVED
+    sl[L.CS_MODE] = CN.SLAVED
     root = C.attracting_direction(0.3, 1e-9, 0.0, y0, _sys(p, sl, n, wk, ist))
     assert math.isfinite(root)
     sl[L.CS_NU] = root
@@ -825,7 +932,7 @@ def test_an_update_that_leaves_a_slaved_slip_past_its_exit_hands_it_to_slide(set
     dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
     C.eval_rhs(0.0, y, _sys(p, sl.copy(), n, wk, ist), dy, aux)
     u_exit = C.exit_speed(y, aux, p)
-    for factor, mode in ((1.001, L.SLIDE), (0.999, L.SLAVED)):
+    for factor, mode in ((1.001, CN.SLIDE), (0.999, CN.SLAVED)):
         y = y0.copy()
         # the slip a little off the slaved direction, as the integrated slip vector is
         y[M.Y_U1], y[M.Y_U2] = factor * u_exit * math.cos(root + 0.01), factor * u_exit * math.sin(root + 0.01)
@@ -833,11 +940,11 @@ def test_an_update_that_leaves_a_slaved_slip_past_its_exit_hands_it_to_slide(set
         C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
         g = np.zeros(L.N_WCOLS)
         C.event_values(0.0, y, aux, p, cs, math.nan, g)
-        assert (g[C.EV_SLIP_FAST] <= 0.0) == (mode == L.SLIDE), (factor, g[C.EV_SLIP_FAST])
+        assert (g[EV.EV_SLIP_FAST] <= 0.0) == (mode == CN.SLIDE), (factor, g[EV.EV_SLIP_FAST])
         code = C.settle_event(0.0, y, _sys(p, cs, n, wk, ist), M.moment_axes_rates(y), -1)
         assert code == -1
         assert cs[L.CS_MODE] == mode, factor
-        assert cs[L.CS_SLAVE_OFF] == 0.0
+        assert cs[L.CS_SLAVE_OFF] == CN.HANDOVER_ARMED
         assert math.hypot(y[M.Y_U1], y[M.Y_U2]) == pytest.approx(factor * u_exit, rel=1e-15)
 
 
@@ -870,7 +977,8 @@ def test_an_impulse_releases_a_stuck_component_only_beyond_spin_tol(setup):
 def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end():
     """integrate.next_try: the try's size and the loop's stops, each from its documented rule."""
     from sweep import outcomes as oc
-    from sweep.core.integrate import EPS, next_try
+    from sweep.core.constants import EPS
+    from sweep.core.integrate import next_try
 
     consts = _consts(t_max=100.0, max_steps=50)
     wk, istats = _work()

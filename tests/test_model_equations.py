@@ -29,6 +29,7 @@ import pytest
 
 from tests.reference import newton_euler as ne
 
+from sweep.core import constants as CN
 from sweep.core import model as M
 from sweep.core import layout as L
 from sweep.core.impulse import project_velocity, stop_axis_rate
@@ -121,7 +122,7 @@ def reference_rhs(disk, y, side, rolling, sig, stuck, n0):
 def rhs_errors(rolling, stuckset, seed, n_valid=N_VALID):
     """Compare model.rhs with the reference at n_valid random states; return max errors."""
     rng = np.random.default_rng(seed)
-    mode = M.ROLL if rolling else M.SLIDE
+    mode = CN.ROLL if rolling else CN.SLIDE
     err = {name: 0.0 for name in DY_NAMES + AUX_NAMES}
     err.update(energy=0.0, physical_velocity=0.0, power_identity=0.0, power_ref=0.0,
                core_vs_full=0.0, theta_psi_invariance=0.0, params=0.0)
@@ -332,7 +333,7 @@ def test_energy_balance_holds_past_the_rim_edge_with_the_side_kept(rolling):
     rng = np.random.default_rng(11)
     dy = np.zeros(M.N_FULL)
     aux = np.zeros(M.N_AUX)
-    mode = M.ROLL if rolling else M.SLIDE
+    mode = CN.ROLL if rolling else CN.SLIDE
     worst = 0.0
     n_valid = 0
     for _ in range(400):
@@ -378,8 +379,8 @@ def test_project_velocity():
     worst = dict(state=0.0, loss=0.0, constraint=0.0, energy_drop=0.0, pythagoras=0.0,
                  physical_velocity=0.0)
     count = 0
-    for mode_old in (M.ROLL, M.SLIDE):
-        for mode_new in (M.ROLL, M.SLIDE):
+    for mode_old in (CN.ROLL, CN.SLIDE):
+        for mode_new in (CN.ROLL, CN.SLIDE):
             for flip in (False, True):
                 for _ in range(n_per_combo):
                     disk, p, chi = random_disk(rng)
@@ -389,12 +390,12 @@ def test_project_velocity():
                         alpha = random_alpha(rng)
                     side_old = math.copysign(1.0, alpha)
                     side_new = -side_old if flip else side_old
-                    y = random_state(rng, mode_old == M.ROLL, alpha)
+                    y = random_state(rng, mode_old == CN.ROLL, alpha)
                     y0 = y.copy()
-                    ws_old = ne.from_reduced(disk, y0, side_old, mode_old == M.ROLL,
+                    ws_old = ne.from_reduced(disk, y0, side_old, mode_old == CN.ROLL,
                                              y0[M.Y_THETA], y0[M.Y_PSI])
                     E_old = M.energy(y0, p, side_old, mode_old)
-                    loss = project_velocity(y, p, side_old, mode_old == M.SLIDE, side_new, mode_new == M.SLIDE,
+                    loss = project_velocity(y, p, side_old, mode_old == CN.SLIDE, side_new, mode_new == CN.SLIDE,
                                             np.zeros((7, 12)))
                     # the impulse leaves the configuration: compare at the height of side_old (the
                     # two rims' heights differ where alpha != 0, i.e. everywhere but at a real edge change)
@@ -404,13 +405,13 @@ def test_project_velocity():
                     count += 1
 
                     vn, wn, r, loss_ref = ne.plastic_impulse(disk, ws_old, side_new,
-                                                             mode_new == M.ROLL)
+                                                             mode_new == CN.ROLL)
                     sc = chi ** 2 / (disk.m * disk.R ** 2)
                     # the new reduced state from the reference world velocity
                     yr = y0.copy()
                     yr[M.Y_W1:M.Y_W3 + 1] = chi * (ws_old.Ef.T @ wn)
                     vPn = vn + np.cross(wn, r)
-                    if mode_new == M.SLIDE:
+                    if mode_new == CN.SLIDE:
                         yr[M.Y_U1] = chi / disk.R * (vPn @ ws_old.A[:, 0])
                         yr[M.Y_U2] = chi / disk.R * (vPn @ ws_old.A[:, 1])
                     else:
@@ -432,21 +433,21 @@ def test_project_velocity():
                     vP = v_m + np.cross(w_m, r)
                     vscale = 1 + chi / disk.R * (np.linalg.norm(ws_old.v)
                                                  + disk.R * np.linalg.norm(ws_old.omega))
-                    res = vP if mode_new == M.ROLL else vP[2:]
+                    res = vP if mode_new == CN.ROLL else vP[2:]
                     worst["constraint"] = max(worst["constraint"],
                                               chi / disk.R * np.max(np.abs(res)) / vscale)
                     ref_pv = np.concatenate([chi / disk.R * (ws_old.Ef.T @ vn),
                                              chi * (ws_old.Ef.T @ wn)])
                     worst["physical_velocity"] = max(worst["physical_velocity"],
                                                      np.max(_rel(pv, ref_pv)))
-                    ws_new = ne.from_reduced(disk, y, side_new, mode_new == M.ROLL,
+                    ws_new = ne.from_reduced(disk, y, side_new, mode_new == CN.ROLL,
                                              y0[M.Y_THETA], y0[M.Y_PSI])
                     # closest point in the kinetic-energy metric: for any admissible velocity V',
                     # |V - V'|^2 = |V - V+|^2 + |V+ - V'|^2 (so V+ is the unique minimiser)
                     d_plus = _ke_dist2(disk, ws_old.Iw, ws_old.v, ws_old.omega, ws_new.v, ws_new.omega)
                     for _ in range(3):
-                        y3 = random_state(rng, mode_new == M.ROLL, alpha)
-                        ws3 = ne.from_reduced(disk, y3, side_new, mode_new == M.ROLL,
+                        y3 = random_state(rng, mode_new == CN.ROLL, alpha)
+                        ws3 = ne.from_reduced(disk, y3, side_new, mode_new == CN.ROLL,
                                               y0[M.Y_THETA], y0[M.Y_PSI])
                         d3 = _ke_dist2(disk, ws_old.Iw, ws_old.v, ws_old.omega, ws3.v, ws3.omega)
                         d23 = _ke_dist2(disk, ws_old.Iw, ws_new.v, ws_new.omega, ws3.v, ws3.omega)
@@ -566,14 +567,14 @@ def test_stop_axis_rate_is_the_least_change_that_stops_one_moment_axis():
                     y0 = y.copy()
                     cs = np.zeros(L.N_CS)
                     cs[L.CS_SIDE] = side
-                    cs[L.CS_MODE] = L.ROLL if rolling else L.SLIDE
+                    cs[L.CS_MODE] = CN.ROLL if rolling else CN.SLIDE
                     for j in stuckset:
                         if j != i:
                             cs[L.CS_STUCK + j] = 1.0
                             g0[j] = rng.normal(0.0, 1e-12)   # a held component's drift
                     y = _with_axis_rates(y, g0)
                     y0 = y.copy()
-                    mode = M.ROLL if rolling else M.SLIDE
+                    mode = CN.ROLL if rolling else CN.SLIDE
                     E_old = M.energy(y0, p, side, mode)
                     loss = stop_axis_rate(y, p, cs, i, np.zeros((7, 12)))
                     E_new = M.energy(y, p, side, mode)

@@ -18,6 +18,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import sweep
+from sweep.core import constants as CN
 from sweep.core import contact as C
 from sweep.core import layout as L
 from sweep.core import model as M
@@ -84,7 +85,7 @@ def _flow_fate(y, p, cs, u):
     def rates(nu):
         ys = y[:n].copy()
         ys[M.Y_U1], ys[M.Y_U2] = u * math.cos(nu), u * math.sin(nu)
-        contact = M.Contact(M.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3],
+        contact = M.Contact(CN.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3],
                             math.cos(nu), math.sin(nu))
         M.rhs(0.0, ys, p, contact, n, dy, aux)
         c, s = math.cos(nu), math.sin(nu)
@@ -141,7 +142,7 @@ def test_the_slip_fate_is_the_direction_flows():
         nu = rng.uniform(-math.pi, math.pi)
         y[M.Y_U1], y[M.Y_U2] = u * math.cos(nu), u * math.sin(nu)
         cs = np.zeros(L.N_CS)
-        cs[L.CS_MODE] = L.SLIDE
+        cs[L.CS_MODE] = CN.SLIDE
         cs[L.CS_SIDE] = 1.0 if y[M.Y_ALPHA] > 0.0 else -1.0
         cs[L.CS_SIG:L.CS_SIG + 3] = rng.choice([-1.0, 1.0], size=3)
         want = _flow_fate(y, p, cs, u)
@@ -194,7 +195,7 @@ def test_a_narrow_root_pair_of_cross_is_not_taken_for_a_spiral():
     for nu in np.linspace(0.0, 2.0 * math.pi, 64 * 256, endpoint=False):
         ys = y[:n].copy()
         ys[M.Y_U1], ys[M.Y_U2] = u * math.cos(nu), u * math.sin(nu)
-        M.rhs(0.0, ys, p, M.Contact(M.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3],
+        M.rhs(0.0, ys, p, M.Contact(CN.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3],
                                     cs[L.CS_STUCK:L.CS_STUCK + 3], math.cos(nu), math.sin(nu)), n, dy, aux)
         assert aux[M.X_OK] == 1.0
         cross.append(dy[M.Y_U2] * math.cos(nu) - dy[M.Y_U1] * math.sin(nu))
@@ -340,7 +341,7 @@ def test_the_slaved_directions_lag_agrees_with_the_peers():
         y[M.Y_W1:M.Y_W3 + 1] = rng.normal(0.0, 0.5, 3) + [0.0, 0.0, -1.0]
         u = 10.0 ** rng.uniform(-6, -3)
         cs = np.zeros(L.N_CS)
-        cs[L.CS_MODE], cs[L.CS_SIDE] = L.SLIDE, 1.0
+        cs[L.CS_MODE], cs[L.CS_SIDE] = CN.SLIDE, 1.0
         cs[L.CS_SIG:L.CS_SIG + 3] = np.where(np.array(M.moment_axes_rates(y)) >= 0.0, 1.0, -1.0)
         system = L.System(p, cs, n, wk, ist)
         root = C.attracting_direction(rng.uniform(-math.pi, math.pi), u, 0.0, y, system)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .core.constants import ROLL, SLIDE
 from .errors import ConfigError
 
 
@@ -62,7 +63,7 @@ def write_trajectory(result, path) -> None:
             "x": ("time", tr["x"], {"units": "m", "long_name": "centre of mass position on E1"}),
             "y": ("time", tr["y"], {"units": "m", "long_name": "centre of mass position on E2"}),
             "normal_force": ("time", tr["normal_force"], {"units": "N", "long_name": "normal contact force"}),
-            "mode": ("time", tr["mode"], {"units": "1", "long_name": "contact mode", "flag_values": np.array([0, 1], np.int8),
+            "mode": ("time", tr["mode"], {"units": "1", "long_name": "contact mode", "flag_values": np.array([ROLL, SLIDE], np.int8),
                                           "flag_meanings": "rolling sliding"}),
         },
         coords={"time": ("time", tr["t"], {"units": "s", "long_name": "time"}),

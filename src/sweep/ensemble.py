@@ -24,7 +24,8 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from . import outcomes
-from .core.ensemble import MAX_LEVELS, N_DERIVED, BatchInputs, BatchOutputs, solve_index, work_buffers
+from .core.ensemble import MAX_LEVELS, BatchInputs, BatchOutputs, solve_index, work_buffers
+from .core.fits import N_DERIVED
 from .core.layout import I_OVERFLOW, LEVEL_COLS, N_FSTATS, N_ISTATS, N_SETTINGS
 from .core.model import N_FULL, N_PARAMS
 from .errors import ConfigError

@@ -9,7 +9,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .core import model  # noqa: E402
+from .core.constants import SLIDE  # noqa: E402
 from .simulate import SimulationResult  # noqa: E402
 
 
@@ -65,7 +65,7 @@ def paper_figures(result: SimulationResult, outdir) -> list[Path]:
     ax[0].legend(loc="lower right", fontsize=8)
     _tau_axis(ax[0], chi)
     ax[1].plot(t, E, lw=0.8)
-    sl = tr["mode"] == model.SLIDE
+    sl = tr["mode"] == SLIDE
     ax[1].plot(t[sl], E[sl], ".", ms=1.5, color="C3", label="sliding")
     ax[1].set_ylabel(r"energy $\hat E = E/(mR^2/\chi^2)$")
     joules = ax[1].secondary_yaxis("right", functions=(lambda e: e * escale, lambda j: j / escale))

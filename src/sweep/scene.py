@@ -27,6 +27,7 @@ import numpy as np
 
 from . import fields, yamlio
 from .core import model
+from .core.constants import ROLL, SLIDE
 from .core.contact import BETA_FACE
 from .errors import ConfigError, raise_all
 
@@ -235,7 +236,7 @@ def initial_state(scene: Scene) -> tuple[np.ndarray, int]:
     y0[model.Y_ALPHA] = ini["alpha"]
     y0[model.Y_W1:model.Y_W3 + 1] = np.asarray(ini["omega"]) * chi
     slip = np.asarray(ini["slip"]) * chi / R
-    mode = model.SLIDE if np.any(slip != 0.0) else model.ROLL
+    mode = SLIDE if np.any(slip != 0.0) else ROLL
     y0[model.Y_U1:model.Y_U2 + 1] = slip
     y0[model.Y_THETA] = ini["theta"]
     y0[model.Y_PSI] = ini["psi"]

@@ -11,7 +11,9 @@ from . import outputs
 from .core import model
 from .core.fits import N_DERIVED, summary_fits
 from .core.integrate import integrate
-from .core.layout import I_FLAT, L_PRECESSION, L_TAU, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX
+from .core.constants import SLIDE
+from .core.layout import (I_FLAT, L_PRECESSION, L_TAU, N_SETTINGS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX,
+                          SA_ENERGY, SA_MODE, SA_PHI, TR_MODE, TR_PHI, TR_TAU, TR_Y)
 from .errors import ConfigError
 from .scene import Scene, initial_state, load_scene  # noqa: F401 - initial_state: its API home stays here too
 
@@ -66,9 +68,9 @@ def trajectory_energy(traj: np.ndarray, scene: Scene) -> np.ndarray:
     """Dimensionless energy (eq. 6.1, corrected) at every row of the kernel's trajectory buffer."""
     E = np.empty(traj.shape[0])
     for i in range(traj.shape[0]):
-        y = traj[i, 1:1 + model.N_FULL]
+        y = traj[i, TR_Y:TR_Y + model.N_FULL]
         side = 1 if y[model.Y_ALPHA] > 0 else -1
-        E[i] = model.energy(y, scene.params, side, min(int(traj[i, 2 + model.N_FULL]), 1))
+        E[i] = model.energy(y, scene.params, side, min(int(traj[i, TR_MODE]), SLIDE))   # SLAVED: sliding
     return E
 
 
@@ -130,26 +132,26 @@ def simulate(scene, sample_times=None, trajectory: bool = False) -> SimulationRe
             "psi": samp[:, model.Y_PSI].copy(),
             "x": samp[:, model.Y_X] * R,
             "y": samp[:, model.Y_Y] * R,
-            "normal_force": samp[:, model.N_FULL + 1] * sc.config["disk"]["mass"] * R / chi**2,
-            "mode": np.minimum(samp[:, model.N_FULL + 2], 1.0),   # 1: sliding (also the slaved slip)
-            "energy": samp[:, model.N_FULL] * escale,
+            "normal_force": samp[:, SA_PHI] * sc.config["disk"]["mass"] * R / chi**2,
+            "mode": np.minimum(samp[:, SA_MODE], float(SLIDE)),   # SLIDE: sliding (also the slaved slip)
+            "energy": samp[:, SA_ENERGY] * escale,
         }
     tr = None
     if trajectory:
         R = sc.config["disk"]["radius"]
         tr = {
-            "t": traj[:, 0] * chi,
-            "alpha": traj[:, 1 + model.Y_ALPHA].copy(),
-            "omega": traj[:, 1 + model.Y_W1:2 + model.Y_W3] / chi,
-            "slip": traj[:, 1 + model.Y_U1:2 + model.Y_U2] * R / chi,
-            "theta": traj[:, 1 + model.Y_THETA].copy(),
-            "psi": traj[:, 1 + model.Y_PSI].copy(),
-            "x": traj[:, 1 + model.Y_X] * R,
-            "y": traj[:, 1 + model.Y_Y] * R,
-            "normal_force": traj[:, 1 + model.N_FULL] * sc.config["disk"]["mass"] * R / chi**2,
-            "phi": traj[:, 1 + model.N_FULL].copy(),
-            "mode": np.minimum(traj[:, 2 + model.N_FULL], 1).astype(np.int8),
-            "tau": traj[:, 0].copy(),
+            "t": traj[:, TR_TAU] * chi,
+            "alpha": traj[:, TR_Y + model.Y_ALPHA].copy(),
+            "omega": traj[:, TR_Y + model.Y_W1:TR_Y + model.Y_W3 + 1] / chi,
+            "slip": traj[:, TR_Y + model.Y_U1:TR_Y + model.Y_U2 + 1] * R / chi,
+            "theta": traj[:, TR_Y + model.Y_THETA].copy(),
+            "psi": traj[:, TR_Y + model.Y_PSI].copy(),
+            "x": traj[:, TR_Y + model.Y_X] * R,
+            "y": traj[:, TR_Y + model.Y_Y] * R,
+            "normal_force": traj[:, TR_PHI] * sc.config["disk"]["mass"] * R / chi**2,
+            "phi": traj[:, TR_PHI].copy(),
+            "mode": np.minimum(traj[:, TR_MODE], SLIDE).astype(np.int8),   # SLIDE: sliding (also the slaved slip)
+            "tau": traj[:, TR_TAU].copy(),
             "energy": trajectory_energy(traj, sc) * escale,
         }
     out_cfg = sc.config["outputs"]

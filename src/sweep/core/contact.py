@@ -29,13 +29,13 @@ from __future__ import annotations
 import math
 
 from .. import outcomes as oc
-from .events import (C_CONTACT_LOST, C_FACE, C_MOMENT, C_SIDE, E_CLASS, E_COMPONENT, E_FORCES, EV_AGAINST1,  # noqa: F401
-                     EV_CONE, EV_CONTACT, EV_FACE, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SIGN2, EV_SIGN3, EV_SLAVE,
-                     EV_SLAVE_LOST, EV_SLIP_FAST, EV_SLIP_SLOW, EV_SLIP_STOP, EV_SPIN1, EV_SPIN2, EV_SPIN3,
-                     EV_UNSTICK1, EV_UNSTICK2, EV_UNSTICK3, EVENTS, N_DYN_EVENTS, N_EVENTS)
+from .events import (C_CONTACT_LOST, C_FACE, C_MOMENT, C_SIDE, C_SLIP, E_CLASS, E_COMPONENT, E_FORCES, EV_AGAINST1, EV_AGAINST3, EV_CONE, EV_CONTACT,
+                     EV_FACE, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SIGN3, EV_SLAVE, EV_SLAVE_LOST, EV_SLIP_FAST, EV_SLIP_SLOW,
+                     EV_SLIP_STOP, EV_SPIN1, EV_SPIN3, EV_UNSTICK1, EV_UNSTICK3, EVENTS, N_EVENTS)
+from .constants import AT_FLOOR, BELOW, EPS, HANDOVER_ARMED, HANDOVER_OFF, ROLL, SLAVED, SLIDE, SLOW_OFF
 from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
-from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, ROLL, SLAVED, SLIDE, W_AUXTMP,
+from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, W_AUXTMP,
                      W_AUXFLOW, W_AUXSLOPE, W_DYFLOW, W_DYSLOPE, W_DYTMP, W_GBUF, W_YFLOW, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
                      System)
 from .model import (N_PARAMS, P_A, P_SLAVE, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_LAG, X_NU, X_SLAVE_ERR, Y_ALPHA,
@@ -63,18 +63,9 @@ SLAVE_EXIT = 2.0
 # before slave_tol existed: exiting there at twice the speed cost 29 % more steps in the paper's
 # disk at mu_d = mu_s
 FLOOR_EXIT = 4.0
-# cs[CS_SLAVE_OFF] while a slide that spirals out from u = 0 slides on below slip_tol (slow_slide):
-# the hand-over and EV_SLIP_SLOW are both off until the slip is fast again (EV_SLIP_FAST)
-SLOW_OFF = 2.0
-# cs[CS_SLAVE_OFF] while a slide below slip_tol is followed to its fate (slow_slide): an ending slip
-# whose direction has yet to turn to its direction of arrival, one spiralling in, one passing by
-# u = 0; its fate is read again at cs[CS_FLOOR], BELOW_STEP times slower each time
-BELOW = 3.0
+# a slide followed BELOW slip_tol (constants.BELOW) has its fate read again BELOW_STEP times slower
+# each time
 BELOW_STEP = 16.0
-# cs[CS_SLAVE_OFF] while a slide refused at the slaving speed for its slaved direction's error is
-# followed to the floor's speed SLAVE_FLOOR mu_d Phi, where it is handed over whatever that error
-# (try_slave); or re-armed where it is fast again
-AT_FLOOR = 4.0
 # settle_onto's answers
 SETTLED, AGAINST, INACCURATE = 0, 1, 2
 # tau: the differences of d/dtau(omega.a_i) along the motion for its second and third derivatives
@@ -82,13 +73,12 @@ SETTLED, AGAINST, INACCURATE = 0, 1, 2
 SPIN_DIFF = 1e-3
 # A passage by u = 0 is resolved in time where it takes at least this many ulps of tau (slip_floor).
 SLIP_RESOLUTION = 256.0
-EPS = 2.220446049250313e-16
 # Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
 DIR_TOL = 1e-14
 # ... or when cross is at its round-off floor: |cross| <= DIR_NOISE |slip acceleration|. Near a fold
 # (d cross/d nu small) the secant can stall there, two iterates giving the same rounded cross, before
 # its angle update gets below DIR_TOL: the root is then found to machine precision, not lost.
-DIR_NOISE = 64.0 * 2.220446049250313e-16
+DIR_NOISE = 64.0 * EPS
 DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
 # tau: forward-difference step of d cross/d tau along the motion at a fixed direction (the lag):
 # truncation O(FLOW_DTAU) relative, round-off ~EPS |a_P| / FLOW_DTAU, both far below the lag's
@@ -425,7 +415,7 @@ def set_slip(t, y, sys):
     if un > p[P_UTOL]:
         cs[CS_MODE] = SLIDE
         cs[CS_NU] = nu
-        cs[CS_SLAVE_OFF] = 0.0
+        cs[CS_SLAVE_OFF] = HANDOVER_ARMED
         model_call(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
         if un <= slave_speed(y, wk[W_AUXTMP], p):
             return try_slave(t, y, sys)
@@ -544,14 +534,14 @@ def try_slave(t, y, sys):
             return -1
         return oc.PAINLEVE
     if math.isnan(root):
-        cs[CS_SLAVE_OFF] = 1.0
+        cs[CS_SLAVE_OFF] = HANDOVER_OFF
         return -1
     # where the slip points against the direction, it is not settling onto it but passing by u = 0
     # (its direction turning towards a root along which it grows): it goes on sliding, as the
     # sliding equations carry it, past u = 0 or to slip_tol (docs/model.md)
     settled = settle_onto(root, t, y, sys, True)
     if settled == AGAINST:
-        cs[CS_SLAVE_OFF] = 1.0
+        cs[CS_SLAVE_OFF] = HANDOVER_OFF
     elif settled == INACCURATE:
         cs[CS_SLAVE_OFF] = AT_FLOOR
     return -1
@@ -663,7 +653,7 @@ def slow_slide(t, y, sys):
         cs[CS_SLAVE_OFF] = SLOW_OFF
         return -1
     if fate == FATE_ENDS and not math.isnan(nu) and settle_onto(nu, t, y, sys, False) == SETTLED:
-        cs[CS_SLAVE_OFF] = 0.0
+        cs[CS_SLAVE_OFF] = HANDOVER_ARMED
         return -1
     eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     floor = min(slip_floor(t, wk[W_AUXTMP], p, cs), math.hypot(y[Y_U1], y[Y_U2])) / BELOW_STEP
@@ -680,7 +670,7 @@ def slow_slide(t, y, sys):
     y[Y_U2] = 0.0
     cs[CS_MODE] = SLAVED
     cs[CS_NU] = nu
-    cs[CS_SLAVE_OFF] = 0.0
+    cs[CS_SLAVE_OFF] = HANDOVER_ARMED
     return -1
 
 
@@ -709,7 +699,7 @@ def confirm_slaved(t, y, sys):
         return oc.PAINLEVE
     if math.isnan(root):
         cs[CS_MODE] = SLIDE
-        cs[CS_SLAVE_OFF] = 1.0
+        cs[CS_SLAVE_OFF] = HANDOVER_OFF
         return -1
     cs[CS_NU] = root
     return -1
@@ -1041,8 +1031,9 @@ def reads_forces(k):
 
 @kernel
 def state_event_value(k, t, y, p, cs, lev):
-    """g_k of an active event that does not read the forces (not reads_forces(k))."""
-    if k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
+    """g_k of an active event that does not read the forces (not reads_forces(k)); raises for any
+    other id."""
+    if EV_SIGN1 <= k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
         i = EVENTS[k, E_COMPONENT]
         r1, r2, r3 = moment_axes_rates(y)
         g = cs[CS_SIG + i] * (r1 if i == 0 else (r2 if i == 1 else r3))
@@ -1051,7 +1042,9 @@ def state_event_value(k, t, y, p, cs, lev):
         return cs[CS_SIDE] * y[Y_ALPHA]
     if k == EV_FACE:
         return (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
-    return mode_energy(y, p, cs) - lev   # EV_LEVEL
+    if k == EV_LEVEL:
+        return mode_energy(y, p, cs) - lev
+    raise ValueError("state_event_value: an event id with no value of the state alone")
 
 
 @kernel
@@ -1075,7 +1068,7 @@ def event_values(t, y, aux, p, cs, lev, g):
     elif mode == SLIDE:
         if cs[CS_SLAVE_OFF] != SLOW_OFF:
             g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p, cs)
-        if cs[CS_SLAVE_OFF] == 0.0:
+        if cs[CS_SLAVE_OFF] == HANDOVER_ARMED:
             g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(y, aux, p)
         elif cs[CS_SLAVE_OFF] == AT_FLOOR:
             # refused for its error at the slaving speed: handed over at the floor's, or re-armed
@@ -1133,10 +1126,10 @@ def moment_event(k, t, y, sys):
     components, so that the rates after it are those that release_moved compares with."""
     cs, wk, istats = sys.cs, sys.wk, sys.istats
     i = EVENTS[k, E_COMPONENT]
-    if k <= EV_SIGN3:
+    if EV_SIGN1 <= k <= EV_SIGN3:
         stick_or_flip(i, t, y, sys)
         return -1, False
-    if k >= EV_AGAINST1:
+    if EV_AGAINST1 <= k <= EV_AGAINST3:
         # neither sign holds (the one just set fails at once, the other opposes the motion):
         # the Filippov solution stays on omega.a_i = 0
         sig_failed = cs[CS_SIG + i]
@@ -1148,10 +1141,12 @@ def moment_event(k, t, y, sys):
         return -1, False
     if EV_SPIN1 <= k <= EV_SPIN3:
         return -1, stick_at_spin_tol(i, t, y, sys)
-    eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
-    cs[CS_SIG + i] = 1.0 if wk[W_AUXTMP, X_SIG1 + i] > 0.0 else -1.0
-    cs[CS_STUCK + i] = 0.0
-    return i, False
+    if EV_UNSTICK1 <= k <= EV_UNSTICK3:
+        eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+        cs[CS_SIG + i] = 1.0 if wk[W_AUXTMP, X_SIG1 + i] > 0.0 else -1.0
+        cs[CS_STUCK + i] = 0.0
+        return i, False
+    raise ValueError("moment_event: an event id of class C_MOMENT with no update")
 
 
 @kernel
@@ -1162,7 +1157,7 @@ def slip_event(k, t, y, sys):
     p, cs, wk = sys.p, sys.cs, sys.wk
     if k == EV_CONE:
         start_slip(t, y, sys)
-        cs[CS_SLAVE_OFF] = 0.0
+        cs[CS_SLAVE_OFF] = HANDOVER_ARMED
     elif k == EV_SLIP_SLOW:
         return slow_slide(t, y, sys)
     elif k == EV_SLIP_STOP:
@@ -1173,13 +1168,15 @@ def slip_event(k, t, y, sys):
         cs[CS_MODE] = ROLL
     elif k == EV_SLIP_FAST:
         cs[CS_MODE] = SLIDE
-        cs[CS_SLAVE_OFF] = 0.0
+        cs[CS_SLAVE_OFF] = HANDOVER_ARMED
     elif k == EV_SLAVE:
         return try_slave(t, y, sys)
     elif k == EV_SLAVE_LOST:
         # the quasi-static direction folds away: the slip direction follows its own dynamics
         cs[CS_MODE] = SLIDE
-        cs[CS_SLAVE_OFF] = 1.0
+        cs[CS_SLAVE_OFF] = HANDOVER_OFF
+    else:
+        raise ValueError("slip_event: an event id of class C_SLIP with no update")
     return -1
 
 
@@ -1191,7 +1188,8 @@ def apply_event(k, t, y, sys, fstats):
     phases are counted where a component sticks.
 
     Returns the outcome code that ends the scene, or -1 to continue. The caller re-evaluates the
-    right-hand side and the event functions afterwards.
+    right-hand side and the event functions afterwards. Raises for an event with no discrete update
+    (the level's, C_LEVEL) or of a class it does not know.
     """
     g_before = moment_axes_rates(y)
     own = -1   # the component this event puts on its surface (settle_signs)
@@ -1206,10 +1204,12 @@ def apply_event(k, t, y, sys, fstats):
         return oc.FACE_CONTACT   # the caller records it as a halt
     elif cls == C_SIDE:
         return side_change(t, y, sys, fstats)
-    else:
+    elif cls == C_SLIP:
         code = slip_event(k, t, y, sys)
         if code >= 0:
             return code
+    else:
+        raise ValueError("apply_event: an event class with no discrete update")
     return settle_event(t, y, sys, g_before, own)
 
 

@@ -1,12 +1,15 @@
 """DOP853 (Dormand & Prince 8(5,3)) step, error norm, dense output and starting step.
 
-Step-size control follows Hairer, Norsett & Wanner (1993), II.4 and II.10: the error norm of
-dop853 (5th/3rd-order embedded estimates), safety 0.9, factor in [0.2, 10], exponent -1/8.
-The stepper does not know the physics: the right-hand side comes in as a kernel argument,
-`rhs(t, y, sys, dy, aux)` (dy = d y/d t and its aux at (t, y); the integrator passes
-contact.eval_rhs), with `sys` (layout.System) passed through to it; of sys the stepper reads only
-the state size n and the work buffer wk (its rows W_YTMP, W_DYTMP, W_AUXTMP, W_DELTA). The sums
-over the stages are straight-line code generated from the tableau (dop853_sums.py, from tableau.py).
+The error norm is Hairer's dop853 (Hairer, Norsett & Wanner (1993), II.10: 5th/3rd-order embedded
+estimates); the step-size factor that follows from it is the controller's (controller.py, with this
+method's ERR_EXPONENT). The stepper knows no state layout: the caller gives the error norm its
+per-component scales (atol_i + rtol |y_i| with whatever component rules it has: the integrator's
+integrate.error_scale) and the number of leading components the norms run over. Nor does it know
+the physics: the right-hand side comes in as a kernel argument, `rhs(t, y, sys, dy, aux)` (dy =
+d y/d t and its aux at (t, y); the integrator passes contact.eval_rhs), with `sys` (layout.System)
+passed through to it; of sys the stepper reads only the state size n and the work buffer wk (its
+rows W_YTMP, W_DYTMP, W_AUXTMP, W_DELTA). The sums over the stages are straight-line code generated
+from the tableau (dop853_sums.py, from tableau.py).
 
 The kernels that call rhs (dop853_sums.main_stages and dense_stages, rk_step, dense_coeffs,
 initial_step) are inlined into their callers (inline="always"). numba compiles a kernel passed as
@@ -23,13 +26,9 @@ import math
 from .jit import kernel
 from .dop853_sums import dense_rows, dense_stages, error_sums, increment, main_stages
 from .layout import W_AUXTMP, W_DELTA, W_DYTMP, W_YTMP
-from .model import N_CORE, Y_ALPHA, Y_U1, Y_U2
 from .tableau import N_STAGES
 
-SAFETY = 0.9
-MIN_FACTOR = 0.2
-MAX_FACTOR = 10.0
-ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8)
+ERR_EXPONENT = -1.0 / 8.0   # error estimator of order 7 -> h ~ err^(-1/8) (controller.step_factor)
 N_DENSE = 7                 # rows of dense-output coefficients
 
 
@@ -50,52 +49,19 @@ def rk_step(rhs, t, h, start, end, sys, K):
 
 
 @kernel
-def error_norm(K, h, y, y_new, n, rtol, atol, u_atol):
-    """Hairer's dop853 error norm over the dynamic state and the dissipation quadratures only;
-    the slip components (Y_U1, Y_U2) with the absolute tolerance u_atol instead of atol.
-
-    theta, psi, x, y (when integrated) are passive quadratures that never feed back into the
-    dynamics; leaving them out keeps the step sequence, and so every result, identical whether or
-    not a scene asks for them.
-
-    The inclination's error is relative to its distance from the nearer of upright and flat,
-    min(|alpha|, pi/2 - |alpha|): near flat the dynamics and the face event depend on
-    beta = pi/2 - |alpha| (the face contact lies at beta = 1e-6 rad), which an error relative to
-    |alpha| ~ 1.57 would resolve only to rtol * 1.57.
-    """
-    n = min(n, N_CORE)
+def error_norm(K, h, sc, n):
+    """Hairer's dop853 error norm of the step of size h whose stages are K, over the components
+    0..n-1, component i measured in units of sc[i] > 0 (its tolerance: the caller's weights)."""
     e5 = 0.0
     e3 = 0.0
     for i in range(n):
-        mag = max(abs(y[i]), abs(y_new[i]))
-        if i == Y_ALPHA:
-            mag = min(mag, max(0.5 * math.pi - min(abs(y[i]), abs(y_new[i])), 0.0))
-        sc = (u_atol if i == Y_U1 or i == Y_U2 else atol) + rtol * mag
         a5, a3 = error_sums(K, i)
-        e5 += (a5 / sc) ** 2
-        e3 += (a3 / sc) ** 2
+        e5 += (a5 / sc[i]) ** 2
+        e3 += (a3 / sc[i]) ** 2
     if e5 == 0.0 and e3 == 0.0:
         return 0.0
     den = e5 + 0.01 * e3
     return abs(h) * e5 / math.sqrt(den * n)
-
-
-@kernel
-def step_factor(err):
-    """Step-size factor after an error norm `err` (accepted if err <= 1)."""
-    if err == 0.0:
-        return MAX_FACTOR
-    if not math.isfinite(err):
-        return MIN_FACTOR
-    return min(MAX_FACTOR, max(MIN_FACTOR, SAFETY * err ** ERR_EXPONENT))
-
-
-@kernel
-def accepted_step_factor(err, after_reject):
-    """Step-size factor after an accepted step (err <= 1); no growth right after a rejection (as
-    in Hairer's DOP853): 6 % fewer steps at the median harness scene."""
-    fac = step_factor(err)
-    return min(fac, 1.0) if after_reject else fac
 
 
 @kernel(inline="always")
@@ -135,10 +101,10 @@ def dense_component(F, row0, y_old, t_old, h, t, i):
 
 
 @kernel(inline="always")
-def initial_step(rhs, t, y, f, sys, rtol, atol):
-    """Starting step size (Hairer & Wanner II.4, 'starting step size'), on the dynamic state."""
+def initial_step(rhs, t, y, f, sys, rtol, atol, nc):
+    """Starting step size (Hairer & Wanner II.4, 'starting step size'), its norms over the
+    components 0..nc-1 (the caller's: those that carry the dynamics) with scale atol + rtol |y_i|."""
     n, wk = sys.n, sys.wk
-    nc = min(n, N_CORE)
     d0 = 0.0
     d1 = 0.0
     for i in range(nc):

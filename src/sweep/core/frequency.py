@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 
+from .constants import EPS
 from .contact import eval_rhs
 from .dop853 import dense_component, dense_eval
 from .jit import kernel
@@ -115,7 +116,7 @@ def theta_crossing(F, y, t, h, ta, tb, target, sgn):
         return ta
     side = 0
     for _ in range(200):
-        if tb - ta <= 4.0 * 2.220446049250313e-16 * max(abs(tb), 1.0) or gb == 0.0:
+        if tb - ta <= 4.0 * EPS * max(abs(tb), 1.0) or gb == 0.0:
             break
         tm = (ta * gb - tb * ga) / (gb - ga)
         if not (ta < tm < tb):

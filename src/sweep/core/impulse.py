@@ -13,7 +13,8 @@ from __future__ import annotations
 import math
 
 from .jit import kernel
-from .layout import CS_MODE, CS_SIDE, CS_STUCK, ROLL
+from .constants import ROLL
+from .layout import CS_MODE, CS_SIDE, CS_STUCK
 from .model import P_A, P_C, P_H, Y_ALPHA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, physical_velocity
 
 # scratch layout: rows 0..5 hold J (6 x 5) in columns 0..4 and the augmented normal matrix

@@ -17,14 +17,16 @@ from .. import outcomes as oc
 from .contact import (apply_event, count_transition, confirm_slaved, spin_sticks,
                       consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, reads_forces, set_slip, start_slip)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
-from .events import (C_MOMENT, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
+from .events import (C_MOMENT, D_RATES, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
                      EV_LEVEL, EVENTS, N_DYN_EVENTS, R_SPIN, R_SURFACE)
-from .dop853 import N_DENSE, accepted_step_factor, dense_eval, error_norm, initial_step, rk_step, step_factor
+from .constants import EPS, ROLL, SLAVED
+from .controller import accepted_step_factor, step_factor
+from .dop853 import ERR_EXPONENT, N_DENSE, dense_eval, error_norm, initial_step, rk_step
 from .jit import kernel
 from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_E, I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
                      I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, L_PENDING, LEVEL_COLS,
-                     N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, ROLL, S_ATOL, S_HMAX,
-                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, SAMPLE_COLS, SLAVED, T_CUT, T_DIMPACT_HALT,
+                     N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, S_ATOL, S_HMAX, W_ESCALE,
+                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, SAMPLE_COLS, T_CUT, T_DIMPACT_HALT,
                      T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
                      W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Point, Record, RunConsts,
                      Segment, Span, System, Work)
@@ -34,7 +36,6 @@ from .tableau import N_STAGES
 from .tracking import (deep_levels, deep_pending, start_deep_levels, dense_wanted, halt_flat, record_levels, record_sample, record_samples, record_traj,
                        step_dense, track_frequency)
 
-EPS = 2.220446049250313e-16
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
 # increases, so such a step is an instability the error estimate did not see; it is rejected.
 ENERGY_GUARD = 10.0
@@ -288,7 +289,7 @@ def dip_bracket(k, span, lev, work, have_dense):
         # |u| less a speed: a V where the slip passes by u = 0, placed from the slip's own smooth
         # components (a cubic in g, or its difference quotient, can step over it)
         dip = slip_closest_approach(y, f, y_new, f_new, h)
-    else:
+    elif how == D_RATES:
         if trk[T_RATES_OLD] == 0.0:
             event_rates(t, y, f, wk[W_GOLD], wk[W_RATEOLD], lev, span.sys)
             trk[T_RATES_OLD] = 1.0
@@ -296,6 +297,8 @@ def dip_bracket(k, span, lev, work, have_dense):
             event_rates(t + h, y_new, f_new, wk[W_GNEW], wk[W_RATENEW], lev, span.sys)
             trk[T_RATES_NEW] = 1.0
         dip = hermite_dip(g0, wk[W_RATEOLD, k] * h, g1, wk[W_RATENEW, k] * h)
+    else:
+        raise ValueError("dip_bracket: an event of the dynamics with no way to bracket a dip (E_DIP)")
     if not dip > 0.0:
         return -1.0, 0.0, have_dense
     have_dense = dense_built(have_dense, span, work)
@@ -399,10 +402,37 @@ def try_step(t, h, consts, work, sys):
         err = math.inf
     if err == 0.0:
         defect = max(power_defect(y, f, aux, p, cs), power_defect(y_new, wk[W_FNEW], aux_new, p, cs))
-        err = max(error_norm(K, h, y, y_new, n, rtol, atol, slip_atol(y, y_new, p, rtol, atol)),
-                  balance_error(y, aux, wk[W_DELTA], h, defect, p, cs, consts))
+        nc = norm_size(n)
+        error_scale(y, y_new, nc, rtol, atol, slip_atol(y, y_new, p, rtol, atol), wk[W_ESCALE])
+        err = max(error_norm(K, h, wk[W_ESCALE], nc), balance_error(y, aux, wk[W_DELTA], h, defect, p, cs, consts))
     tally_step(cs, sys.istats, err <= 1.0, 1)
     return err
+
+
+@kernel
+def norm_size(n):
+    """The components 0..norm_size(n) - 1 of a state of size n that the step's error norms run over
+    (dop853.error_norm, initial_step): the dynamics and the dissipation books (model.N_CORE). theta,
+    psi, x, y (when integrated) are passive quadratures that never feed back into the dynamics;
+    leaving them out keeps the step sequence, and so every result, identical whether or not a scene
+    asks for them."""
+    return min(n, N_CORE)
+
+
+@kernel
+def error_scale(y, y_new, n, rtol, atol, u_atol, sc):
+    """The error norm's scale of each of the components 0..n-1 of a step from y to y_new (dop853's
+    error_norm reads them): atol + rtol max(|y_i|, |y_new_i|), as in Hairer's dop853, with two
+    rules of this state's. The slip components (Y_U1, Y_U2) take the absolute tolerance u_atol
+    (slip_atol) instead of atol. The inclination's error is relative to its distance from the
+    nearer of upright and flat, min(|alpha|, pi/2 - |alpha|): near flat the dynamics and the face
+    event depend on beta = pi/2 - |alpha| (the face contact lies at beta = 1e-6 rad), which an
+    error relative to |alpha| ~ 1.57 would resolve only to rtol * 1.57 (n: norm_size)."""
+    for i in range(n):
+        mag = max(abs(y[i]), abs(y_new[i]))
+        if i == Y_ALPHA:
+            mag = min(mag, max(0.5 * math.pi - min(abs(y[i]), abs(y_new[i])), 0.0))
+        sc[i] = (u_atol if i == Y_U1 or i == Y_U2 else atol) + rtol * mag
 
 
 @kernel
@@ -505,7 +535,7 @@ def record_start(consts, work, rec, sys):
     trk[T_RATES_OLD] = 0.0
     if consts.peaks_on:
         freq_start(y[Y_THETA], aux[X_PHI], rec.fq)
-    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, consts.rtol, consts.atol)
+    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, consts.rtol, consts.atol, norm_size(n))
 
 
 @kernel
@@ -626,7 +656,7 @@ def carry_step_end(lev, level_pending, work):
     the next step (the level's from the energy, +inf once every level is crossed), and a slaved
     direction is continued to its end."""
     y, p, cs, wk = work.y, work.p, work.cs, work.wk
-    for k in range(N_DYN_EVENTS + 1):
+    for k in range(N_DYN_EVENTS):
         wk[W_GOLD, k] = wk[W_GNEW, k]
     wk[W_GOLD, EV_LEVEL] = mode_energy_at(y, wk[W_AUX], p, cs) - lev if level_pending else math.inf
     if cs[CS_MODE] == SLAVED:
@@ -795,10 +825,10 @@ def run(settings, level_e, sample_tau, work, rec):
             break
         err = try_step(t, h, consts, work, sys)
         if not err <= 1.0:
-            h *= step_factor(err)
+            h *= step_factor(err, ERR_EXPONENT)
             after_reject = True
             continue
-        h_next = min(h * accepted_step_factor(err, after_reject), consts.h_max)
+        h_next = min(h * accepted_step_factor(err, ERR_EXPONENT, after_reject), consts.h_max)
         after_reject = False
         if wk[W_AUXNEW, X_OK] != 1.0 and running:
             outcome = failure_outcome(wk[W_AUXNEW, X_OK])
@@ -824,7 +854,7 @@ def run(settings, level_e, sample_tau, work, rec):
         e_seg, seg_err = segment_end(span, seg_end, event, running, consts)
         if seg_err > 1.0:
             retract_step(cs, istats)
-            h *= step_factor(seg_err)
+            h *= step_factor(seg_err, ERR_EXPONENT)
             after_reject = True
             continue
         seg = Segment(t, h, seg_end, first_k, have_dense, running, at_tmax)

@@ -1,15 +1,14 @@
 """Named slots of the plain arrays that the kernels pass around (no Python objects in a kernel).
 
 Contact state `cs` (float64, N_CS): the discrete state of the hybrid system.
-    CS_MODE    ROLL, SLIDE (slip faster than slip_tol, friction along -u/|u|) or SLAVED (slip at
-               most slip_tol, its direction slaved to the quasi-static one; docs/model.md)
+    CS_MODE    constants.ROLL, SLIDE (slip faster than slip_tol, friction along -u/|u|) or SLAVED (slip
+               at most the slaving speed, its direction slaved to the quasi-static one; docs/model.md)
     CS_SIDE    +1/-1: which rim edge carries the contact (sign of alpha)
     CS_SIG     3 slots: sign of omega.a_i used in the moment M_f (eq. 3.3)
     CS_STUCK   3 slots: 1 where omega.a_i is held at 0 by the dry-friction moment (Filippov)
     CS_NU      slip direction angle on (a1, a2) (rad): the slaved friction direction
-    CS_SLAVE_OFF  1 while a slip that found no quasi-static direction stays in SLIDE; 2 (contact.SLOW_OFF)
-                  while a slide spiralling out from u = 0 slides on below slip_tol; 3
-                  (contact.BELOW) while a slow slide is followed below slip_tol to its fate
+    CS_SLAVE_OFF  a slide's hand-over to SLAVED: constants.HANDOVER_ARMED, HANDOVER_OFF, SLOW_OFF,
+                  BELOW or AT_FLOOR (constants.py says what each means)
     CS_FLOOR   the slip speed (u_hat) at which a slide followed BELOW meets its fate again
 Work buffer `wk` (float64, N_WORK x N_FULL): rows used as vectors; `K` (N_KROWS x N_FULL) holds the
 RK stages of this step (rows 0..15) and of the previous step (rows K_PREV.., kept while its dense
@@ -25,9 +24,6 @@ from collections import namedtuple
 from .events import N_EVENTS
 from .model import N_AUX, N_FULL  # noqa: F401  (re-exported sizes)
 from .tableau import N_STAGES_EXTENDED
-
-# --- modes -------------------------------------------------------------------------------------
-ROLL, SLIDE, SLAVED = 0, 1, 2
 
 # --- contact state ----------------------------------------------------------------------------
 CS_MODE = 0
@@ -69,7 +65,8 @@ W_DELTA = 31      # the step's (or kept segment's) increment y_new - y before ro
 W_YFLOW = 32      # SLAVED: the state a short way along the motion (the slip direction's lag)
 W_DYFLOW = 33
 W_AUXFLOW = 34
-N_WORK = 35
+W_ESCALE = 35     # the error norm's per-component scales of this step (integrate.error_scale)
+N_WORK = 36
 N_WCOLS = max(N_FULL, N_AUX, N_EVENTS)   # columns of the work buffer: a state, an aux or every event's value
 
 # --- settings vector: the run's inputs (float64; a scene's row of a batch), read once into RunConsts ---

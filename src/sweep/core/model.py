@@ -20,6 +20,7 @@ from collections import namedtuple
 
 import numpy as np
 
+from .constants import SLIDE
 from .jit import kernel
 
 # --- state vector layout -------------------------------------------------------------------
@@ -58,7 +59,6 @@ X_LAG = 14      # SLAVED only: the slip direction's lag behind it (rad); the fri
 X_SLAVE_ERR = 15  # SLAVED only: how far the slaved direction is from exact (contact.slaved_slip; inf: invalid)
 N_AUX = 16
 
-ROLL, SLIDE = 0, 1
 
 # The discrete configuration the right-hand side (rhs) is evaluated in: mode (ROLL or SLIDE), side
 # (+1/-1: sign(alpha), the rim edge in contact), sig (3 signs of omega.a_i used in M_f, eq. 3.3),

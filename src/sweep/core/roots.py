@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import math
 
-from .contact import N_EVENTS, eval_rhs, event_values, reads_forces, state_event_value
+from .constants import EPS
+from .contact import eval_rhs, event_values, reads_forces, state_event_value
 from .dop853 import dense_eval
+from .events import N_EVENTS
 from .jit import kernel
 from .layout import W_AUXBUF, W_DYBUF, W_GBUF, W_YBUF
 from .model import X_PHI, Y_U1, Y_U2, sign_rate
@@ -20,7 +22,6 @@ from .model import X_PHI, Y_U1, Y_U2, sign_rate
 # tau = 0. The restart point is the bracket's right end, so each event restarts up to the tolerance
 # past its root: a one-sided error that no rtol removes.
 EVENT_TOL_TAU = 1e-15
-EPS = 2.220446049250313e-16
 # Step (tau) of the forward difference that gives the rate of an event function without a closed form.
 RATE_STEP = 1e-7
 

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 
-from .contact import EV_LEVEL, eval_rhs, mode_energy
+from .contact import eval_rhs, mode_energy
+from .events import EV_LEVEL
 from .dop853 import N_DENSE, dense_coeffs, dense_eval
 from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_step, open_level, peak_candidate, peak_confirmed
 from .fits import halt_from_three
