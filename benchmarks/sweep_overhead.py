@@ -244,7 +244,7 @@ def gather(base: Path, sizes: list[int], before_max: int) -> None:
 def sweep(base: Path) -> None:
     import xarray as xr
 
-    print("sweep: the warm default sweep (each tree's config/config.yaml: 400 scenes here, 320 at 746a2c3) with -j2")
+    print("sweep: the warm default sweep (each tree's own config/config.yaml) with -j2")
     for label, tree in (("before", base), ("after", ROOT)):
         wd = OUT / f"sweep-{label}"
         shutil.rmtree(wd, ignore_errors=True)
