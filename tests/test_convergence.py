@@ -231,7 +231,8 @@ def test_the_default_slave_tol_gives_the_counts_of_its_limit_in_a_micro_stick_sc
     friction direction's angle: its stick phases are decided by the slaved direction's error
     (docs/model.md, 'Slow slip'). With the direction integrated wherever its relaxation time times
     the motion's rate exceeds slave_tol, the counts are 69 stick phases from slave_tol 3e-3 down to
-    0 (slaved only below slip_tol), the default 1e-4 among them; 73 at 5e-3, 98 at 1e-2."""
+    0 (slaved only where the relaxation time alone is below 1e-7), the default 3e-3 among them; 73 at
+    5e-3, 98 at 1e-2."""
     rng = np.random.default_rng(20261124)
     cfg = harness._valid_levels([harness.draw_scene(rng) for _ in range(247)][246])
     res = {st: harness._one_run(cfg, 1e-10, knobs={} if st is None else {"slave_tol": st}) for st in (None, 1e-4, 0.0)}

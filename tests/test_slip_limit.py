@@ -363,22 +363,24 @@ def test_the_slaved_directions_lag_agrees_with_the_peers():
 
 def test_a_slip_at_the_edge_of_the_cone_without_k3_halts():
     """The paper's disk at mu_d = mu_s with k3 = 0 slips for most of its motion; with the slip's
-    direction integrated wherever it relaxes slowly it runs into step_limit (5e6 steps) before the
-    0.01 rad level, as it does at the default slave_tol 1e-4 (docs/model.md, 'Slow slip'). Slaved by
-    the slow manifold from slave_tol 1e-3, it halts with a finite halt time."""
+    direction integrated wherever it relaxes slowly (slave_tol 0 or 1e-4) it runs into step_limit
+    (5e6 steps) before the 0.01 rad level (docs/model.md, 'Slow slip'). Slaved by the slow
+    manifold at the default slave_tol 3e-3, it halts with a finite halt time (measured: 72.97 +-
+    1.1 s in 114 k steps), as at 1e-3 (667 k steps)."""
     cfg = _paper_edge(k3=0.0)
-    cfg["solver"] = {"slave_tol": 1e-3}
-    s = sweep.simulate(cfg).summary
-    assert s["outcome"] == "halted", s["outcome"]
-    assert s["halt_finite"] and math.isfinite(s["t_halt"]) and math.isfinite(s["t_halt_error"])
-    assert s["n_steps"] < 1_000_000, s["n_steps"]
+    for solver in ({}, {"slave_tol": 1e-3}):
+        cfg["solver"] = solver
+        s = sweep.simulate(cfg).summary
+        assert s["outcome"] == "halted", (solver, s["outcome"])
+        assert s["halt_finite"] and math.isfinite(s["t_halt"]) and math.isfinite(s["t_halt_error"])
+        assert s["n_steps"] < 1_000_000, s["n_steps"]
 
 
 def test_the_slaved_direction_converges_as_slave_tol_goes_to_zero():
     """The paper's disk at mu_d = mu_s to tau = 60 (0.1 rad reached): alpha at tau 20, 40, 60 at
-    slave_tol 1e-2, 1e-3 and 1e-4 (the default) against 1e-6: the differences shrink by more than
-    10 per decade down to the integration error, and the default is within 1e-9 rad (measured:
-    1.1e-8, 1.5e-11, 3.9e-12)."""
+    slave_tol 1e-2, 1e-3 and 1e-4 against 1e-6: the differences shrink by more than 10 per decade
+    down to the integration error, and 1e-4 is within 1e-9 rad (measured: 1.1e-8, 1.5e-11,
+    3.9e-12). (The default, 3e-3, lies between 1e-3 and 1e-2.)"""
     cfg = _paper_edge()
     chi = _chi(cfg)
     cfg["stop"] = {"levels": [0.1], "t_max": 60.5 * chi}
