@@ -295,20 +295,20 @@ from types import SimpleNamespace
 from sweep import batch, io
 chunk = batch.chunk_from_spec(sys.argv[1])
 n_levels = len(chunk.spec["settings"]["levels"])
-real_checksum = io.file_checksum
-def checksum_then_die(path):
+real_fsync = io._fsync_path
+def fsync_then_die(path):
     if ".tmp-" in str(path):  # the temporary file is fully written: die before the rename
         os.kill(os.getpid(), signal.SIGKILL)
-    return real_checksum(path)
-io.file_checksum = checksum_then_die
+    return real_fsync(path)
+io._fsync_path = fsync_then_die
 batch.run_chunk(chunk, sys.argv[2], simulate=lambda sc: SimpleNamespace(summary=io.error_summary(n_levels)))
 """
 
 
 @pytest.mark.slow
 def test_kill_9_while_writing_a_chunk_leaves_no_file_under_its_name(tmp_path, monkeypatch):
-    # A deterministic SIGKILL inside the chunk write (after the netCDF data, before the checksum
-    # and the rename): only a temporary file remains, which no check or gather ever reads.
+    # A deterministic SIGKILL inside the chunk write (after the netCDF data and its checksum, before
+    # the fsync and the rename): only a temporary file remains, which no check or gather ever reads.
     settings = settings_of(fault_config())
     chunk = next(iter(grid.plan_chunks(settings).values()))
     final = tmp_path / f"{chunk.id}.nc"

@@ -630,17 +630,18 @@ class Disk:
     def try_slave(self, t, y, c):
         """Returns outcomes.PAINLEVE where the slip is carried into the Painleve singularity, else -1."""
         u = math.hypot(y[Y_U1], y[Y_U2])
+        at_floor = c.slave_off == "floor"   # the floor's hand-over takes the slip whatever its error
         root = self.attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, c)
         if math.isinf(root):
             phi = self.rhs(t, y, c, c.nu)[1][X_PHI]
-            if self.p[P_SLAVE] > 0.0 and u > SLAVE_FLOOR * self.p[P_MUD] * phi:
+            if self.p[P_SLAVE] > 0.0 and u > SLAVE_FLOOR * self.p[P_MUD] * phi and not at_floor:
                 c.slave_off = "floor"   # decided at the floor's speed, as at slave_tol 0
                 return -1
             return outcomes.PAINLEVE
         if math.isnan(root):
             c.slave_off = True
             return -1
-        settled = self.settle_onto(root, t, y, c, strict=True)
+        settled = self.settle_onto(root, t, y, c, strict=not at_floor)
         if settled == "against":
             c.slave_off = True    # pointing against it: passing by u = 0, it goes on sliding
         elif settled == "inaccurate":

@@ -526,9 +526,12 @@ def try_slave(t, y, sys):
     u = math.hypot(y[Y_U1], y[Y_U2])
     eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     floor_speed = SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]
+    # the hand-over at the floor's speed (a slide refused above it) takes the slip whatever the
+    # slaved direction's error there
+    at_floor = cs[CS_SLAVE_OFF] == AT_FLOOR
     root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, sys)
     if root == JAMMED:
-        if p[P_SLAVE] > 0.0 and u > floor_speed:
+        if p[P_SLAVE] > 0.0 and u > floor_speed and not at_floor:
             # decided where the direction's relaxation is as fast as at slave_tol 0: at the floor
             cs[CS_SLAVE_OFF] = AT_FLOOR
             return -1
@@ -539,7 +542,7 @@ def try_slave(t, y, sys):
     # where the slip points against the direction, it is not settling onto it but passing by u = 0
     # (its direction turning towards a root along which it grows): it goes on sliding, as the
     # sliding equations carry it, past u = 0 or to slip_tol (docs/model.md)
-    settled = settle_onto(root, t, y, sys, True)
+    settled = settle_onto(root, t, y, sys, not at_floor)
     if settled == AGAINST:
         cs[CS_SLAVE_OFF] = HANDOVER_OFF
     elif settled == INACCURATE:
