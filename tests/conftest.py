@@ -48,11 +48,11 @@ def scipy_peer():
 
 
 def peer_run(cfg: dict, rtol: float) -> tuple[dict, float]:
-    """The SciPy peer's run of scene `cfg` at rtol (atol rtol/100): its result dict (times in tau)
-    and chi (s), to convert them."""
+    """The SciPy peer's run of scene `cfg` at rtol (atol rtol/100; cfg's other solver settings, e.g.
+    slave_tol, kept): its result dict (times in tau) and chi (s), to convert them."""
     from sweep.scene import load_scene
 
     c = copy.deepcopy(cfg)
-    c["solver"] = {"rtol": rtol, "atol": rtol * 1e-2}
+    c["solver"] = {**c.get("solver", {}), "rtol": rtol, "atol": rtol * 1e-2}
     sc = load_scene(c)
     return scipy_peer().run_scipy(sc, "DOP853", rtol, rtol * 1e-2), sc.chi

@@ -237,11 +237,13 @@ def test_the_peer_brings_the_disk_without_k2_down_alike():
     """The SciPy peer (its own contact rules and event logic) at rtol 1e-11 against the kernel at
     the same rtol: no stick phase in either, the same transitions, the 0.01 rad level within 2e-5 s
     (well-conditioned: ~5e-6 s under a 1e-10 rad change of alpha0) and the landing within 0.02 s
-    (sensitive by the dynamics: ~3e-3 s under that change)."""
+    (sensitive by the dynamics: ~3e-3 s under that change). Both at slave_tol 0: the transitions
+    close to the landing are as sensitive as its time (at the default slave_tol 3e-3 the kernel
+    counts 303 or 304 by a 1-ulp change of atol), and the comparison is of the contact rules."""
     from conftest import peer_run
 
     cfg = _without_k2()
-    cfg["solver"] = {"rtol": 1e-11, "atol": 1e-13}
+    cfg["solver"] = {"rtol": 1e-11, "atol": 1e-11 * 1e-2, "slave_tol": 0.0}
     s = sweep.simulate(cfg).summary
     peer, chi = peer_run(cfg, 1e-11)
     print("peer", peer["outcome"], peer["t_end"] * chi, peer["n_transitions"], peer["n_stick"])
