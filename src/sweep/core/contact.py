@@ -524,14 +524,14 @@ def try_slave(t, y, sys):
     > 0 that is decided at the floor's, AT_FLOOR), else -1."""
     p, cs, wk = sys.p, sys.cs, sys.wk
     u = math.hypot(y[Y_U1], y[Y_U2])
-    eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
-    floor_speed = SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]
     # the hand-over at the floor's speed (a slide refused above it) takes the slip whatever the
     # slaved direction's error there
     at_floor = cs[CS_SLAVE_OFF] == AT_FLOOR
     root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, sys)
     if root == JAMMED:
-        if p[P_SLAVE] > 0.0 and u > floor_speed and not at_floor:
+        # (the normal force at the state, in scratch rows: attracting_direction's are left as they are)
+        eval_rhs(t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE])
+        if p[P_SLAVE] > 0.0 and not at_floor and u > SLAVE_FLOOR * p[P_MUD] * wk[W_AUXSLOPE, X_PHI]:
             # decided where the direction's relaxation is as fast as at slave_tol 0: at the floor
             cs[CS_SLAVE_OFF] = AT_FLOOR
             return -1
