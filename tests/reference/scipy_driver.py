@@ -496,9 +496,10 @@ class Disk:
         xa, ca, x_prev, c_prev = nu, abs(c0), nu, math.inf
         for j in range(1, 129):
             xb = nu + j * step
-            crossed = passed(xb)
+            c_b = self.cross_dot(xb, u, t, y, c)[0]
+            crossed = self.no_solution(xb, u, t, y, c) or (c_b > 0.0) != (c0 > 0.0)   # passed(xb)
             lo, hi = xa, xb
-            cb = abs(self.cross_dot(xb, u, t, y, c)[0]) if not crossed else 0.0
+            cb = abs(c_b)
             if not crossed and ca < c_prev and ca <= cb:
                 # |cross| dips at xa: a root pair narrower than a step may hide between its neighbours
                 from scipy.optimize import minimize_scalar
