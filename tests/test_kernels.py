@@ -10,6 +10,9 @@ import pytest
 
 from sweep import outcomes as oc
 from sweep.core import constants as CN
+from sweep.core import event_dispatch as ED
+from sweep.core import event_ids as ID
+from sweep.core import event_rules as ER
 from sweep.core import events as EV
 from sweep.core import contact as C
 from sweep.core import dop853 as D
@@ -42,6 +45,12 @@ def _sys(p, cs, n, wk, ist):
 
 def _work():
     return np.zeros((L.N_WORK, L.N_WCOLS)), np.zeros(L.N_ISTATS, np.int64)
+
+
+def _ev_sys(p, cs):
+    """The system an event function reads (its parameters and contact state), with fresh buffers."""
+    wk, ist = _work()
+    return _sys(p, cs, M.N_CORE, wk, ist)
 
 
 def _group(p, cs, wk, F, trk=None, y=None):
@@ -382,7 +391,7 @@ def _dense_step(p, y, cs, h, n=M.N_CORE, t0=0.0, y_end=None):
 def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
     p, y, cs = setup
     n, h = M.N_CORE, 0.3
-    k = EV.EV_SIGN1        # g = sigma_1 w1 = 0.05 > 0; w1 rises through 0 within the step
+    k = ID.EV_SIGN1        # g = sigma_1 w1 = 0.05 > 0; w1 rises through 0 within the step
     y = y.copy()
     y[M.Y_W1] = -0.05
     cs = cs.copy()
@@ -411,7 +420,7 @@ def test_locate_closes_a_force_event_bracket_superlinearly(setup):
     y[M.Y_W1] = -0.2      # |F|/Phi rises from 0.393 to 0.413 over the step
     p = p.copy()
     p[M.P_MUS] = 0.403
-    k = EV.EV_CONE
+    k = ID.EV_CONE
     F, wk, ist = _dense_step(p, y, cs, h)
     span = L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist))
     g0 = R.event_value_at(k, 0.0, span, math.nan)
@@ -722,28 +731,28 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
     aux = np.zeros(M.N_AUX)
     C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), f, aux)
     g = np.zeros(L.N_WCOLS)
-    C.event_values(0.0, y, aux, p, cs, math.nan, g)
+    ED.event_values(0.0, y, aux, _ev_sys(p, cs), math.nan, g)
     rates = np.zeros(L.N_WCOLS)
     R.event_rates(0.0, y, f, g, rates, math.nan, _sys(p, cs, n, wk, ist))
     for k in range(3):
         exact = cs[L.CS_SIG + k] * R.sign_rate(k, y, f)
-        assert rates[EV.EV_SIGN1 + k] == pytest.approx(exact, rel=1e-6, abs=1e-7)
-    assert rates[EV.EV_SIDE] == pytest.approx(cs[L.CS_SIDE] * y[M.Y_W1], rel=1e-6, abs=1e-7)
+        assert rates[ID.EV_SIGN1 + k] == pytest.approx(exact, rel=1e-6, abs=1e-7)
+    assert rates[ID.EV_SIDE] == pytest.approx(cs[L.CS_SIDE] * y[M.Y_W1], rel=1e-6, abs=1e-7)
 
     def g_at(eps):
         ys = y.copy()
         ys[:n] += eps * f[:n]
         dy, ax, gg = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
         C.eval_rhs(eps, ys, _sys(p, cs, n, wk, ist), dy, ax)
-        C.event_values(0.0, ys, ax, p, cs, math.nan, gg)
+        ED.event_values(0.0, ys, ax, _ev_sys(p, cs), math.nan, gg)
         return gg
 
     g_plus, g_minus = g_at(1e-5), g_at(-1e-5)
-    for k in (EV.EV_CONE, EV.EV_CONTACT, EV.EV_FACE):
+    for k in (ID.EV_CONE, ID.EV_CONTACT, ID.EV_FACE):
         assert math.isfinite(g[k])
         central = (g_plus[k] - g_minus[k]) / 2e-5
         assert rates[k] == pytest.approx(central, rel=1e-6, abs=1e-7), k
-    for k in range(EV.N_DYN_EVENTS):
+    for k in range(ID.N_DYN_EVENTS):
         if g[k] == math.inf:
             assert rates[k] == 0.0      # inactive in this mode: no slope
 
@@ -776,20 +785,20 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
         dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
         C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
         g_true = np.zeros(L.N_WCOLS)
-        C.event_values(0.0, y, aux, p, cs, level, g_true)
-        for k in range(EV.N_EVENTS):
-            if C.reads_forces(k) or g_true[k] == math.inf:
+        ED.event_values(0.0, y, aux, _ev_sys(p, cs), level, g_true)
+        for k in range(ID.N_EVENTS):
+            if R.reads_forces(k) or g_true[k] == math.inf:
                 continue
             checked.add(k)
-            assert C.state_event_value(k, 0.0, y, p, cs, level) == g_true[k], k
+            assert ED.state_event_value(k, 0.0, y, _ev_sys(p, cs), level) == g_true[k], k
             # on a dense output whose every coefficient is 0, the value at any t is y itself
             rhs_before = ist[L.I_RHS]
             F = np.zeros((14, M.N_FULL))
             span = L.Span(F, 0, y, 0.0, 1.0, _sys(p, cs, M.N_CORE, wk, ist))
             assert R.event_value_at(k, 0.3, span, level) == g_true[k]
             assert ist[L.I_RHS] == rhs_before
-    expected = {EV.EV_SIDE, EV.EV_FACE, EV.EV_LEVEL} | (
-        {EV.EV_SIGN1, EV.EV_SIGN2, EV.EV_SIGN3, EV.EV_SPIN1, EV.EV_SPIN2, EV.EV_SPIN3} if mode == CN.ROLL
+    expected = {ID.EV_SIDE, ID.EV_FACE, ID.EV_LEVEL} | (
+        {ID.EV_SIGN1, ID.EV_SIGN2, ID.EV_SIGN3, ID.EV_SPIN1, ID.EV_SPIN2, ID.EV_SPIN3} if mode == CN.ROLL
         else set())
     assert expected <= checked
 
@@ -807,22 +816,22 @@ def test_the_event_ids_are_the_rows_of_one_table():
     component exactly for the moment events, a dip rule exactly for the events of the dynamics; the
     dynamic events first, the level's event right after them (integrate.carry_step_end and
     first_event rely on it), the update-only ids last."""
-    ids = {v: k for k, v in vars(EV).items() if k.startswith("EV_")}
-    assert sorted(ids) == list(range(EV.N_EVENT_IDS)) == list(range(EV.EVENTS.shape[0]))
-    assert EV.N_DYN_EVENTS == EV.EV_LEVEL < EV.N_EVENTS == EV.EV_LEVEL + 1 <= EV.EV_AGAINST1
+    ids = {v: k for k, v in vars(ID).items() if k.startswith("EV_")}
+    assert sorted(ids) == list(range(ID.N_EVENT_IDS)) == list(range(ID.EVENTS.shape[0]))
+    assert ID.N_DYN_EVENTS == ID.EV_LEVEL < ID.N_EVENTS == ID.EV_LEVEL + 1 <= ID.EV_AGAINST1
     classes = {EV.C_MOMENT, EV.C_SLIP, EV.C_CONTACT_LOST, EV.C_FACE, EV.C_SIDE, EV.C_LEVEL}
-    for k in range(EV.N_EVENT_IDS):
-        cls = EV.EVENTS[k, EV.E_CLASS]
+    for k in range(ID.N_EVENT_IDS):
+        cls = ID.EVENTS[k, EV.E_CLASS]
         assert cls in classes, ids[k]
-        assert (EV.EVENTS[k, EV.E_COMPONENT] in (0, 1, 2)) == (cls == EV.C_MOMENT), ids[k]
-    assert [k for k in range(EV.N_EVENT_IDS) if EV.EVENTS[k, EV.E_CLASS] == EV.C_LEVEL] == [EV.EV_LEVEL]
+        assert (ID.EVENTS[k, EV.E_COMPONENT] in (0, 1, 2)) == (cls == EV.C_MOMENT), ids[k]
+    assert [k for k in range(ID.N_EVENT_IDS) if ID.EVENTS[k, EV.E_CLASS] == EV.C_LEVEL] == [ID.EV_LEVEL]
     # every event of the dynamics has a way to bracket a dip inside a step (integrate.dip_bracket
     # raises for any other) and a restart rule; the others are never scanned
-    for k in range(EV.N_EVENT_IDS):
-        dip = EV.EVENTS[k, EV.E_DIP]
-        assert (dip in (EV.D_RATES, EV.D_SIGN, EV.D_SIDE, EV.D_SLIP)) == (k < EV.N_DYN_EVENTS), ids[k]
-        assert EV.EVENTS[k, EV.E_RESTART] in (EV.R_NONE, EV.R_SURFACE, EV.R_SPIN), ids[k]
-        assert dip != EV.D_SIGN or EV.EVENTS[k, EV.E_COMPONENT] in (0, 1, 2), ids[k]
+    for k in range(ID.N_EVENT_IDS):
+        dip = ID.EVENTS[k, EV.E_DIP]
+        assert (dip in (EV.D_RATES, EV.D_SIGN, EV.D_SIDE, EV.D_SLIP)) == (k < ID.N_DYN_EVENTS), ids[k]
+        assert ID.EVENTS[k, EV.E_RESTART] in (EV.R_NONE, EV.R_SURFACE, EV.R_SPIN), ids[k]
+        assert dip != EV.D_SIGN or ID.EVENTS[k, EV.E_COMPONENT] in (0, 1, 2), ids[k]
 
 
 def test_every_event_has_its_value_and_its_update(setup):
@@ -848,19 +857,19 @@ def test_every_event_has_its_value_and_its_update(setup):
         dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
         C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
         g = np.zeros(L.N_WCOLS)
-        C.event_values(0.0, y, aux, p, cs, 0.5, g)
-        active |= {k for k in range(EV.N_EVENTS) if g[k] != math.inf}
-        for k in range(EV.N_EVENTS):
-            if not C.reads_forces(k) and g[k] != math.inf:
-                assert C.state_event_value(k, 0.0, y, p, cs, 0.5) == g[k], k
-    assert active == set(range(EV.N_EVENTS))
+        ED.event_values(0.0, y, aux, _ev_sys(p, cs), 0.5, g)
+        active |= {k for k in range(ID.N_EVENTS) if g[k] != math.inf}
+        for k in range(ID.N_EVENTS):
+            if not R.reads_forces(k) and g[k] != math.inf:
+                assert ED.state_event_value(k, 0.0, y, _ev_sys(p, cs), 0.5) == g[k], k
+    assert active == set(range(ID.N_EVENTS))
     cs = np.zeros(L.N_CS)
     cs[L.CS_SIDE] = 1.0
-    for k in range(EV.N_EVENT_IDS):
-        if not C.reads_forces(k) and EV.EVENTS[k, EV.E_DIP] == EV.D_NONE and k != EV.EV_LEVEL:
+    for k in range(ID.N_EVENT_IDS):
+        if not R.reads_forces(k) and ID.EVENTS[k, EV.E_DIP] == EV.D_NONE and k != ID.EV_LEVEL:
             with pytest.raises(ValueError, match="no value of the state alone"):
-                C.state_event_value(k, 0.0, y, p, cs, 0.5)      # EV_AGAINST*: not event functions
-    for k in range(EV.N_EVENT_IDS):
+                ED.state_event_value(k, 0.0, y, _ev_sys(p, cs), 0.5)      # EV_AGAINST*: not event functions
+    for k in range(ID.N_EVENT_IDS):
         for mode in (CN.ROLL, CN.SLIDE, CN.SLAVED):
             cs = np.zeros(L.N_CS)
             cs[L.CS_MODE] = mode
@@ -869,11 +878,11 @@ def test_every_event_has_its_value_and_its_update(setup):
             wk, ist = _work()
             yk = y.copy()
             sys = _sys(p, cs, M.N_CORE, wk, ist)
-            if k == EV.EV_LEVEL:
+            if k == ID.EV_LEVEL:
                 with pytest.raises(ValueError, match="no discrete update"):
-                    C.apply_event(k, 0.0, yk, sys, np.zeros(L.N_FSTATS))
+                    ED.apply_event(k, 0.0, yk, sys, np.zeros(L.N_FSTATS))
             else:
-                code = C.apply_event(k, 0.0, yk, sys, np.zeros(L.N_FSTATS))
+                code = ED.apply_event(k, 0.0, yk, sys, np.zeros(L.N_FSTATS))
                 assert code == -1 or code in oc.NAMES, (k, mode, code)
 
 
@@ -900,10 +909,10 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
         dy, aux, g = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
         C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
         assert aux[M.X_OK] == 1.0
-        C.event_values(0.0, y, aux, p, cs, math.nan, g)
-        values.append(g[EV.EV_SLIP_STOP])
+        ED.event_values(0.0, y, aux, _ev_sys(p, cs), math.nan, g)
+        values.append(g[ID.EV_SLIP_STOP])
         # the stored direction would have given another value
-        assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[EV.EV_SLIP_STOP]) > 1e-3 * u
+        assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[ID.EV_SLIP_STOP]) > 1e-3 * u
     sl[L.CS_NU] = root
     nu, lag, _, ok, _ = C.slaved_slip(root, 0.0, y, _sys(p, sl, n, wk, ist), np.zeros(M.N_FULL), np.zeros(M.N_AUX))
     assert ok == 1.0
@@ -939,9 +948,9 @@ def test_an_update_that_leaves_a_slaved_slip_past_its_exit_hands_it_to_slide(set
         cs = sl.copy()
         C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
         g = np.zeros(L.N_WCOLS)
-        C.event_values(0.0, y, aux, p, cs, math.nan, g)
-        assert (g[EV.EV_SLIP_FAST] <= 0.0) == (mode == CN.SLIDE), (factor, g[EV.EV_SLIP_FAST])
-        code = C.settle_event(0.0, y, _sys(p, cs, n, wk, ist), M.moment_axes_rates(y), -1)
+        ED.event_values(0.0, y, aux, _ev_sys(p, cs), math.nan, g)
+        assert (g[ID.EV_SLIP_FAST] <= 0.0) == (mode == CN.SLIDE), (factor, g[ID.EV_SLIP_FAST])
+        code = ER.settle_event(0.0, y, _sys(p, cs, n, wk, ist), M.moment_axes_rates(y), -1)
         assert code == -1
         assert cs[L.CS_MODE] == mode, factor
         assert cs[L.CS_SLAVE_OFF] == CN.HANDOVER_ARMED

@@ -235,7 +235,7 @@ FIELDS: list[Field] = [
                                 lo_open=True), scene=False,
           axis=Axis("omega0", "rad s-1", "initial spin rate about -e3", "initial spin ω0 (rad/s)", outer=False,
                     sets="initial.omega", to_scene=_spin_about_minus_e3)),
-    # levels below the face inclination (core.contact.BETA_FACE = 1e-6 rad) are crossed when the
+    # levels below the face inclination (core.event_rules.BETA_FACE = 1e-6 rad) are crossed when the
     # disk lies flat; 1e-7 keeps their energies normal numbers
     Field("stop.levels", Range(1e-7, HALF_PI, "inclination level in rad at which times and frequencies are recorded",
                                hi_open=True, hi_text="pi/2"), [1.0e-1, 1.0e-2, 1.0e-3, 1.0e-4], kind="levels",

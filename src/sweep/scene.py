@@ -28,7 +28,7 @@ import numpy as np
 from . import fields, yamlio
 from .core import model
 from .core.constants import ROLL, SLIDE
-from .core.contact import BETA_FACE
+from .core.event_rules import BETA_FACE
 from .errors import ConfigError, raise_all
 
 # every field's default, by section (the registry of inputs, sweep.fields: ranges and reasons there)
@@ -215,7 +215,7 @@ def _validate(raw) -> Scene:
 
 def flat_start_error(alpha: float) -> ConfigError | None:
     """The error for a start that lies flat already: pi/2 - |alpha| at or below the face
-    inclination BETA_FACE (1e-6 rad), where the face touches the table (core.contact)."""
+    inclination BETA_FACE (1e-6 rad), where the face touches the table (core.event_rules)."""
     beta = 0.5 * math.pi - abs(alpha)
     if beta > BETA_FACE:
         return None

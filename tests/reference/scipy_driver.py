@@ -93,6 +93,7 @@ from numba.core.registry import CPUDispatcher
 
 from sweep import outcomes
 from sweep.core import contact as _contact
+from sweep.core import event_rules as _event_rules
 from sweep.core import impulse as _impulse
 from sweep.core import model
 from sweep.core.model import (N_AUX, N_CORE, P_A, P_C, P_H, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_SLAVE, P_UTOL, P_WTOL, X_F1, X_F2,
@@ -103,8 +104,8 @@ from sweep.simulate import initial_state, level_energies
 __all__ = ["run_scipy", "numba_backend", "numpy_backend", "Backend"]
 
 # physical constants of the rules (documented in docs/model.md)
-BETA_FACE = _contact.BETA_FACE
-ZENO_DTAU = _contact.ZENO_DTAU
+BETA_FACE = _event_rules.BETA_FACE
+ZENO_DTAU = _event_rules.ZENO_DTAU
 SLAVE_EXIT = _contact.SLAVE_EXIT
 SLAVE_FLOOR = _contact.SLAVE_FLOOR
 FLOOR_EXIT = _contact.FLOOR_EXIT

@@ -29,25 +29,16 @@ from __future__ import annotations
 import math
 
 from .. import outcomes as oc
-from .events import (C_CONTACT_LOST, C_FACE, C_MOMENT, C_SIDE, C_SLIP, E_CLASS, E_COMPONENT, E_FORCES, EV_AGAINST1, EV_AGAINST3, EV_CONE, EV_CONTACT,
-                     EV_FACE, EV_LEVEL, EV_SIDE, EV_SIGN1, EV_SIGN3, EV_SLAVE, EV_SLAVE_LOST, EV_SLIP_FAST, EV_SLIP_SLOW,
-                     EV_SLIP_STOP, EV_SPIN1, EV_SPIN3, EV_UNSTICK1, EV_UNSTICK3, EVENTS, N_EVENTS)
 from .constants import AT_FLOOR, BELOW, EPS, HANDOVER_ARMED, HANDOVER_OFF, ROLL, SLAVED, SLIDE, SLOW_OFF
-from .impulse import project_velocity, stop_axis_rate
+from .impulse import project_velocity
 from .jit import kernel
-from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, W_AUXTMP,
-                     W_AUXFLOW, W_AUXSLOPE, W_DYFLOW, W_DYSLOPE, W_DYTMP, W_GBUF, W_YFLOW, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
-                     System)
-from .model import (N_PARAMS, P_A, P_SLAVE, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_LAG, X_NU, X_SLAVE_ERR, Y_ALPHA,
-                    Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, Contact, energy_from_trig, moment_axes_rates, rhs, sign_rate)
+from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_SLAVE_OFF, CS_STUCK, I_RHS, I_STICK, System,
+                     W_AUXFLOW, W_AUXSLOPE, W_AUXTMP, W_DYFLOW, W_DYSLOPE, W_DYTMP, W_PFRICTION, W_SCRATCH, W_YFLOW,
+                     W_YSLIP)
+from .model import (Contact, N_PARAMS, P_A, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_SLAVE, P_UTOL, P_WTOL, X_COSA, X_DCROSS,
+                    X_F1, X_F2, X_G1, X_LAG, X_NU, X_OK, X_PHI, X_SIG1, X_SINA, X_SLAVE_ERR, Y_ALPHA, Y_DSLIDE, Y_U1,
+                    Y_U2, Y_W3, energy_from_trig, moment_axes_rates, rhs, sign_rate)
 
-# Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
-# is then 1e-6 R above the table (38 nm for the paper's disk), below any real table's flatness. A disk
-# that slaps down reaches it with a normal force ~1e5 m g (tests/test_stress.py 'tiny spin'); closer
-# to flat the rigid single-contact model has no physical content left.
-BETA_FACE = 1e-6
-# Two rim-edge impacts closer than ZENO_DTAU (tau) end the scene as line contact.
-ZENO_DTAU = 1e-6
 # The slip direction is slaved at least where its relaxation time |u|/(mu_d Phi) is below SLAVE_FLOOR
 # (units of chi), whatever slave_tol: near flat the motion's rate 1 + |theta'| grows without bound
 # and slave_tol / rate alone left creeping slips to be integrated down to slip_tol, ~1/|u| steps
@@ -820,36 +811,6 @@ def spin_rest_time(i, t, y, sys):
 
 
 @kernel
-def slip_fast_reached(t, y, sys):
-    """Is the slip at or past EV_SLIP_FAST's surface (a slaved slip at SLAVE_EXIT times the slaving
-    speed; a slide whose hand-over is off, fast again)? Its event function at the state, with the
-    forces that the decisions read (decision_rhs). An impulse of a discrete update (the stop at
-    spin_tol moves the slip by O(spin_tol)) can carry the slip there, where the event, g going
-    from > 0 to <= 0, can no longer happen (docs/model.md, 'Restarts on a surface')."""
-    p, cs, wk = sys.p, sys.cs, sys.wk
-    if cs[CS_MODE] == ROLL:
-        return False
-    decision_rhs(-1, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
-    event_values(t, y, wk[W_AUXTMP], p, cs, math.nan, wk[W_GBUF])
-    return wk[W_GBUF, EV_SLIP_FAST] <= 0.0
-
-
-@kernel
-def holding_sigma(i, t, y, sys, dy, aux):
-    """needed_sigma of component i at y in the mode the slip has there after the update: a slaved
-    slip at or past its exit (slip_fast_reached) slides (settle_event hands it over), and the
-    friction along its own direction, not the quasi-static one, is what the moment must hold
-    against. The right-hand side goes to dy, aux; cs is left as it was."""
-    cs = sys.cs
-    mode = cs[CS_MODE]
-    if mode == SLAVED and slip_fast_reached(t, y, sys):
-        cs[CS_MODE] = SLIDE
-    need = needed_sigma(i, t, y, sys, dy, aux)
-    cs[CS_MODE] = mode
-    return need
-
-
-@kernel
 def spin_sticks(i, t, y, sys):
     """Would free component i, slowing through |omega.a_i| = spin_tol at t, stick: does its motion
     reach rest (spin_rest_time: s later), and can the moment hold it there (|sigma needed| < 1 at
@@ -917,31 +878,6 @@ def cubic_reaches_zero(g, g1, g2, g3):
     """Does c(s) = g + g1 s + g2 s^2/2 + g3 s^3/6, with g > 0 and g1 < 0, reach 0 at some s > 0 before
     its first local minimum there (cubic_rest_time)?"""
     return not math.isnan(cubic_rest_time(g, g1, g2, g3))
-
-
-@kernel
-def stick_at_spin_tol(i, t, y, sys):
-    """A free component has slowed to |omega.a_i| = spin_tol: if it goes on to rest and the moment
-    can hold it there (spin_sticks), it sticks, and the rate left is stopped by an impulsive contact
-    moment (impulse.stop_axis_rate, its energy booked to k_i), where the moment must hold it as well.
-    Else it stays free with its sign (it will cross 0, where the Filippov rule decides, or speed up
-    again). Returns whether it stuck."""
-    p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
-    if not spin_sticks(i, t, y, sys):
-        return False
-    w1, w2, w3, u1, u2 = y[Y_W1], y[Y_W2], y[Y_W3], y[Y_U1], y[Y_U2]
-    cs[CS_STUCK + i] = 1.0
-    loss = stop_axis_rate(y, p, cs, i, wk[W_SCRATCH:W_SCRATCH + 7])
-    # the stop changes the velocity (and, sliding, the slip): the moment must hold the component at
-    # the state it leaves too, where every later decision (settle_signs) reads it, in the mode it
-    # reads it in (a slaved slip that the stop carries past its exit slides); else no stick
-    if abs(holding_sigma(i, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])) < 1.0:
-        y[Y_DK1 + i] += loss
-        istats[I_STICK] += 1
-        return True
-    y[Y_W1], y[Y_W2], y[Y_W3], y[Y_U1], y[Y_U2] = w1, w2, w3, u1, u2
-    cs[CS_STUCK + i] = 0.0
-    return False
 
 
 @kernel
@@ -1025,92 +961,6 @@ def consistent_signs(t, y, sys):
 
 
 @kernel
-def reads_forces(k):
-    """Does event k's function read the right-hand side's aux (events.EVENTS[k, E_FORCES])? The
-    others are functions of the state alone: on a step's dense output they cost no right-hand-side
-    evaluation (state_event_value)."""
-    return EVENTS[k, E_FORCES] != 0
-
-
-@kernel
-def state_event_value(k, t, y, p, cs, lev):
-    """g_k of an active event that does not read the forces (not reads_forces(k)); raises for any
-    other id."""
-    if EV_SIGN1 <= k <= EV_SIGN3 or EV_SPIN1 <= k <= EV_SPIN3:
-        i = EVENTS[k, E_COMPONENT]
-        r1, r2, r3 = moment_axes_rates(y)
-        g = cs[CS_SIG + i] * (r1 if i == 0 else (r2 if i == 1 else r3))
-        return g if k <= EV_SIGN3 else g - p[P_WTOL]
-    if k == EV_SIDE:
-        return cs[CS_SIDE] * y[Y_ALPHA]
-    if k == EV_FACE:
-        return (0.5 * math.pi - abs(y[Y_ALPHA])) - BETA_FACE
-    if k == EV_LEVEL:
-        return mode_energy(y, p, cs) - lev
-    raise ValueError("state_event_value: an event id with no value of the state alone")
-
-
-@kernel
-def event_values(t, y, aux, p, cs, lev, g):
-    """g[k] for every event k (inf where not active). `aux` must belong to `y`."""
-    for k in range(N_EVENTS):
-        g[k] = math.inf
-    k = (p[P_K1], p[P_K2], p[P_K3])
-    for i in range(3):
-        if k[i] > 0.0:
-            if cs[CS_STUCK + i] == 1.0:
-                g[EV_UNSTICK1 + i] = 1.0 - abs(aux[X_SIG1 + i])
-            else:
-                # omega.a_i from the RHS: the same arithmetic as state_event_value, without a sine
-                g[EV_SIGN1 + i] = cs[CS_SIG + i] * aux[X_G1 + i]
-                if p[P_WTOL] > 0.0:
-                    g[EV_SPIN1 + i] = g[EV_SIGN1 + i] - p[P_WTOL]
-    mode = cs[CS_MODE]
-    if mode == ROLL:
-        g[EV_CONE] = p[P_MUS] * aux[X_PHI] - math.hypot(aux[X_F1], aux[X_F2])
-    elif mode == SLIDE:
-        if cs[CS_SLAVE_OFF] != SLOW_OFF:
-            g[EV_SLIP_SLOW] = math.hypot(y[Y_U1], y[Y_U2]) - slip_floor(t, aux, p, cs)
-        if cs[CS_SLAVE_OFF] == HANDOVER_ARMED:
-            g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - slave_speed(y, aux, p)
-        elif cs[CS_SLAVE_OFF] == AT_FLOOR:
-            # refused for its error at the slaving speed: handed over at the floor's, or re-armed
-            # where fast again
-            g[EV_SLAVE] = math.hypot(y[Y_U1], y[Y_U2]) - max(p[P_UTOL], SLAVE_FLOOR * p[P_MUD] * aux[X_PHI])
-            g[EV_SLIP_FAST] = exit_speed(y, aux, p) - math.hypot(y[Y_U1], y[Y_U2])
-        else:
-            # the hand-over is off (no quasi-static direction to settle on, or the slip passed it
-            # by) until the slip is fast again: SLAVE_EXIT times the slaving speed, as a slaved
-            # slip's exit; a slip that reverses and later decays is handed over then
-            g[EV_SLIP_FAST] = exit_speed(y, aux, p) - math.hypot(y[Y_U1], y[Y_U2])
-    else:
-        # the slip along the slaved direction at this state (the RHS's): reaches 0 where the slip ends
-        g[EV_SLIP_STOP] = y[Y_U1] * math.cos(aux[X_NU] + aux[X_LAG]) + y[Y_U2] * math.sin(aux[X_NU] + aux[X_LAG])
-        g[EV_SLIP_FAST] = slaved_margin(y, aux, p)
-        g[EV_SLAVE_LOST] = -aux[X_DCROSS]
-    g[EV_CONTACT] = aux[X_PHI]
-    g[EV_SIDE] = state_event_value(EV_SIDE, t, y, p, cs, lev)
-    g[EV_FACE] = state_event_value(EV_FACE, t, y, p, cs, lev)
-    if not math.isnan(lev):
-        g[EV_LEVEL] = mode_energy_at(y, aux, p, cs) - lev   # state_event_value's, from aux
-
-
-@kernel
-def slaved_margin(y, aux, p):
-    """EV_SLIP_FAST of a slaved slip: > 0 while the slip is below its exit speed (exit_speed) and
-    the slaved direction's error (aux[X_SLAVE_ERR]) below SLAVE_EXIT times slave_tol, or the slip
-    below FLOOR_EXIT times the floor's speed SLAVE_FLOOR mu_d Phi; each as a fraction of its
-    bound."""
-    u = math.hypot(y[Y_U1], y[Y_U2])
-    margin = 1.0 - u / exit_speed(y, aux, p)
-    if p[P_SLAVE] > 0.0:
-        # (within FLOOR_EXIT times the floor's speed the slip stays slaved whatever the error)
-        floor = 1.0 - u / (FLOOR_EXIT * SLAVE_FLOOR * p[P_MUD] * max(aux[X_PHI], 0.0))
-        margin = min(margin, max(floor, 1.0 - aux[X_SLAVE_ERR] / (SLAVE_EXIT * p[P_SLAVE])))
-    return margin
-
-
-@kernel
 def end_slip(y, sys):
     """SLIDE -> ROLL: a plastic contact impulse removes the slip (its energy goes to sliding); for
     a slip that ends at the round-off floor or spirals in (slow_slide)."""
@@ -1120,170 +970,13 @@ def end_slip(y, sys):
     cs[CS_MODE] = ROLL
 
 
-@kernel
-def moment_event(k, t, y, sys):
-    """The update of one dry-friction moment component at its event k: a sign flip or a stick
-    (EV_SIGN*), a stick where neither sign holds (EV_AGAINST*), a stick at spin_tol (EV_SPIN*) or a
-    release (EV_UNSTICK*). Returns (own, held): own, the component this event put on its surface
-    (settle_signs leaves it; -1: none); held, True where a stop at spin_tol holds the stuck
-    components, so that the rates after it are those that release_moved compares with."""
-    cs, wk, istats = sys.cs, sys.wk, sys.istats
-    i = EVENTS[k, E_COMPONENT]
-    if EV_SIGN1 <= k <= EV_SIGN3:
-        stick_or_flip(i, t, y, sys)
-        return -1, False
-    if EV_AGAINST1 <= k <= EV_AGAINST3:
-        # neither sign holds (the one just set fails at once, the other opposes the motion):
-        # the Filippov solution stays on omega.a_i = 0
-        sig_failed = cs[CS_SIG + i]
-        stick_or_flip(i, t, y, sys)
-        if cs[CS_STUCK + i] == 0.0 and cs[CS_SIG + i] == sig_failed:
-            cs[CS_STUCK + i] = 1.0
-            istats[I_STICK] += 1
-            return i, False
-        return -1, False
-    if EV_SPIN1 <= k <= EV_SPIN3:
-        return -1, stick_at_spin_tol(i, t, y, sys)
-    if EV_UNSTICK1 <= k <= EV_UNSTICK3:
-        eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
-        cs[CS_SIG + i] = 1.0 if wk[W_AUXTMP, X_SIG1 + i] > 0.0 else -1.0
-        cs[CS_STUCK + i] = 0.0
-        return i, False
-    raise ValueError("moment_event: an event id of class C_MOMENT with no update")
 
 
-@kernel
-def slip_event(k, t, y, sys):
-    """The update of the contact's slip at its event k (EV_CONE .. EV_SLAVE, EV_SLAVE_LOST): the
-    onset of a slip, its fate below slip_tol or its end along the slaved direction, the hand-over to and from
-    the slaved direction. Returns the outcome code that ends the scene, or -1."""
-    p, cs, wk = sys.p, sys.cs, sys.wk
-    if k == EV_CONE:
-        start_slip(t, y, sys)
-        cs[CS_SLAVE_OFF] = HANDOVER_ARMED
-    elif k == EV_SLIP_SLOW:
-        return slow_slide(t, y, sys)
-    elif k == EV_SLIP_STOP:
-        # the slip speed along the slaved direction is 0; what the integration left of the slip
-        # (its error) is removed by the plastic impulse, so the energy books stay exact
-        side = int(cs[CS_SIDE])
-        y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
-        cs[CS_MODE] = ROLL
-    elif k == EV_SLIP_FAST:
-        cs[CS_MODE] = SLIDE
-        cs[CS_SLAVE_OFF] = HANDOVER_ARMED
-    elif k == EV_SLAVE:
-        return try_slave(t, y, sys)
-    elif k == EV_SLAVE_LOST:
-        # the quasi-static direction folds away: the slip direction follows its own dynamics
-        cs[CS_MODE] = SLIDE
-        cs[CS_SLAVE_OFF] = HANDOVER_OFF
-    else:
-        raise ValueError("slip_event: an event id of class C_SLIP with no update")
-    return -1
 
 
-@kernel
-def apply_event(k, t, y, sys, fstats):
-    """Discrete update at a located event k (state y at the event, changed in place): the event's
-    own update (moment_event, slip_event, side_change), then what every update owes the state
-    (settle_event). The caller counts the roll<->slip transition it makes (count_transition); stick
-    phases are counted where a component sticks.
-
-    Returns the outcome code that ends the scene, or -1 to continue. The caller re-evaluates the
-    right-hand side and the event functions afterwards. Raises for an event with no discrete update
-    (the level's, C_LEVEL) or of a class it does not know.
-    """
-    g_before = moment_axes_rates(y)
-    own = -1   # the component this event puts on its surface (settle_signs)
-    cls = EVENTS[k, E_CLASS]
-    if cls == C_MOMENT:
-        own, held = moment_event(k, t, y, sys)
-        if held:
-            g_before = moment_axes_rates(y)   # the stop holds the stuck components: they stay stuck
-    elif cls == C_CONTACT_LOST:
-        return oc.CONTACT_LOST
-    elif cls == C_FACE:
-        return oc.FACE_CONTACT   # the caller records it as a halt
-    elif cls == C_SIDE:
-        return side_change(t, y, sys, fstats)
-    elif cls == C_SLIP:
-        code = slip_event(k, t, y, sys)
-        if code >= 0:
-            return code
-    else:
-        raise ValueError("apply_event: an event class with no discrete update")
-    return settle_event(t, y, sys, g_before, own)
 
 
-@kernel
-def count_transition(rolling, cs, istats):
-    """A roll<->slip transition where the contact rolled before a discrete update (rolling) and
-    slips after it (cs), or the reverse. A slide that ends and, its cone violated, slips again at
-    once within one update never rolled: it has passed through u = 0, and counts as the passage it
-    is, whether its fate was read as an end or as a passage (docs/model.md, 'Where a slip ends')."""
-    if rolling != (cs[CS_MODE] == ROLL):
-        istats[I_TRANS] += 1
 
 
-@kernel
-def settle_event(t, y, sys, g_before, own):
-    """What every discrete update owes the state: a slip that it left at or past EV_SLIP_FAST's
-    surface (a slaved slip at SLAVE_EXIT times the slaving speed, or its direction's error measure
-    at SLAVE_EXIT times slave_tol: slaved_margin) is fast (slip_event: SLIDE, the hand-over
-    re-armed); a slide at or below slip_tol meets its fate (slow_slide); the moment
-    components that the update moved are released (release_moved: g_before, omega.a_i before it)
-    and every sign made consistent (settle_signs, leaving component own); a rolling state left
-    outside the static cone starts to slip. Returns the outcome that ends the scene, else -1."""
-    p, cs, wk = sys.p, sys.cs, sys.wk
-    if slip_fast_reached(t, y, sys):
-        slip_event(EV_SLIP_FAST, t, y, sys)
-    if cs[CS_MODE] == SLIDE and cs[CS_SLAVE_OFF] != SLOW_OFF:
-        eval_rhs(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
-        if math.hypot(y[Y_U1], y[Y_U2]) <= slip_floor(t, wk[W_AUXTMP], p, cs):
-            # the slip reached its floor within the located event's bracket (a stiff slip decays
-            # by orders of magnitude in 1e-11 tau): its own event can no longer happen
-            code = slow_slide(t, y, sys)
-            if code >= 0:
-                return code
-    release_moved(y, p, cs, g_before)
-    settle_signs(t, y, sys, own)
-    # a rolling state must be admissible after every discrete update: a moment sign that flips or
-    # sticks changes the friction that rolling needs, and it may jump outside the static cone
-    if cs[CS_MODE] == ROLL and cone_violated(t, y, sys):
-        start_slip(t, y, sys)
-        # the slip changes the moments the stuck components need
-        # (a component the Filippov rule held is tested again: the slip changed its dynamics)
-        settle_signs(t, y, sys, own if own >= 0 and cs[CS_STUCK + own] == 0.0 else -1)
-    return -1
 
 
-@kernel
-def side_change(t, y, sys, fstats):
-    """alpha = 0: plastic impact of the other rim edge, which releases every held moment component;
-    after it each free sign is that of its omega.a_i, an exact 0 gets the stick test
-    (consistent_signs), and a rolling contact outside the static cone starts to slip. Ends the scene
-    (line contact) when no rotation towards the new side is left, or when two impacts come within
-    ZENO_DTAU (the rocking between the edges has collapsed into a Zeno sequence of impacts)."""
-    p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
-    mode = cs[CS_MODE]
-    side = cs[CS_SIDE]
-    loss = project_velocity(y, p, int(side), mode != ROLL, int(-side), mode != ROLL, wk[W_SCRATCH:W_SCRATCH + 7])
-    fstats[F_DIMPACT] += loss
-    cs[CS_SIDE] = -side
-    istats[I_IMPACTS] += 1
-    y[Y_ALPHA] = 0.0
-    for i in range(3):
-        cs[CS_STUCK + i] = 0.0
-    zeno = t - fstats[F_TIMPACT] < ZENO_DTAU
-    fstats[F_TIMPACT] = t
-    if y[Y_W1] * cs[CS_SIDE] <= 0.0 or zeno:
-        return oc.LINE_CONTACT   # the disk stands on its flat edge
-    if mode != ROLL:
-        code = set_slip(t, y, sys)
-        if code >= 0:
-            return code
-    consistent_signs(t, y, sys)
-    if mode == ROLL and cone_violated(t, y, sys):
-        start_slip(t, y, sys)
-    return -1

@@ -3,7 +3,7 @@
 `run` (numba, no allocation) steps the current contact state, scans the accepted step for events,
 locates the earliest on the dense output, restarts there with the new discrete state (keeping the
 step size) and records what the scene asked for. Every discrete decision is taken in
-contact.apply_event from the state at the located event; the step size, rtol and atol only decide
+event_dispatch.apply_event from the state at the located event; the step size, rtol and atol only decide
 where the steps fall. `integrate` (Python) allocates the buffers and names the outputs.
 """
 from __future__ import annotations
@@ -14,27 +14,35 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
-from .contact import (apply_event, count_transition, confirm_slaved, spin_sticks,
-                      consistent_signs, cone_violated, eval_rhs, event_values, mode_energy, mode_energy_at, reads_forces, set_slip, start_slip)
-from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
-from .events import (C_MOMENT, D_RATES, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, EV_AGAINST1,
-                     EV_LEVEL, EVENTS, N_DYN_EVENTS, R_SPIN, R_SURFACE)
 from .constants import EPS, ROLL, SLAVED
+from .contact import (cone_violated, confirm_slaved, consistent_signs, eval_rhs, mode_energy, mode_energy_at, set_slip,
+                      spin_sticks, start_slip)
 from .controller import accepted_step_factor, step_factor
 from .dop853 import ERR_EXPONENT, N_DENSE, dense_eval, error_norm, initial_step, rk_step
+from .event_dispatch import apply_event, event_values
+from .event_ids import EVENTS, EV_AGAINST1, EV_LEVEL, N_DYN_EVENTS
+from .event_rules import count_transition
+from .events import (C_MOMENT, D_RATES, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, R_SPIN,
+                     R_SURFACE)
+from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .jit import kernel
-from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_E, I_IMPACTS, I_STICK, I_TRANS, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND, F_TIMPACT,
-                     I_EVENTS, I_OUTCOME, I_OVERFLOW, I_PEAKS, I_REJECTED, I_TRAJ, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, L_PENDING, LEVEL_COLS,
-                     N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK, PEAK_COLS, S_ATOL, S_HMAX, W_ESCALE,
-                     S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, SAMPLE_COLS, T_CUT, T_DIMPACT_HALT,
-                     T_DIP_END, T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_T_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING, T_PHI_B, T_RATES_NEW, T_RATES_OLD, TRAJ_COLS, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F,
-                     W_DELTA, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, I_FLAT, Point, Record, RunConsts,
-                     Segment, Span, System, Work)
-from .model import N_AUX, N_CORE, N_FULL, N_PARAMS, N_THETA, P_G, P_H, P_UTOL, energy_increment_trig, energy_rate_trig, X_COSA, X_NU, X_OK, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3
-from .roots import brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, location_tol, sign_slopes, slip_closest_approach, span_state
+from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, F_APPROACH, F_DIMPACT, F_E0, F_EEND, F_HLAST,
+                     F_SLIDETIME, F_TEND, F_THALT, F_THALT_ERR, F_TIMPACT, I_EVENTS, I_FLAT, I_IMPACTS, I_OUTCOME,
+                     I_OVERFLOW, I_PEAKS, I_REJECTED, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK, I_TRAJ,
+                     I_TRANS, LEVEL_COLS, L_PENDING, N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK,
+                     PEAK_COLS, Point, Record, RunConsts, SAMPLE_COLS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS,
+                     S_RTOL, S_TMAX, Segment, Span, System, TRAJ_COLS, T_CUT, T_DEEP_E, T_DIMPACT_HALT, T_DIP_END,
+                     T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING,
+                     T_PHI_B, T_RATES_NEW, T_RATES_OLD, T_T_AFTER, W_AUX, W_AUXBUF, W_AUXNEW, W_DELTA, W_DYBUF,
+                     W_ESCALE, W_F, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, Work)
+from .model import (N_AUX, N_CORE, N_FULL, N_PARAMS, N_THETA, P_G, P_H, P_UTOL, X_COSA, X_NU, X_OK, X_PHI, X_SINA,
+                    Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3,
+                    energy_increment_trig, energy_rate_trig)
+from .roots import (brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, location_tol,
+                    reads_forces, sign_slopes, slip_closest_approach, span_state)
 from .tableau import N_STAGES
-from .tracking import (deep_levels, deep_pending, start_deep_levels, dense_wanted, halt_flat, record_levels, record_sample, record_samples, record_traj,
-                       step_dense, track_frequency)
+from .tracking import (deep_levels, deep_pending, dense_wanted, halt_flat, record_levels, record_sample, record_samples,
+                       record_traj, start_deep_levels, step_dense, track_frequency)
 
 # A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
 # increases, so such a step is an instability the error estimate did not see; it is rejected.
@@ -233,7 +241,7 @@ def surface_bracket(k, span, lev, work):
             k_event = EV_AGAINST1 + i
     elif ta < 0.0:
         # it never leaves: at once (a moment component moving against its new sign means the
-        # un-stick only grazed |sigma| = 1: contact.apply_event sticks it)
+        # un-stick only grazed |sigma| = 1: apply_event sticks it)
         ta, tb = t, t
         if moment:
             k_event = EV_AGAINST1 + i
@@ -505,7 +513,7 @@ def begin(lev, work, rec, sys):
     start_code = start(y, sys)
     eval_rhs(0.0, y, sys, f, aux)
     fstats[F_E0] = mode_energy(y, p, cs)
-    event_values(0.0, y, aux, p, cs, lev, wk[W_GOLD])
+    event_values(0.0, y, aux, sys, lev, wk[W_GOLD])
     outcome = -1
     if aux[X_PHI] <= 0.0:
         outcome = oc.CONTACT_LOST
@@ -621,7 +629,7 @@ def advance(seg, ended, n, work, fstats):
 
 @kernel
 def restart_after_event(k, t, y, lev, sys, fstats):
-    """The discrete update of event k at t (contact.apply_event) of the system sys (layout.System);
+    """The discrete update of event k at t (event_dispatch.apply_event) of the system sys (layout.System);
     then the new contact state's slaved direction, right-hand side (wk[W_F], wk[W_AUX]) and event
     values (wk[W_GOLD]; lev: the next level's energy); the roll<->slip transition the update made is
     counted. Returns the outcome that ends the scene here (FACE_CONTACT: the disk lies flat), else -1."""
@@ -646,7 +654,7 @@ def restart_after_event(k, t, y, lev, sys, fstats):
         # the update (an impact) leaves the disk with no compressive normal force: it leaves the
         # table here (its own event, Phi falling through 0, cannot happen)
         return oc.CONTACT_LOST
-    event_values(t, y, aux, p, cs, lev, wk[W_GOLD])
+    event_values(t, y, aux, sys, lev, wk[W_GOLD])
     return -1
 
 
@@ -834,7 +842,7 @@ def run(settings, level_e, sample_tau, work, rec):
             outcome = failure_outcome(wk[W_AUXNEW, X_OK])
             break
         # the earliest event on the step: the kept part ends there
-        event_values(t + h, wk[W_YNEW], wk[W_AUXNEW], p, cs, lev, wk[W_GNEW])
+        event_values(t + h, wk[W_YNEW], wk[W_AUXNEW], sys, lev, wk[W_GNEW])
         span = Span(work.F, 0, work.y, t, h, sys)
         first_k, seg_end, have_dense = first_event(span, lev, work)
         event = first_k >= 0

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 from collections import namedtuple
 
-from .events import N_EVENTS
-from .model import N_AUX, N_FULL  # noqa: F401  (re-exported sizes)
+from .event_ids import N_EVENTS
+from .model import N_AUX, N_FULL
 from .tableau import N_STAGES_EXTENDED
 
 # --- contact state ----------------------------------------------------------------------------

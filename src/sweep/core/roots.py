@@ -11,9 +11,11 @@ from __future__ import annotations
 import math
 
 from .constants import EPS
-from .contact import eval_rhs, event_values, reads_forces, state_event_value
+from .contact import eval_rhs
 from .dop853 import dense_eval
-from .events import N_EVENTS
+from .event_dispatch import event_value, event_values, state_event_value
+from .event_ids import EVENTS, N_EVENTS
+from .events import E_FORCES
 from .jit import kernel
 from .layout import W_AUXBUF, W_DYBUF, W_GBUF, W_YBUF
 from .model import X_PHI, Y_U1, Y_U2, sign_rate
@@ -132,18 +134,26 @@ def event_rates(t, y, f, g_here, rates, lev, sys):
     derivative f; lev: the next level's energy) into rates, by a forward difference of step
     RATE_STEP along f: one RHS evaluation for all, in the system sys (layout.System). 0 where g_k is
     inactive (inf)."""
-    p, cs, wk = sys.p, sys.cs, sys.wk
+    wk = sys.wk
     ys = wk[W_YBUF]
     for i in range(sys.n):
         ys[i] = y[i] + RATE_STEP * f[i]
     eval_rhs(t + RATE_STEP, ys, sys, wk[W_DYBUF], wk[W_AUXBUF])
-    event_values(t + RATE_STEP, ys, wk[W_AUXBUF], p, cs, lev, wk[W_GBUF])
+    event_values(t + RATE_STEP, ys, wk[W_AUXBUF], sys, lev, wk[W_GBUF])
     for k in range(N_EVENTS):
         gk = wk[W_GBUF, k]
         if g_here[k] == math.inf or gk == math.inf:
             rates[k] = 0.0
         else:
             rates[k] = (gk - g_here[k]) / RATE_STEP
+
+
+@kernel
+def reads_forces(k):
+    """Does event k's function read the right-hand side's aux (event_ids.EVENTS[k, E_FORCES])? The
+    others are functions of the state alone: on a step's dense output they cost no right-hand-side
+    evaluation (state_event_value)."""
+    return EVENTS[k, E_FORCES] != 0
 
 
 @kernel
@@ -159,13 +169,12 @@ def event_value_at(k, t, span, lev):
     energy); one RHS evaluation, in the span's system, for an event that reads the forces, none for
     one of the state alone."""
     sys = span.sys
-    p, cs, wk = sys.p, sys.cs, sys.wk
+    wk = sys.wk
     span_state(t, span)
     if not reads_forces(k):
-        return state_event_value(k, t, wk[W_YBUF], p, cs, lev)
+        return state_event_value(k, t, wk[W_YBUF], sys, lev)
     eval_rhs(t, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])
-    event_values(t, wk[W_YBUF], wk[W_AUXBUF], p, cs, lev, wk[W_GBUF])
-    return wk[W_GBUF, k]
+    return event_value(k, t, wk[W_YBUF], wk[W_AUXBUF], sys, lev)
 
 
 @kernel

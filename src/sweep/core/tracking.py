@@ -10,15 +10,17 @@ from __future__ import annotations
 import math
 
 from .contact import eval_rhs, mode_energy
-from .events import EV_LEVEL
 from .dop853 import N_DENSE, dense_coeffs, dense_eval
-from .frequency import Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_step, open_level, peak_candidate, peak_confirmed
+from .event_ids import EV_LEVEL
 from .fits import halt_from_three
+from .frequency import (Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_step, open_level, peak_candidate,
+                        peak_confirmed)
 from .jit import kernel
-from .layout import (F_APPROACH, F_THALT, F_THALT_ERR, T_DEEP_B, T_DEEP_E, T_FIT_B, T_FIT_T, CS_MODE, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, N_CS, T_NEXT_LEVEL, T_PREV_DENSE,
-                     T_NEXT_SAMPLE, T_PENDING, L_ALPHA, L_FHAT, L_PENDING, L_TAU, PK_PHI, PK_TAU, PK_THETA, SA_ENERGY, SA_MODE,
-                     SA_PHI, SA_Y, T_PHI_A, T_PHI_B, T_PREV_OK, T_TA, T_TB, T_HPREV, T_TPREV, TR_MODE, TR_PHI, TR_TAU, TR_Y,
-                     T_NPK, T_PEAK_RING, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV, F_NFMAX, F_TEND, Span, System)
+from .layout import (CS_MODE, F_APPROACH, F_NFMAX, F_TEND, F_THALT, F_THALT_ERR, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ,
+                     K_PREV, L_ALPHA, L_FHAT, L_PENDING, L_TAU, N_CS, PK_PHI, PK_TAU, PK_THETA, SA_ENERGY, SA_MODE,
+                     SA_PHI, SA_Y, Span, System, TR_MODE, TR_PHI, TR_TAU, TR_Y, T_DEEP_B, T_DEEP_E, T_FIT_B, T_FIT_T,
+                     T_HPREV, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_NPK, T_PEAK_RING, T_PENDING, T_PHI_A, T_PHI_B,
+                     T_PREV_DENSE, T_PREV_OK, T_TA, T_TB, T_TPREV, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV)
 from .model import X_PHI, Y_ALPHA, Y_THETA, steady_rolling_energy
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
