@@ -5,7 +5,9 @@
   output definitions, the runners, the drivers and the front door on top; a module imports only
   from its own tier or below (the kernel knows no file, config or command line; nothing but the
   front door imports the front door);
-* no kernel of the core takes more than MAX_PARAMS parameters;
+* no function of the core takes more than MAX_PARAMS parameters, beyond the listed exceptions
+  (WIDE_ALLOWED, each with its reason; the list is exact: a listed function that fits is removed);
+* no module of the core is longer than MAX_CORE_LINES lines;
 * the stepper (dop853.py) and the step-size controller (controller.py) know no state layout;
 * a shared name of the core (EPS, the contact modes, the hand-over states) has one home, and no
   module imports a core module's name through another core module that only imports it (no
@@ -26,11 +28,41 @@ from pathlib import Path
 import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "sweep"
-MAX_PARAMS = 8
+MAX_PARAMS = 6
+# The core functions over MAX_PARAMS, by reason. Each is a candidate for grouping into a record; a
+# new wide function must be added here with its reason (or take a group instead).
+_EQUATIONS = "the model's scalar equations: state, parameters and the trig values or side the inlined right-hand side passes, as scalars (a tuple built per call inside the hot right-hand side)"
+_STEPPER = "the generic stepper's interface: the caller's right-hand side, its system, the step and its stage/dense buffers"
+_SLIP_SOLVE = "a trial slip (direction nu, speed u) at the state (t, y) in the system, with the output rows it fills"
+_BUFFERS = "a recorder or check writing into caller buffers beside the state and the run's constants"
+WIDE_ALLOWED = {
+    "accept.balance_error": _BUFFERS, "accept.error_scale": _BUFFERS, "accept.state_balance_error": _BUFFERS,
+    "contact_rhs._model": _SLIP_SOLVE, "contact_rhs.direction_lag": _SLIP_SOLVE, "contact_rhs.lag_and_error": _SLIP_SOLVE,
+    "contact_rhs.model_call": _SLIP_SOLVE, "contact_rhs.root_lag": _SLIP_SOLVE, "contact_rhs.slaved_direction": _SLIP_SOLVE,
+    "contact_rhs.slide_model": _SLIP_SOLVE, "contact_rhs.slip_rates": _SLIP_SOLVE, "slip.dip_crosses": _SLIP_SOLVE,
+    "dop853.dense_coeffs": _STEPPER, "dop853.dense_component": _STEPPER, "dop853.dense_eval": _STEPPER,
+    "dop853.initial_step": _STEPPER, "dop853.rk_step": _STEPPER,
+    "fits.summary_fits": "the fits' inputs as plain arrays and counts (called from numba and from Python alike)",
+    "frequency.theta_crossing": _BUFFERS, "impulse.project_velocity": _EQUATIONS,
+    "integrate.end_segment": _BUFFERS, "integrate.record_segment": _BUFFERS,
+    "integrate.integrate": "the Python entry point's public signature (state, parameters, settings, levels, samples, capacities)",
+    "model.centre_velocity": _EQUATIONS, "model.contact_rates": _EQUATIONS, "model.energy_from_trig": _EQUATIONS,
+    "model.energy_increment_trig": _EQUATIONS, "model.energy_rate_trig": _EQUATIONS, "model.held_spin_rates": _EQUATIONS,
+    "model.make_params": "the physical inputs of a disk (Python, once per scene)", "model.rhs": _EQUATIONS,
+    "model.spin_balance": _EQUATIONS, "model.tilt_balance": _EQUATIONS,
+    "roots.event_rates": _BUFFERS, "roots.locate": "a bracket (ta, ga, tb, gb) of event k on a span at a level",
+    "roots.sign_slopes": "a step's two ends (y, f) and its size for component i's sign",
+    "scan.lift_off": "a bracket's end values and slopes (g0, d0, g1, d1) of event k on a span at a level",
+    "tracking._add_peak": _BUFFERS, "tracking.dense_wanted": _BUFFERS, "tracking.record_traj": _BUFFERS,
+    "tracking.step_dense": _STEPPER, "tracking.track_frequency": _BUFFERS,
+}
+# a module of the core that outgrows this is split along its seams (contact_rhs / slip / moments /
+# event_rules; integrate / scan / accept)
+MAX_CORE_LINES = 700
 
 
 def modules() -> dict[str, ast.Module]:
-    """Every module of the package, by dotted name (sweep.core.contact, ...)."""
+    """Every module of the package, by dotted name (sweep.core.contact_rhs, ...)."""
     out = {}
     for path in sorted(SRC.rglob("*.py")):
         rel = path.relative_to(SRC.parent).with_suffix("")
@@ -151,7 +183,7 @@ def test_the_package_has_no_import_cycle():
 
 def test_the_import_graph_finds_what_a_module_imports():
     graph = import_graph(modules())
-    assert "sweep.core.model" in graph["sweep.core.contact"]          # `from .model import ...`
+    assert "sweep.core.model" in graph["sweep.core.contact_rhs"]          # `from .model import ...`
     assert "sweep.core.integrate" in graph["sweep.simulate"]          # `from .core.integrate import ...`
     assert "sweep.errors" in graph["sweep.scene"]
 
@@ -175,9 +207,42 @@ def test_an_upward_import_is_caught():
         floors({"a": {"b"}, "b": {"a"}})
 
 
-def test_no_core_kernel_takes_more_than_eight_parameters():
-    wide = [(m, f, len(ps)) for m, f, ps in kernel_functions(modules()) if len(ps) > MAX_PARAMS]
-    assert not wide, wide
+def long_core_modules(limit: int = MAX_CORE_LINES) -> list[tuple[str, int]]:
+    """(module file, lines) of the core modules over limit lines."""
+    out = []
+    for path in sorted((SRC / "core").glob("*.py")):
+        n = len(path.read_text().splitlines())
+        if n > limit:
+            out.append((path.name, n))
+    return out
+
+
+def test_no_core_module_is_longer_than_the_limit():
+    assert long_core_modules() == []
+
+
+def test_a_long_module_is_caught():
+    """The check can fail: at a limit below the longest core module's length it names that module."""
+    longest = max(len(p.read_text().splitlines()) for p in (SRC / "core").glob("*.py"))
+    assert len(long_core_modules(longest - 1)) >= 1
+
+
+def wide_functions(mods: dict[str, ast.Module]) -> dict[str, int]:
+    """module.function: parameter count of the core functions over MAX_PARAMS."""
+    return {f"{m.rpartition('.')[2]}.{f}": len(ps) for m, f, ps in kernel_functions(mods) if len(ps) > MAX_PARAMS}
+
+
+def test_no_core_function_takes_more_than_six_parameters_beyond_the_listed():
+    """Every core function over MAX_PARAMS is listed with its reason, and every listed one is over it
+    (the list shrinks as functions take groups)."""
+    assert set(wide_functions(modules())) == set(WIDE_ALLOWED)
+    assert all(WIDE_ALLOWED.values())
+
+
+def test_a_wide_function_is_caught():
+    mods = modules()
+    mods["sweep.core.scan"].body.append(ast.parse("def wide(a, b, c, d, e, f, g):\n    pass\n").body[0])
+    assert set(wide_functions(mods)) - set(WIDE_ALLOWED) == {"scan.wide"}
 
 
 def top_level_names(tree: ast.Module) -> set[str]:
@@ -241,8 +306,8 @@ def test_no_module_imports_a_core_name_through_another():
 
 def test_a_reexport_is_caught():
     mods = modules()
-    mods["sweep.core.roots"] = ast.parse("from .contact import N_EVENTS\n")
-    assert ("sweep.core.roots", "sweep.core.contact", "N_EVENTS") in reexports(mods)
+    mods["sweep.core.roots"] = ast.parse("from .contact_rhs import ROLL\n")
+    assert ("sweep.core.roots", "sweep.core.contact_rhs", "ROLL") in reexports(mods)
 
 
 STEPPER_MODULES = {"sweep.core.jit", "sweep.core.dop853_sums", "sweep.core.layout", "sweep.core.tableau", "sweep.core"}
@@ -265,7 +330,7 @@ def stepper_layout_leaks(mods: dict[str, ast.Module]) -> list[str]:
 
 
 def test_the_stepper_and_its_controller_know_no_state_layout():
-    """dop853.py takes its error scales from its caller (integrate.error_scale): it imports nothing
+    """dop853.py takes its error scales from its caller (accept.error_scale): it imports nothing
     of the model, the events, the contact state or the integrator; controller.py only the compiler."""
     assert stepper_layout_leaks(modules()) == []
 

@@ -10,15 +10,18 @@ import pytest
 
 from sweep import outcomes as oc
 from sweep.core import constants as CN
+from sweep.core import contact_rhs as CR
+from sweep.core import dop853 as D
 from sweep.core import event_dispatch as ED
 from sweep.core import event_ids as ID
 from sweep.core import event_rules as ER
 from sweep.core import events as EV
-from sweep.core import contact as C
-from sweep.core import dop853 as D
+from sweep.core import integrate as I
 from sweep.core import layout as L
 from sweep.core import model as M
+from sweep.core import moments as MO
 from sweep.core import roots as R
+from sweep.core import slip as SL
 from sweep.core import tableau as T
 from sweep.scene import load_scene
 
@@ -56,7 +59,7 @@ def _ev_sys(p, cs):
 def _group(p, cs, wk, F, trk=None, y=None):
     """The run's Work group (layout.Work) around the given buffers, as the roots and recorders take it."""
     y = np.zeros(M.N_FULL) if y is None else y
-    trk = np.zeros(L.N_TRACK) if trk is None else trk
+    trk = I.tracking_arrays() if trk is None else trk
     return L.Work(y, p, cs, wk, np.zeros((L.N_KROWS, M.N_FULL)), F, trk)
 
 
@@ -69,7 +72,7 @@ def _step(t, y, f, h, sys, K, y_new, f_new=None):
     """dop853.rk_step with the contact right-hand side from (t, y, f) over h into y_new (its
     derivative into f_new if given), in the system sys (layout.System)."""
     f_new = np.zeros(M.N_FULL) if f_new is None else f_new
-    D.rk_step(C.eval_rhs, t, h, L.Point(y, f, np.zeros(M.N_AUX)), L.Point(y_new, f_new, np.zeros(M.N_AUX)), sys,
+    D.rk_step(CR.eval_rhs, t, h, L.Point(y, f, np.zeros(M.N_AUX)), L.Point(y_new, f_new, np.zeros(M.N_AUX)), sys,
               K)
 
 
@@ -107,7 +110,7 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
     is the 8th-order step's own local error in that direction: halving h divides it by at least
     ~2^9 (a model whose energy did not match its right-hand side would give a residual ~ h). Also with the contact kept on the rim past alpha = 0 (side -1 at
     alpha 1), which a step overshooting the rim-edge event integrates."""
-    from sweep.core import integrate as I
+    from sweep.core import accept as A
     p, y, cs0 = setup
     cs = cs0.copy()
     cs[L.CS_SIDE] = side
@@ -120,10 +123,10 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
         K = np.zeros((T.N_STAGES_EXTENDED, M.N_FULL))
         f = np.zeros(M.N_FULL)
         aux = np.zeros(M.N_AUX)
-        C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), f, aux)
+        CR.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), f, aux)
         y_new = np.zeros(M.N_FULL)
         _step(0.0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new)
-        e_cur, e_new = C.mode_energy(y, p, cs), C.mode_energy(y_new, p, cs)
+        e_cur, e_new = CR.mode_energy(y, p, cs), CR.mode_energy(y_new, p, cs)
         delta = wk[L.W_DELTA, :n]
         assert np.array_equal(y_new[:n], y[:n] + delta)      # the increment the step added
         assert np.sum(y_new[M.Y_DSLIDE:M.Y_DK3 + 1]) > 1e-6 * e_cur        # it dissipates
@@ -133,8 +136,8 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
         inc_res = abs(change + np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]))
         assert abs(inc_res - res[-1]) < 1e-15 * e_cur, (inc_res, res[-1])
         # balance_error is that residual over its allowance, which grows with h and the dissipation
-        ratio = I.balance_error(y, aux, wk[L.W_DELTA], h, 0.0, p, cs, _consts(1e-10, e0=e_cur, t_max=100.0))
-        allowed = I.BALANCE_FACTOR * 1e-10 * (np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
+        ratio = A.balance_error(y, aux, wk[L.W_DELTA], h, 0.0, p, cs, _consts(1e-10, e0=e_cur, t_max=100.0))
+        allowed = A.BALANCE_FACTOR * 1e-10 * (np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
         assert inc_res / ratio >= allowed
     assert res[0] / res[1] > 256.0 and res[2] / res[3] > 256.0, res
     assert res[3] > 1e-14, res         # far above round-off (~1e-16)
@@ -146,7 +149,7 @@ def test_energy_increment_is_exact_to_the_round_off_of_the_change(setup, alpha):
     BALANCE_ROUNDOFF of its own scale (relative to the change), while the difference of two float64
     energies errs by ~EPS E, 10..10^4 times more (measured; the error that hid a step's truncation
     in the budget)."""
-    from sweep.core import integrate as I
+    from sweep.core import accept as A
     p, _, _ = setup
     ld = np.longdouble
     if np.finfo(ld).eps > 1e-18:
@@ -178,7 +181,7 @@ def test_energy_increment_is_exact_to_the_round_off_of_the_change(setup, alpha):
             e_new, e_old = energy(yl + dl, slip), energy(yl, slip)
             exact = e_new - e_old
             ref_err = 4 * np.finfo(ld).eps * (abs(e_new) + abs(e_old))   # the reference's own round-off
-            assert abs(ld(change) - exact) <= I.BALANCE_ROUNDOFF * scale + ref_err, (slip, step, change, exact)
+            assert abs(ld(change) - exact) <= A.BALANCE_ROUNDOFF * scale + ref_err, (slip, step, change, exact)
             naive = M.energy_with_slip(y + d, p, side, *((y + d)[M.Y_U1:M.Y_U2 + 1] if slip else (0.0, 0.0))) \
                 - M.energy_with_slip(y, p, side, *(y[M.Y_U1:M.Y_U2 + 1] if slip else (0.0, 0.0)))
             assert abs(ld(change) - exact) <= abs(ld(naive) - exact) + 4 * np.finfo(float).eps * scale + ref_err
@@ -192,7 +195,7 @@ def test_energy_rate_is_the_gradient_of_the_energy_and_the_power_defect_is_round
     integrate.power_defect is round-off of the power's terms, also near flat (beta = 1e-6), where
     the gyroscopic terms (tan(alpha) ~ 1e6) make those terms, and the defect, large against the
     dissipated power: balance_error's floor measures the defect instead of assuming it small."""
-    from sweep.core import integrate as I
+    from sweep.core import accept as A
     p, _, cs0 = setup
     rng = np.random.default_rng(5)
     slip = mode == CN.SLIDE
@@ -224,7 +227,7 @@ def test_energy_rate_is_the_gradient_of_the_energy_and_the_power_defect_is_round
         terms = (abs(p[M.P_G] * dy[M.Y_ALPHA]) + np.sum(np.abs(dy[M.Y_DSLIDE:M.Y_DK3 + 1]))
                  + p[M.P_A] * (abs(y[M.Y_W1] * dy[M.Y_W1]) + abs(y[M.Y_W3] * dy[M.Y_W3]))
                  + p[M.P_C] * abs(y[M.Y_W2] * dy[M.Y_W2]) + np.sum(np.abs(dy[M.Y_W1:M.Y_U2 + 1])) ** 2)
-        (defects_flat if beta == 1e-6 else defects_far).append(I.power_defect(y, dy, aux, p, cs) / terms)
+        (defects_flat if beta == 1e-6 else defects_far).append(A.power_defect(y, dy, aux, p, cs) / terms)
     assert len(defects_far) > 100 and len(defects_flat) > 30
     assert max(defects_far) < 1e-12, max(defects_far)
     assert np.median(defects_far) < 1e-14
@@ -252,10 +255,10 @@ def test_energy_kernels_from_the_rhs_trig_are_the_plain_ones_to_the_bit(setup):
         cs[L.CS_MODE], cs[L.CS_SIDE] = mode, side
         cs[L.CS_NU] = math.atan2(y[M.Y_U2], y[M.Y_U1])
         dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
-        C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
+        CR.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
         assert aux[M.X_SINA] == math.sin(y[M.Y_ALPHA]) and aux[M.X_COSA] == math.cos(y[M.Y_ALPHA])
         slip = mode != CN.ROLL
-        assert C.mode_energy_at(y, aux, p, cs) == C.mode_energy(y, p, cs)
+        assert CR.mode_energy_at(y, aux, p, cs) == CR.mode_energy(y, p, cs)
         v = rng.normal(size=M.N_FULL) * 1e-3
         assert (M.energy_rate_trig(y, v, p, side, slip, aux[M.X_SINA], aux[M.X_COSA])
                 == M.energy_rate(y, v, p, side, slip))
@@ -287,7 +290,7 @@ def test_error_norm_is_hairers_dop853_norm_in_the_callers_scales():
 def test_error_scale_is_hairers_with_the_inclination_and_slip_rules(alpha):
     """integrate.error_scale: atol + rtol max(|y|, |y_new|), the inclination's magnitude
     min(|alpha|, pi/2 - |alpha|), the slip components' absolute tolerance u_atol."""
-    from sweep.core.integrate import error_scale
+    from sweep.core.accept import error_scale
     rng = np.random.default_rng(3)
     n = M.N_CORE
     y = rng.normal(size=M.N_FULL)
@@ -319,7 +322,7 @@ def test_dense_output_interpolates_the_step_at_seventh_order(setup):
         y_new = np.zeros(M.N_FULL)
         f_new = np.zeros(M.N_FULL)
         _step(0.0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new, f_new)
-        D.dense_coeffs(C.eval_rhs, 0.0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
+        D.dense_coeffs(CR.eval_rhs, 0.0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
         out = np.zeros(M.N_FULL)
         D.dense_eval(F, 0, y, 0.0, h, 0.0, n, out)
         assert np.max(np.abs(out[:n] - y[:n])) < 1e-15
@@ -382,7 +385,7 @@ def _dense_step(p, y, cs, h, n=M.N_CORE, t0=0.0, y_end=None):
     f[:n] = _f(t0, y, p, cs)[0]
     y_new, f_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
     _step(t0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new, f_new)
-    D.dense_coeffs(C.eval_rhs, t0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
+    D.dense_coeffs(CR.eval_rhs, t0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
     if y_end is not None:
         y_end[:] = y_new
     return F, wk, ist
@@ -455,9 +458,9 @@ def test_brent_finds_the_maximum_of_the_normal_force(setup):
 def _two_steps(p, y0, cs, t0, t_mid, t_end, n=M.N_CORE):
     """Two DOP853 steps from (t0, y0), [t0, t_mid] and [t_mid, t_end], set up as track_peaks sees
     them: the first one's dense output in F[7:14] with its start in wk[W_YPREV], the second's in
-    F[0:7]; returns (F, trk, wk, istats, y_mid)."""
+    F[0:7]; returns (F, trk, wk, istats, y_mid), trk the recorders' layout.TrackState."""
     F = np.zeros((14, M.N_FULL))
-    trk = np.zeros(L.N_TRACK)
+    trk = I.tracking_arrays().track
     ys = [y0.copy()]
     for k, (ta, tb) in enumerate(((t0, t_mid), (t_mid, t_end))):
         y1 = np.zeros(M.N_FULL)
@@ -466,16 +469,16 @@ def _two_steps(p, y0, cs, t0, t_mid, t_end, n=M.N_CORE):
         ys.append(y1)
     wk[L.W_YPREV, :M.N_FULL] = ys[0]
     wk[L.W_CSPREV, :L.N_CS] = cs
-    trk[L.T_TA], trk[L.T_TB], trk[L.T_TPREV], trk[L.T_HPREV] = t0, t_mid, t0, t_mid - t0
-    trk[L.T_PHI_B] = _f(t_mid, ys[1], p, cs)[1][M.X_PHI]
+    trk.phi[L.PH_TA], trk.phi[L.PH_TB], trk.phi[L.PH_TPREV], trk.phi[L.PH_HPREV] = t0, t_mid, t0, t_mid - t0
+    trk.phi[L.PH_B] = _f(t_mid, ys[1], p, cs)[1][M.X_PHI]
     return F, trk, wk, ist, ys[1]
 
 
 def _spans(p, F, trk, wk, ist, y_mid, t_mid, t1, n=M.N_CORE):
-    """The two steps of _two_steps, [T_TPREV, t_mid] and [t_mid, t1], as track_peaks reads them:
+    """The two steps of _two_steps, [PH_TPREV, t_mid] and [t_mid, t1], as track_peaks reads them:
     (before, this), both in the contact state stored in wk[W_CSPREV]."""
     cs = wk[L.W_CSPREV, :L.N_CS].copy()
-    before = L.Span(F, D.N_DENSE, wk[L.W_YPREV], trk[L.T_TPREV], trk[L.T_HPREV],
+    before = L.Span(F, D.N_DENSE, wk[L.W_YPREV], trk.phi[L.PH_TPREV], trk.phi[L.PH_HPREV],
                     _sys(p, wk[L.W_CSPREV, :L.N_CS], n, wk, ist))
     this = L.Span(F, 0, y_mid, t_mid, t1 - t_mid, _sys(p, cs, n, wk, ist))
     return before, this
@@ -537,16 +540,16 @@ def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
     u = 1e-9
     dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
     for nu0 in np.linspace(-3.0, 3.0, 7):
-        nu = C.attracting_direction(nu0, u, 0.0, y, _sys(p, sl, n, wk, ist))
+        nu = SL.attracting_direction(nu0, u, 0.0, y, _sys(p, sl, n, wk, ist))
         if math.isnan(nu):
             continue
-        c, _ = C.slip_rates(nu, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        c, _ = CR.slip_rates(nu, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
         assert abs(c) < 1e-10
         # attracting: the direction rate cross/u points back to the root from both sides
-        cm, _ = C.slip_rates(nu - 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
-        cp, _ = C.slip_rates(nu + 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        cm, _ = CR.slip_rates(nu - 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        cp, _ = CR.slip_rates(nu + 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
         assert cm > 0.0 > cp
-        nu2 = C.slaved_direction(nu + 1e-4, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        nu2 = CR.slaved_direction(nu + 1e-4, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
         assert abs(math.remainder(nu2 - nu, 2 * math.pi)) < 1e-12
 
 
@@ -576,22 +579,22 @@ def test_onset_direction_takes_a_root_with_a_solution_and_never_a_painleve_pole(
         cs = cs0.copy()
         cs[L.CS_SIDE] = 1.0 if y[M.Y_ALPHA] >= 0.0 else -1.0
         cs[L.CS_SIG:L.CS_SIG + 3] = np.sign(rng.normal(size=3))
-        C.model_call(0.0, y, _sys(p, cs, n, wk, ist), dy, aux, 1.0, 0.0)
+        CR.model_call(0.0, y, _sys(p, cs, n, wk, ist), dy, aux, 1.0, 0.0)
         if aux[M.X_OK] != 1.0 or aux[M.X_PHI] <= 0.0:
             continue
         F1, F2 = aux[M.X_F1], aux[M.X_F2]
         guess = math.atan2(-F2, -F1)
         cs[L.CS_MODE] = CN.SLAVED
         sys_ = _sys(p, cs, n, wk, ist)
-        scan = np.array([C.slip_rates(x, 0.0, 0.0, y, sys_, dy, aux, ys) + (aux[M.X_OK],) for x in grid])
+        scan = np.array([CR.slip_rates(x, 0.0, 0.0, y, sys_, dy, aux, ys) + (aux[M.X_OK],) for x in grid])
         flips = np.nonzero((scan[:-1, 0] > 0.0) != (scan[1:, 0] > 0.0))[0]
         consistent = any(scan[j, 2] > 0.0 and scan[j + 1, 2] > 0.0 and scan[j + 1, 1] > 0.0 for j in flips)
         poles_seen += sum(1 for j in flips if scan[j, 2] != scan[j + 1, 2])
-        nu = C.onset_direction(0.0, y, _sys(p, cs, n, wk, ist), F1, F2)
+        nu = SL.onset_direction(0.0, y, _sys(p, cs, n, wk, ist), F1, F2)
         if nu == guess:
             assert not consistent
             continue
-        cr, dr = C.slip_rates(nu, 0.0, 0.0, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+        cr, dr = CR.slip_rates(nu, 0.0, 0.0, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
         assert math.isfinite(cr) and abs(cr) <= 1e-9 * max(1.0, abs(dr)) and dr > 0.0   # a root, not a pole
         if consistent:
             assert aux[M.X_OK] == 1.0
@@ -615,21 +618,21 @@ def test_slaved_direction_near_a_fold_converges_at_the_round_off_floor():
                   9.988368229478843e-10, 0.0, 0.0])   # spin_tol 0; slave_tol 0: slaved from the slip_tol
     n, t = M.N_FULL, 283.5429130271587
     wk, ist = _work()
-    C.try_slave(t, y, _sys(p, cs, n, wk, ist))
+    SL.try_slave(t, y, _sys(p, cs, n, wk, ist))
     assert cs[L.CS_MODE] == CN.SLAVED
     u = math.hypot(y[M.Y_U1], y[M.Y_U2])
     dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
-    root = C.slaved_direction(cs[L.CS_NU], u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+    root = CR.slaved_direction(cs[L.CS_NU], u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
     assert aux[M.X_OK] == 1.0
     for k in range(-40, 41):
         start = root + k * 4e-16
-        nu = C.slaved_direction(start, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
-        c, d = C.slip_rates(nu, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+        nu = CR.slaved_direction(start, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+        c, d = CR.slip_rates(nu, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
         assert aux[M.X_OK] == 1.0, (k, nu)
-        assert abs(c) <= C.DIR_NOISE * math.hypot(c, d) and abs(nu - root) < 1e-12, (k, nu, c)
+        assert abs(c) <= CR.DIR_NOISE * math.hypot(c, d) and abs(nu - root) < 1e-12, (k, nu, c)
     # and the slaved right-hand side there is finite (it was NaN with X_OK 1 left by the model)
     cs[L.CS_NU] = root
-    C.eval_rhs(t, y, _sys(p, cs, n, wk, ist), dy, aux)
+    CR.eval_rhs(t, y, _sys(p, cs, n, wk, ist), dy, aux)
     assert aux[M.X_OK] == 1.0 and np.isfinite(dy[:n]).all() and aux[M.X_DCROSS] < 0.0
 
 
@@ -657,9 +660,9 @@ def test_settle_signs_releases_a_stuck_component_the_moment_cannot_hold(setup, k
         cs[L.CS_MODE] = CN.ROLL
         cs[L.CS_STUCK] = 1.0
         wk, ist = _work()
-        C.eval_rhs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
+        CR.eval_rhs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
         need = wk[L.W_AUXTMP, M.X_SIG1]
-        C.settle_signs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), held)
+        MO.settle_signs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), held)
         if abs(need) <= 1.0 or held == 0:
             assert cs[L.CS_STUCK] == 1.0
         else:
@@ -682,10 +685,10 @@ def test_an_impulse_carrying_a_free_component_past_its_surface(setup, w1_after):
     cs = cs0.copy()
     cs[L.CS_MODE] = CN.ROLL
     wk, ist = _work()
-    need = C.needed_sigma(0, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
+    need = MO.needed_sigma(0, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
     assert abs(need) < 1.0
-    C.release_moved(y1, pp, cs, g_before)
-    C.settle_signs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), -1)
+    MO.release_moved(y1, pp, cs, g_before)
+    MO.settle_signs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), -1)
     if abs(w1_after) > pp[M.P_WTOL]:
         assert cs[L.CS_STUCK] == 0.0 and cs[L.CS_SIG] == -1.0
     else:
@@ -708,11 +711,11 @@ def test_settle_signs_tests_every_component_on_its_surface(setup):
     cs[L.CS_SIG + 1] = math.copysign(1.0, g[1])
     cs[L.CS_SIG + 2] = -math.copysign(1.0, g[2])
     wk, ist = _work()
-    need1 = C.needed_sigma(0, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
-    need3 = C.needed_sigma(2, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
+    need1 = MO.needed_sigma(0, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
+    need3 = MO.needed_sigma(2, 0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), wk[L.W_DYTMP], wk[L.W_AUXTMP])
     assert abs(need1) > 1.0
     cs[L.CS_SIG] = math.copysign(1.0, need1)
-    C.settle_signs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), -1)
+    MO.settle_signs(0.0, y1, _sys(pp, cs, M.N_CORE, wk, ist), -1)
     assert cs[L.CS_STUCK] == 0.0 and cs[L.CS_SIG] == math.copysign(1.0, need1)
     if abs(need3) < 1.0:   # (0.78 here: the moment holds it)
         assert cs[L.CS_STUCK + 2] == 1.0
@@ -729,7 +732,7 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
     wk, ist = _work()
     f = np.zeros(M.N_FULL)
     aux = np.zeros(M.N_AUX)
-    C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), f, aux)
+    CR.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), f, aux)
     g = np.zeros(L.N_WCOLS)
     ED.event_values(0.0, y, aux, _ev_sys(p, cs), math.nan, g)
     rates = np.zeros(L.N_WCOLS)
@@ -743,7 +746,7 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
         ys = y.copy()
         ys[:n] += eps * f[:n]
         dy, ax, gg = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
-        C.eval_rhs(eps, ys, _sys(p, cs, n, wk, ist), dy, ax)
+        CR.eval_rhs(eps, ys, _sys(p, cs, n, wk, ist), dy, ax)
         ED.event_values(0.0, ys, ax, _ev_sys(p, cs), math.nan, gg)
         return gg
 
@@ -783,7 +786,7 @@ def test_events_that_do_not_read_forces_are_functions_of_the_state(setup, mode):
         level = rng.uniform(0.1, 2.0)
         wk, ist = _work()
         dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
-        C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
+        CR.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
         g_true = np.zeros(L.N_WCOLS)
         ED.event_values(0.0, y, aux, _ev_sys(p, cs), level, g_true)
         for k in range(ID.N_EVENTS):
@@ -855,7 +858,7 @@ def test_every_event_has_its_value_and_its_update(setup):
         cs[L.CS_STUCK:L.CS_STUCK + 3] = stuck
         wk, ist = _work()
         dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
-        C.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
+        CR.eval_rhs(0.0, y, _sys(p, cs, M.N_CORE, wk, ist), dy, aux)
         g = np.zeros(L.N_WCOLS)
         ED.event_values(0.0, y, aux, _ev_sys(p, cs), 0.5, g)
         active |= {k for k in range(ID.N_EVENTS) if g[k] != math.inf}
@@ -897,7 +900,7 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
     sl = cs0.copy()
     sl[L.CS_MODE] = CN.SLAVED
     u = 1e-9
-    root = C.attracting_direction(0.3, u, 0.0, y0, _sys(p, sl, n, wk, ist))
+    root = SL.attracting_direction(0.3, u, 0.0, y0, _sys(p, sl, n, wk, ist))
     assert math.isfinite(root)
     # the slip vector a little off the root (its component across s is what the impulse removes)
     y = y0.copy()
@@ -907,14 +910,14 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
         cs = sl.copy()
         cs[L.CS_NU] = stored
         dy, aux, g = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(L.N_WCOLS)
-        C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
+        CR.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
         assert aux[M.X_OK] == 1.0
         ED.event_values(0.0, y, aux, _ev_sys(p, cs), math.nan, g)
         values.append(g[ID.EV_SLIP_STOP])
         # the stored direction would have given another value
         assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[ID.EV_SLIP_STOP]) > 1e-3 * u
     sl[L.CS_NU] = root
-    nu, lag, _, ok, _ = C.slaved_slip(root, 0.0, y, _sys(p, sl, n, wk, ist), np.zeros(M.N_FULL), np.zeros(M.N_AUX))
+    nu, lag, _, ok, _ = CR.slaved_slip(root, 0.0, y, _sys(p, sl, n, wk, ist), np.zeros(M.N_FULL), np.zeros(M.N_AUX))
     assert ok == 1.0
     # the slip along the friction's direction: the quasi-static one plus its lag (docs/model.md, 'Slow slip')
     expected = y[M.Y_U1] * math.cos(nu + lag) + y[M.Y_U2] * math.sin(nu + lag)
@@ -932,21 +935,21 @@ def test_an_update_that_leaves_a_slaved_slip_past_its_exit_hands_it_to_slide(set
     wk, ist = _work()
     sl = cs0.copy()
     sl[L.CS_MODE] = CN.SLAVED
-    root = C.attracting_direction(0.3, 1e-9, 0.0, y0, _sys(p, sl, n, wk, ist))
+    root = SL.attracting_direction(0.3, 1e-9, 0.0, y0, _sys(p, sl, n, wk, ist))
     assert math.isfinite(root)
     sl[L.CS_NU] = root
     # the exit speed at the state (the slaving speed reads Phi, which the slip's size hardly moves)
     y = y0.copy()
     y[M.Y_U1], y[M.Y_U2] = 1e-9 * math.cos(root), 1e-9 * math.sin(root)
     dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
-    C.eval_rhs(0.0, y, _sys(p, sl.copy(), n, wk, ist), dy, aux)
-    u_exit = C.exit_speed(y, aux, p)
+    CR.eval_rhs(0.0, y, _sys(p, sl.copy(), n, wk, ist), dy, aux)
+    u_exit = CR.exit_speed(y, aux, p)
     for factor, mode in ((1.001, CN.SLIDE), (0.999, CN.SLAVED)):
         y = y0.copy()
         # the slip a little off the slaved direction, as the integrated slip vector is
         y[M.Y_U1], y[M.Y_U2] = factor * u_exit * math.cos(root + 0.01), factor * u_exit * math.sin(root + 0.01)
         cs = sl.copy()
-        C.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
+        CR.eval_rhs(0.0, y, _sys(p, cs, n, wk, ist), dy, aux)
         g = np.zeros(L.N_WCOLS)
         ED.event_values(0.0, y, aux, _ev_sys(p, cs), math.nan, g)
         assert (g[ID.EV_SLIP_FAST] <= 0.0) == (mode == CN.SLIDE), (factor, g[ID.EV_SLIP_FAST])
@@ -976,7 +979,7 @@ def test_an_impulse_releases_a_stuck_component_only_beyond_spin_tol(setup):
         cs[L.CS_STUCK] = 1.0
         g_before = M.moment_axes_rates(y)
         y[M.Y_W1] += move
-        C.release_moved(y, p, cs, g_before)
+        MO.release_moved(y, p, cs, g_before)
         assert (cs[L.CS_STUCK] == 0.0) == released, (spin_tol, move)
         if released and move != 0.0:
             assert cs[L.CS_SIG] == math.copysign(1.0, move)
@@ -1002,33 +1005,33 @@ def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end
     h, outcome, at_tmax, stop = next_try(t_near, 0.5, -1, consts, work, rec)
     assert (outcome, at_tmax, stop) == (oc.T_MAX, True, True) and h == 100.0 - t_near
     # (t_max is where the motion ends: the frequency windows still open keep their symmetric part)
-    assert work.trk[L.T_CUT] == 0.0
+    assert not work.trk.ends.cut[0]
     # ... elsewhere as STEP_SIZE_UNDERFLOW (nothing in the model decides by the step size), a
     # numerical stop: the windows still open get no value
     assert next_try(10.0, 1.5 * EPS * 10.0, -1, consts, work, rec)[1:] == (oc.STEP_SIZE_UNDERFLOW, False, True)
-    assert work.trk[L.T_CUT] == 1.0
-    work.trk[:] = 0.0
+    assert work.trk.ends.cut[0]
+    I.clear_tracking(work.trk)
     assert next_try(10.0, 2.5 * EPS * 10.0, -1, consts, work, rec)[1:] == (-1, False, False)
     # the step budget counts accepted and rejected tries; it stops the steps after the end too
     istats[L.I_STEPS], istats[L.I_REJECTED] = 30, 20
     assert next_try(10.0, 0.5, -1, consts, work, rec)[1:] == (oc.STEP_LIMIT, False, True)
-    assert work.trk[L.T_CUT] == 1.0
-    work.trk[:] = 0.0
+    assert work.trk.ends.cut[0]
+    I.clear_tracking(work.trk)
     assert next_try(10.0, 0.5, oc.HALTED, consts, work, rec)[1:] == (oc.HALTED, False, True)
-    assert work.trk[L.T_CUT] == 1.0
+    assert work.trk.ends.cut[0]
     istats[L.I_STEPS] = 0
-    work.trk[:] = 0.0
+    I.clear_tracking(work.trk)
     # after a halt (at tau 40): the steps that complete the frequency windows, no longer than the last one,
     # and none past twice the end's tau, nor past t_max
-    trk = work.trk
+    after = work.trk.ends.after
     assert next_try(40.0, 0.5, oc.HALTED, consts, work, rec) == (0.5, oc.HALTED, False, False)
-    assert trk[L.T_H_AFTER] == 0.5 and trk[L.T_T_AFTER] == 80.0
+    assert after[L.EA_H_AFTER] == 0.5 and after[L.EA_T_AFTER] == 80.0
     assert next_try(60.0, 4.0, oc.HALTED, consts, work, rec) == (0.5, oc.HALTED, False, False)
     assert next_try(99.9, 0.2, oc.HALTED, consts, work, rec) == (-1.0, oc.HALTED, False, True)
     # twice the end's tau is where the motion after it ends, not a numerical stop
-    assert trk[L.T_CUT] == 0.0
+    assert not work.trk.ends.cut[0]
     # ... while the halt fit waits for a level below the last one, they go on past it, up to t_max
-    trk[L.T_DEEP_E] = 1e-3
+    work.trk.track.fit[L.FT_DEEP_E] = 1e-3
     assert next_try(90.0, 0.2, oc.HALTED, consts, work, rec) == (0.2, oc.HALTED, False, False)
     assert next_try(99.9, 0.2, oc.HALTED, consts, work, rec)[0] == pytest.approx(0.1)
     assert next_try(100.0, 0.2, oc.HALTED, consts, work, rec) == (-1.0, oc.HALTED, False, True)

@@ -102,7 +102,7 @@ def kernel_state(scene: dict):
     """The summary of a scene and the kernel's own per-level state: whether the level's window was
     opened (crossed by the motion, not by lying flat), whole cycles before it (LW_MB), lattice
     points after it (LW_NF), pending f_hat, counted maxima at or before the level time; and
-    whether a numerical stop cut the steps (T_CUT). The buffers are those integrate.integrate
+    whether a numerical stop cut the steps (EndState.cut). The buffers are those integrate.integrate
     allocates, kept here."""
     from sweep.core import frequency as F, integrate as I, layout as Y
     from sweep.core.dop853 import N_DENSE
@@ -118,7 +118,7 @@ def kernel_state(scene: dict):
     y = np.zeros(Y.N_FULL)
     y[:len(y0)] = y0
     work = Y.Work(y, sc.params.copy(), np.zeros(Y.N_CS), np.zeros((Y.N_WORK, Y.N_WCOLS)),
-                  np.zeros((Y.N_KROWS, Y.N_FULL)), np.zeros((2 * N_DENSE, Y.N_FULL)), np.zeros(Y.N_TRACK))
+                  np.zeros((Y.N_KROWS, Y.N_FULL)), np.zeros((2 * N_DENSE, Y.N_FULL)), I.tracking_arrays())
     I.run(settings, level_e, np.zeros(0), work, Y.Record(istats, fstats, levels, np.zeros((0, Y.SAMPLE_COLS)),
                                                           np.empty((0, Y.TRAJ_COLS)), peaks, np.zeros(Y.N_FULL), fq))
     assert istats[Y.I_OVERFLOW] == 0
@@ -129,7 +129,7 @@ def kernel_state(scene: dict):
         state.append({"opened": fq[row, F.LW_TL] != 0.0, "before": fq[row, F.LW_MB], "after": fq[row, F.LW_NF],
                       "pending": levels[L, Y.LEVEL_COLS] == 1.0,
                       "maxima_before": int(np.sum(tpk <= levels[L, 0]))})
-    return simulate_module.simulate(sc).summary, state, work.trk[Y.T_CUT] != 0.0
+    return simulate_module.simulate(sc).summary, state, bool(work.trk.ends.cut[0])
 
 
 def default_grid_scene(point):

@@ -19,7 +19,9 @@ from scipy.integrate import solve_ivp
 
 import sweep
 from sweep.core import constants as CN
-from sweep.core import contact as C
+from sweep.core import contact_rhs as CR
+from sweep.core import moments as MO
+from sweep.core import slip as SL
 from sweep.core import layout as L
 from sweep.core import model as M
 
@@ -150,8 +152,8 @@ def test_the_slip_fate_is_the_direction_flows():
             continue
         wk = np.zeros((L.N_WORK, L.N_WCOLS))
         istats = np.zeros(L.N_ISTATS, np.int64)
-        fate, nu_exit = C.slip_fate(0.0, y, L.System(p, cs, M.N_CORE, wk, istats))
-        got = {C.FATE_ENDS: "ends", C.FATE_PASSES: "passes", C.FATE_SPIRALS_OUT: "spirals_out"}.get(fate)
+        fate, nu_exit = SL.slip_fate(0.0, y, L.System(p, cs, M.N_CORE, wk, istats))
+        got = {SL.FATE_ENDS: "ends", SL.FATE_PASSES: "passes", SL.FATE_SPIRALS_OUT: "spirals_out"}.get(fate)
         assert got == want, (got, want, y[:M.N_CORE], p)
         if got == "passes":
             assert math.isfinite(nu_exit)
@@ -203,8 +205,8 @@ def test_a_narrow_root_pair_of_cross_is_not_taken_for_a_spiral():
     assert _flow_fate(y, p, cs, u) == "passes"
     wk = np.zeros((L.N_WORK, L.N_WCOLS))
     istats = np.zeros(L.N_ISTATS, np.int64)
-    fate, nu_exit = C.slip_fate(0.0, y, L.System(p, cs, M.N_CORE, wk, istats))
-    assert fate == C.FATE_PASSES, fate
+    fate, nu_exit = SL.slip_fate(0.0, y, L.System(p, cs, M.N_CORE, wk, istats))
+    assert fate == SL.FATE_PASSES, fate
     # the root reached is a root of cross, the first one in the sense in which the direction turns
     roots = np.linspace(0.0, 2.0 * math.pi, 64 * 256, endpoint=False)[np.sign(cross) != np.sign(np.roll(cross, -1))]
     nu0 = math.atan2(y[M.Y_U2], y[M.Y_U1]) % (2.0 * math.pi)
@@ -233,7 +235,7 @@ def test_a_narrow_root_pair_of_cross_is_not_taken_for_a_spiral():
 def test_cubic_reaches_zero(coeffs, reaches):
     """The cubic g + g1 s + g2 s^2/2 + g3 s^3/6 from a positive value falling: 0 reached before the
     first minimum, or not (spin_rest_time's decision)."""
-    assert C.cubic_reaches_zero(*coeffs) is reaches
+    assert MO.cubic_reaches_zero(*coeffs) is reaches
 
 
 def test_cubic_reaches_zero_agrees_with_sampling():
@@ -249,7 +251,7 @@ def test_cubic_reaches_zero_agrees_with_sampling():
         margin = np.min(np.abs(c[:upto]))
         if margin < 1e-3:
             continue
-        assert C.cubic_reaches_zero(g, g1, g2, g3) is want, (g, g1, g2, g3)
+        assert MO.cubic_reaches_zero(g, g1, g2, g3) is want, (g, g1, g2, g3)
 
 
 def test_cubic_rest_time_is_the_first_root():
@@ -259,7 +261,7 @@ def test_cubic_rest_time_is_the_first_root():
     found = 0
     for _ in range(300):
         g, g1, g2, g3 = 1.0, -rng.uniform(0.1, 2.0), rng.normal(), 0.3 * rng.normal()
-        s = C.cubic_rest_time(g, g1, g2, g3)
+        s = MO.cubic_rest_time(g, g1, g2, g3)
         if math.isnan(s):
             continue
         found += 1
@@ -344,10 +346,10 @@ def test_the_slaved_directions_lag_agrees_with_the_peers():
         cs[L.CS_MODE], cs[L.CS_SIDE] = CN.SLIDE, 1.0
         cs[L.CS_SIG:L.CS_SIG + 3] = np.where(np.array(M.moment_axes_rates(y)) >= 0.0, 1.0, -1.0)
         system = L.System(p, cs, n, wk, ist)
-        root = C.attracting_direction(rng.uniform(-math.pi, math.pi), u, 0.0, y, system)
+        root = SL.attracting_direction(rng.uniform(-math.pi, math.pi), u, 0.0, y, system)
         if not math.isfinite(root):
             continue
-        lag, dcross, err = C.root_lag(root, u, 0.0, y, system, np.zeros(M.N_FULL), np.zeros(M.N_AUX))
+        lag, dcross, err = CR.root_lag(root, u, 0.0, y, system, np.zeros(M.N_FULL), np.zeros(M.N_AUX))
         c = Contact(1)
         c.mode = 1
         c.sig = list(cs[L.CS_SIG:L.CS_SIG + 3])

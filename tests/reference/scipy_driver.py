@@ -4,7 +4,7 @@ This is what a researcher would write instead of `sweep`'s hybrid integrator (is
 same equations (`sweep.core.model.rhs`, numba-compiled, or its plain-Python/NumPy `py_func` for the
 "plain NumPy" peer) and the same plastic impulse (`sweep.core.impulse.project_velocity`). The
 discrete rules are written here again from the physics in docs/model.md, in plain Python and
-independently of `sweep.core.contact` (only constants are read from the kernel):
+independently of the kernel's contact modules (only constants are read from the kernel):
 
 * modes ROLL (no slip; the friction that rolling needs, inside the static cone), SLIDE (friction
   -mu_d Phi u/|u|) and SLAVED (a slow slip whose direction is the slow manifold of its direction
@@ -92,7 +92,7 @@ from scipy.optimize import minimize_scalar as _minimize_scalar
 from numba.core.registry import CPUDispatcher
 
 from sweep import outcomes
-from sweep.core import contact as _contact
+from sweep.core import contact_rhs as _contact_rhs
 from sweep.core import event_rules as _event_rules
 from sweep.core import impulse as _impulse
 from sweep.core import model
@@ -106,9 +106,9 @@ __all__ = ["run_scipy", "numba_backend", "numpy_backend", "Backend"]
 # physical constants of the rules (documented in docs/model.md)
 BETA_FACE = _event_rules.BETA_FACE
 ZENO_DTAU = _event_rules.ZENO_DTAU
-SLAVE_EXIT = _contact.SLAVE_EXIT
-SLAVE_FLOOR = _contact.SLAVE_FLOOR
-FLOOR_EXIT = _contact.FLOOR_EXIT
+SLAVE_EXIT = _contact_rhs.SLAVE_EXIT
+SLAVE_FLOOR = _contact_rhs.SLAVE_FLOOR
+FLOOR_EXIT = _contact_rhs.FLOOR_EXIT
 
 ROLL, SLIDE, SLAVED = 0, 1, 2     # driver modes; model.rhs knows ROLL (0) and SLIDE (1)
 DIR_TOL = 1e-14                   # convergence of the slaved direction (rad)

@@ -2,14 +2,18 @@
 
     jit.py       `@kernel`: how every kernel here is compiled (njit, cached, no reference counting, NumPy's error model)
     constants.py the names the core shares: EPS, the contact modes, a slide's hand-over states
-    events.py    the events as one table (ids = rows): class, bracketing, restart, component
+    events.py    the columns of the events' table: class (update protocol), bracketing, restart, component
     model.py     the Kessler-O'Reilly equations (dimensionless right-hand side, energy, steady motion)
     layout.py    named slots of the state, contact-state, work, settings and statistics arrays and
                  of the output rows, and the groups the kernels pass (namedtuples): the run's
                  buffers (Work, Record) and constants (RunConsts), the system a right-hand side
                  evaluates (System), a step's ends (Point), its dense output and its kept part
                  (Span, Segment)
-    contact.py   contact modes (roll, slide, slaved slip), event functions, discrete updates
+    contact_rhs.py  the right-hand side per contact state (roll, slide, slaved slip), the slip speeds
+    slip.py      slip onset, hand-over between slide and slaved slip, a slow slide's fate
+    moments.py   the dry-friction moment components (Filippov): stick test, stop at spin_tol, signs
+    event_rules.py  the events' table: each event's row beside its value and update functions, and
+                 the generator of event_ids.py (ids, table) and event_dispatch.py (the dispatch)
     impulse.py   plastic contact impulse (side change)
     tableau.py   DOP853 coefficients
     dop853_sums.py  the tableau's sums as straight-line code, generated from tableau.py
@@ -19,8 +23,9 @@
     roots.py     event location and Phi maxima on the dense output
     tracking.py  halt levels, samples, normal-force maxima, trajectory
     frequency.py precession, ringing and f_hat at the levels over whole precession cycles
-    integrate.py the main loop (`run`), its CPU entry point (`integrate`), the error norm's scales of
-                 this state (error_scale)
+    scan.py      the event scan of an accepted step (first_event)
+    accept.py    a step's try and acceptance: error norm scales of this state, energy balance, counters
+    integrate.py the main loop (`run`) and its CPU entry point (`integrate`)
     fits.py      the summary's fits: halt time (also after the halt, on deeper levels), ramp exponent
     ensemble.py  one scene on fixed-size buffers (the batch path)
 

@@ -4,9 +4,9 @@ The error norm is Hairer's dop853 (Hairer, Norsett & Wanner (1993), II.10: 5th/3
 estimates); the step-size factor that follows from it is the controller's (controller.py, with this
 method's ERR_EXPONENT). The stepper knows no state layout: the caller gives the error norm its
 per-component scales (atol_i + rtol |y_i| with whatever component rules it has: the integrator's
-integrate.error_scale) and the number of leading components the norms run over. Nor does it know
+accept.error_scale) and the number of leading components the norms run over. Nor does it know
 the physics: the right-hand side comes in as a kernel argument, `rhs(t, y, sys, dy, aux)` (dy =
-d y/d t and its aux at (t, y); the integrator passes contact.eval_rhs), with `sys` (layout.System)
+d y/d t and its aux at (t, y); the integrator passes contact_rhs.eval_rhs), with `sys` (layout.System)
 passed through to it; of sys the stepper reads only the state size n and the work buffer wk (its
 rows W_YTMP, W_DYTMP, W_AUXTMP, W_DELTA). The sums over the stages are straight-line code generated
 from the tableau (dop853_sums.py, from tableau.py).

@@ -11,7 +11,7 @@ batch's BatchInputs and BatchOutputs, a worker's SceneInputs and Fits, and the r
 layout.Record.
 
 The only difference to `sweep.simulate` is the peak buffer: a ring of the last PEAK_RING normal-
-force maxima (layout.T_PEAK_RING) instead of every maximum, since the summary needs only the last
+force maxima (layout.TF_RING) instead of every maximum, since the summary needs only the last
 few. A scene whose look-back outgrows the ring (never seen) flags I_OVERFLOW, and the caller reruns
 it with `sweep.simulate`.
 """
@@ -22,12 +22,12 @@ from collections import namedtuple
 
 import numpy as np
 
-from .frequency import FQ_LEVEL0
 from .fits import N_DERIVED, summary_fits
-from .integrate import record_arrays, run, work_arrays
+from .frequency import FQ_LEVEL0
+from .integrate import clear_tracking, record_arrays, run, work_arrays
 from .jit import kernel
-from .layout import (I_FLAT, I_OVERFLOW, L_PENDING, L_PRECESSION, L_TAU, LEVEL_COLS, N_CS, N_FSTATS, N_ISTATS,
-                     N_SETTINGS, N_TRACK, T_PEAK_RING, Record)
+from .layout import (I_FLAT, I_OVERFLOW, LEVEL_COLS, L_PENDING, L_PRECESSION, L_TAU, N_CS, N_FSTATS, N_ISTATS,
+                     N_SETTINGS, Record, TF_RING)
 from .model import N_FULL, N_PARAMS
 
 # rows of the per-scene scratch: level times (s), precession frequencies (Hz)
@@ -84,9 +84,8 @@ def solve_scene(inp, chi, work, rec, fits):
     zero_rows(work.F, work.F.shape[0])
     zero_rows(rec.peaks, rec.peaks.shape[0])
     zero_rows(rec.fq, FQ_LEVEL0 + nl)
-    for i in range(N_TRACK):
-        work.trk[i] = 0.0
-    work.trk[T_PEAK_RING] = 1.0
+    clear_tracking(work.trk)
+    work.trk.track.flags[TF_RING] = True
     for i in range(N_ISTATS):
         rec.istats[i] = 0
     for i in range(N_FSTATS):

@@ -33,9 +33,8 @@ from pathlib import Path
 
 from .. import outcomes as oc
 from .constants import AT_FLOOR, HANDOVER_ARMED, HANDOVER_OFF, ROLL, SLAVED, SLIDE, SLOW_OFF
-from .contact import (FLOOR_EXIT, SLAVE_EXIT, SLAVE_FLOOR, cone_violated, consistent_signs, decision_rhs, eval_rhs,
-                      exit_speed, mode_energy, mode_energy_at, needed_sigma, release_moved, set_slip, settle_signs,
-                      slave_speed, slip_floor, slow_slide, spin_sticks, start_slip, stick_or_flip, try_slave)
+from .contact_rhs import (FLOOR_EXIT, SLAVE_EXIT, SLAVE_FLOOR, eval_rhs, exit_speed, mode_energy, mode_energy_at,
+                          slave_speed, slip_floor)
 from .events import (C_CONTACT_LOST, C_FACE, C_LEVEL, C_MOMENT, C_SIDE, C_SLIP, D_NONE, D_RATES, D_SIDE, D_SIGN, D_SLIP,
                      R_NONE, R_SPIN, R_SURFACE)
 from .impulse import project_velocity, stop_axis_rate
@@ -45,6 +44,9 @@ from .layout import (CS_MODE, CS_SIDE, CS_SIG, CS_SLAVE_OFF, CS_STUCK, F_DIMPACT
 from .model import (P_K1, P_K2, P_K3, P_MUD, P_MUS, P_SLAVE, P_UTOL, P_WTOL, X_DCROSS, X_F1, X_F2, X_G1, X_LAG, X_NU,
                     X_PHI, X_SIG1, X_SLAVE_ERR, Y_ALPHA, Y_DK1, Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3,
                     moment_axes_rates)
+from .moments import (consistent_signs, decision_rhs, needed_sigma, release_moved, settle_signs, spin_sticks,
+                      stick_or_flip)
+from .slip import cone_violated, set_slip, slow_slide, start_slip, try_slave
 
 # Inclination (rad) at which the face is taken to touch the table: the disk lies flat. The far rim
 # is then 1e-6 R above the table (38 nm for the paper's disk), below any real table's flatness. A disk
@@ -141,7 +143,7 @@ def cone_update(t, y, sys):
 RULES.append(Rule("CONE", C_SLIP, 1, D_RATES, R_NONE, value=cone_value, update=cone_update))
 
 
-# === SLIDE: |u| falls to slip_tol (contact.slip_floor) -> its fate (contact.slow_slide) ================
+# === SLIDE: |u| falls to slip_tol (contact_rhs.slip_floor) -> its fate (slip.slow_slide) ================
 @kernel
 def slip_slow_value(i, t, y, aux, sys, lev):
     """|u| less the slip's floor (slip_floor) of a slide, unless it spirals out (SLOW_OFF)."""

@@ -2,7 +2,7 @@
 column. The table itself, one row per event with its functions, is event_rules.RULES; its ids and
 rows (event_ids.EVENTS) and the dispatch over them are generated from it (event_rules.py says how).
 
-The columns say how the event scan (integrate.first_event: how a crossing inside a step is bracketed,
+The columns say how the event scan (scan.first_event: how a crossing inside a step is bracketed,
 which events may start on their surface), the evaluation on a dense output (roots.event_value_at:
 whether it needs the right-hand side) and the discrete update (event_dispatch.apply_event: which
 protocol runs) treat an event.
@@ -26,8 +26,8 @@ D_NONE = 4        # not searched inside a step (the level: the energy is monoton
 
 # --- how a step that starts on the event's surface is searched (column E_RESTART) --------------------
 R_NONE = 0        # an event that starts at or below 0 cannot fire in this step
-R_SURFACE = 1     # it may leave its surface and come back within the step (integrate.surface_bracket)
-R_SPIN = 2        # below spin_tol at both ends: it may rise past it and slow to it again (integrate.spin_bracket)
+R_SURFACE = 1     # it may leave its surface and come back within the step (scan.surface_bracket)
+R_SPIN = 2        # below spin_tol at both ends: it may rise past it and slow to it again (scan.spin_bracket)
 
 # --- columns ---------------------------------------------------------------------------------------
 E_CLASS = 0       # C_*
@@ -36,5 +36,5 @@ E_DIP = 2         # D_*
 E_RESTART = 3     # R_*
 E_COMPONENT = 4   # the moment component i (0, 1, 2) of a sign, un-stick, spin or against event, else -1
 E_HOLDS = 5       # 1: the event stands only where its update would stick the component (a spin event:
-                  # integrate.spin_holds), else the step goes on through it
+                  # scan.spin_holds), else the step goes on through it
 N_EVENT_COLS = 6

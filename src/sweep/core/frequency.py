@@ -41,10 +41,11 @@ from __future__ import annotations
 import math
 
 from .constants import EPS
-from .contact import eval_rhs
+from .contact_rhs import eval_rhs
 from .dop853 import dense_component, dense_eval
 from .jit import kernel
-from .layout import L_CYCLES, L_PREC_ERR, L_PREC_SIDE, L_PRECESSION, L_RINGING, L_WINDOW, T_PENDING, W_AUXBUF, W_DYBUF, W_YBUF, W_YSEG
+from .layout import (L_CYCLES, L_PRECESSION, L_PREC_ERR, L_PREC_SIDE, L_RINGING, L_WINDOW, W_AUXBUF, W_DYBUF, W_YBUF,
+                     W_YSEG)
 from .model import X_PHI, Y_THETA
 
 SAMPLES_PER_CYCLE = 16          # S: lattice points per precession cycle (Nyquist: 8 Phi cycles per precession cycle)
@@ -98,12 +99,13 @@ def freq_start(theta0, phi0, fq):
 
 
 @kernel
-def open_level(L, tl, fq, trk):
-    """Level L was crossed at tl: its window waits for the first lattice point after tl."""
+def open_level(L, tl, fq, windows):
+    """Level L was crossed at tl: its window waits for the first lattice point after tl (windows[0]:
+    the windows still open)."""
     row = FQ_LEVEL0 + L
     fq[row, LW_STATE] = 1.0
     fq[row, LW_TL] = tl
-    trk[T_PENDING] += 1.0
+    windows[0] += 1
 
 
 @kernel
@@ -164,11 +166,11 @@ def _next_crossing(r, t_lo, seg_end, theta_end, span, fq):
 
 
 @kernel
-def lattice_step(span, seg_end, trk, rec):
+def lattice_step(span, seg_end, windows, rec):
     """The new lattice points on the segment [t, seg_end] of the step span (layout.Span: this
     step's dense output, from t = span.t0; its end state in wk[W_YSEG]) in time order: Phi there
     (dense output, the span's contact state), the rings, and the level windows they open, fill or
-    complete (trk: layout.T_*)."""
+    complete (windows[0]: the windows still open, layout.Tracking)."""
     sys = span.sys
     wk = sys.wk
     t = span.t0
@@ -181,7 +183,7 @@ def lattice_step(span, seg_end, trk, rec):
         tc = tu if r == 0 else td
         dense_eval(span.F, 0, span.y0, t, span.h, tc, sys.n, wk[W_YBUF])
         eval_rhs(tc, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])
-        push_lattice(r, tc, wk[W_AUXBUF, X_PHI], fq, level_out, trk)
+        push_lattice(r, tc, wk[W_AUXBUF, X_PHI], fq, level_out, windows)
         if r == 0:
             tu = _next_crossing(0, tc, seg_end, theta_end, span, fq)
         else:
@@ -189,7 +191,7 @@ def lattice_step(span, seg_end, trk, rec):
 
 
 @kernel
-def push_lattice(r, tc, phi, fq, level_out, trk):
+def push_lattice(r, tc, phi, fq, level_out, windows):
     """Lattice point J + 1 of direction r reached at tc with Phi = phi: open the windows of levels
     crossed before tc (their past from the ring), append it to the open windows of direction r,
     complete those that have as many cycles after the level as before, then store it in the ring."""
@@ -218,7 +220,7 @@ def push_lattice(r, tc, phi, fq, level_out, trk):
             mb = int(fq[row, LW_MB])
             if nf == (mb if mb > 0 else HALF_CYCLES) * S:
                 window_values(L, mb, nf // S, fq, level_out)
-                trk[T_PENDING] -= 1.0
+                windows[0] -= 1
     head = (head + 1) % RING
     fq[1 + r, head] = tc
     fq[1 + r, RING + head] = phi

@@ -1,6 +1,6 @@
 """The hybrid integrator: one scene, DOP853 steps of the current smooth mode, located events.
 
-`run` (numba, no allocation) steps the current contact state, scans the accepted step for events,
+`run` (numba, no allocation) steps the current contact state (accept.try_step), scans the accepted step for events (scan.first_event),
 locates the earliest on the dense output, restarts there with the new discrete state (keeping the
 step size) and records what the scene asked for. Every discrete decision is taken in
 event_dispatch.apply_event from the state at the located event; the step size, rtol and atol only decide
@@ -14,76 +14,32 @@ from collections import namedtuple
 import numpy as np
 
 from .. import outcomes as oc
+from .accept import norm_size, retract_step, segment_end, try_step
 from .constants import EPS, ROLL, SLAVED
-from .contact import (cone_violated, confirm_slaved, consistent_signs, eval_rhs, mode_energy, mode_energy_at, set_slip,
-                      spin_sticks, start_slip)
+from .contact_rhs import eval_rhs, mode_energy, mode_energy_at
 from .controller import accepted_step_factor, step_factor
-from .dop853 import ERR_EXPONENT, N_DENSE, dense_eval, error_norm, initial_step, rk_step
+from .dop853 import ERR_EXPONENT, N_DENSE, dense_eval, initial_step
 from .event_dispatch import apply_event, event_values
-from .event_ids import EVENTS, EV_AGAINST1, EV_LEVEL, N_DYN_EVENTS
+from .event_ids import EV_LEVEL, N_DYN_EVENTS
 from .event_rules import count_transition
-from .events import (C_MOMENT, D_RATES, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, R_SPIN,
-                     R_SURFACE)
 from .frequency import FQ_COLS, FQ_LEVEL0, finish_levels, freq_start
 from .jit import kernel
-from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, F_APPROACH, F_DIMPACT, F_E0, F_EEND, F_HLAST,
-                     F_SLIDETIME, F_TEND, F_THALT, F_THALT_ERR, F_TIMPACT, I_EVENTS, I_FLAT, I_IMPACTS, I_OUTCOME,
-                     I_OVERFLOW, I_PEAKS, I_REJECTED, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, I_STICK, I_TRAJ,
-                     I_TRANS, LEVEL_COLS, L_PENDING, N_CS, N_FSTATS, N_ISTATS, N_KROWS, N_TRACK, N_WCOLS, N_WORK,
-                     PEAK_COLS, Point, Record, RunConsts, SAMPLE_COLS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS,
-                     S_RTOL, S_TMAX, Segment, Span, System, TRAJ_COLS, T_CUT, T_DEEP_E, T_DIMPACT_HALT, T_DIP_END,
-                     T_END_IMPACTS, T_END_STICK, T_END_TRANS, T_H_AFTER, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PENDING,
-                     T_PHI_B, T_RATES_NEW, T_RATES_OLD, T_T_AFTER, W_AUX, W_AUXBUF, W_AUXNEW, W_DELTA, W_DYBUF,
-                     W_ESCALE, W_F, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, W_YSEG, Work)
-from .model import (N_AUX, N_CORE, N_FULL, N_PARAMS, N_THETA, P_G, P_H, P_UTOL, X_COSA, X_NU, X_OK, X_PHI, X_SINA,
-                    Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_THETA, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3,
-                    energy_increment_trig, energy_rate_trig)
-from .roots import (brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, location_tol,
-                    reads_forces, sign_slopes, slip_closest_approach, span_state)
-from .tableau import N_STAGES
-from .tracking import (deep_levels, deep_pending, dense_wanted, halt_flat, record_levels, record_sample, record_samples,
-                       record_traj, start_deep_levels, step_dense, track_frequency)
+from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, EA_DIMPACT, EA_H_AFTER, EA_T_AFTER, EN_IMPACTS,
+                     EN_STICK, EN_TRANS, EndState, F_APPROACH, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND,
+                     F_THALT, F_THALT_ERR, F_TIMPACT, I_EVENTS, I_FLAT, I_IMPACTS, I_OUTCOME, I_OVERFLOW, I_PEAKS,
+                     I_REJECTED, I_STEPS, I_STICK, I_TRAJ, I_TRANS, LEVEL_COLS, L_PENDING, N_CS, N_EA, N_EN, N_FSTATS,
+                     N_FT, N_ISTATS, N_KROWS, N_PH, N_SC, N_TF, N_TK, N_WCOLS, N_WORK, PEAK_COLS, Record, RunConsts,
+                     SAMPLE_COLS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, ScanState, Segment, Span,
+                     System, TK_LEVEL, TRAJ_COLS, TrackState, Tracking, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F, W_FNEW,
+                     W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, Work)
+from .model import N_AUX, N_CORE, N_FULL, N_PARAMS, N_THETA, X_NU, X_OK, X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_U2
+from .moments import consistent_signs
+from .roots import location_tol
+from .scan import carry_rates, first_event, start_scan
+from .slip import cone_violated, confirm_slaved, set_slip, start_slip
+from .tracking import (deep_levels, deep_pending, dense_wanted, end_deep_levels, halt_flat, pending, record_levels,
+                       record_samples, record_traj, start_deep_levels, start_tracking, step_dense, track_frequency)
 
-# A step may not raise the energy by more than ENERGY_GUARD * rtol * E(0): the true energy never
-# increases, so such a step is an instability the error estimate did not see; it is rejected.
-ENERGY_GUARD = 10.0
-# A step's energy balance, E + dissipated, may move by at most BALANCE_FACTOR * rtol times what the
-# step dissipates plus its share h / tau_max of E(0). Summed over a scene that is at most
-# 2 BALANCE_FACTOR rtol E(0) (nothing dissipates more than E(0)): the budget closes to 1e-9 E(0) at
-# the default rtol 1e-10 (the componentwise error norm alone lets through a bias of the
-# 8th-order step in the energy, one sign over 1e5 steps). The balance is taken on the step's
-# increment before rounding, in difference form (model.energy_increment), so its own round-off,
-# BALANCE_ROUNDOFF times its scale, is relative to the change; what the rounding of the state adds
-# is a random walk, ~sqrt(steps) EPS G (docs/model.md, 'Energy and the dissipation budget').
-BALANCE_FACTOR = 4.0
-# The increment's own round-off: its stages are summed with weights whose magnitudes add to ~12.4
-# (dop853's b), so each component carries up to ~12 EPS of itself, and the change that many EPS of
-# the scale of energy_increment (measured: up to 5 EPS); a floor that round-off could exceed would
-# reject every shorter step alike (both scale with the step), so it is set well above.
-BALANCE_ROUNDOFF = 32.0 * EPS
-STATE_BALANCE_ROUNDOFF = 4.0 * EPS
-# The right-hand side's own round-off in the energy direction (power_defect: what dE/dtau plus the
-# dissipated power leaves of 0 at a step's ends) enters the increment as h times a weighted sum of
-# its values at the stages; the floor takes DEFECT_FACTOR times the larger end value. Near flat the
-# gyroscopic terms (tan(alpha) ~ 1e6) carry it far above the energy's own round-off, and it scales
-# with h like a step's dissipation, so without it every shorter step failed alike (slides at
-# beta ~ 1e-6 ended in step_size_underflow at rtol 1e-12, 1e-13: docs/model.md, 'Energy and the
-# dissipation budget').
-DEFECT_FACTOR = 16.0
-
-# Within SLIP_NEAR x slip_tol of u = 0 the slip components are held to rtol SLIP_NEAR slip_tol rather
-# than atol: there the physics decides by |u| against slip_tol (a slip passing by 0 stops if it
-# comes within slip_tol, else reverses), and atol (1e-12 by default, ~1e-4 of slip_tol in u_hat)
-# left that decision to the error of the step: whether a near-reversal stuck moved with rtol.
-SLIP_NEAR = 100.0
-# The slip is the contact point's velocity, a difference of O(|omega|) terms: its round-off, and its
-# step's round-off in the error estimate, is ~EPS |omega|. A tolerance below it failed every shorter
-# step alike (a random-scene harness run at rtol 1e-13 ended in step_size_underflow that way).
-SLIP_ROUNDOFF = 4.0 * EPS
-
-# A dip whose dense-output value at the cubic Hermite minimum is below DIP_REFINE times the lower end
-# value is searched for its true minimum (roots.brent_min) before it is ruled out.
-DIP_REFINE = 0.1
 
 KernelOutput = namedtuple("KernelOutput", "istats fstats levels samples trajectory peaks y_end")
 
@@ -121,366 +77,19 @@ def start(y, sys):
 
 
 @kernel
-def lift_off(k, span, g0, d0, g1, d1, lev):
-    """On the step span (layout.Span: [t, t + h] from its y0, dense output built) that starts on
-    event k's surface (g0 <= 0, just after a discrete update put the state there) and ends with
-    g1 <= 0: a time where g_k > 0 and its value, to bracket a return to the surface within the step;
-    (-1, 0) if there is none. d0, d1: exact end derivatives of g_k per unit of the step. Starts at
-    the peak of the cubic Hermite interpolant of g_k; where g_k leaves the surface upwards (d0 > 0)
-    it halves towards t, where g_k ~ g0 + d0 x > 0. lev: the next level's energy.
-    """
-    t, h = span.t0, span.h
-    x = hermite_peak(g0, d0, g1, d1)
-    tries = 60 if d0 > 0.0 else 1
-    if x <= 0.0:
-        if d0 <= 0.0:
-            return -1.0, 0.0
-        x = 0.5
-    for _ in range(tries):
-        gm = event_value_at(k, t + x * h, span, lev)
-        if gm > 0.0:
-            return t + x * h, gm
-        x *= 0.5
-    return -1.0, 0.0
-
-
-@kernel
-def first_event(span, lev, work):
-    """Earliest event on the accepted step span (layout.Span: [t, t + h] from work.y; its end state,
-    derivatives and event values in wk: W_YNEW, W_F, W_FNEW, W_GOLD, W_GNEW; lev: the next level's
-    energy): (k, restart time, dense output made?).
-
-    An event function that is positive at both ends can still cross zero twice inside the step
-    (dip_bracket); one that starts on its surface can leave it and come back (surface_bracket,
-    spin_bracket). The rates at the step end are kept for the next step's start
-    (trk[T_RATES_OLD]), so a step costs one RHS evaluation for them.
-    """
-    t, h = span.t0, span.h
-    wk, trk = work.wk, work.trk
-    g_old = wk[W_GOLD]
-    g_new = wk[W_GNEW]
-    have_dense = False
-    trk[T_RATES_NEW] = 0.0
-    trk[T_DIP_END] = -1.0
-    first_k = -1
-    first_t = t + h
-    for k in range(N_DYN_EVENTS):
-        k_event = k
-        dip_end = -1.0
-        ta = -1.0
-        ga = 0.0
-        tb = 0.0
-        gb = 0.0
-        if g_old[k] > 0.0 and g_new[k] <= 0.0:
-            ta, ga, tb, gb = t, g_old[k], t + h, g_new[k]
-        elif EVENTS[k, E_RESTART] == R_SURFACE and g_old[k] <= 0.0 and g_new[k] <= 0.0:
-            # the step starts on the surface (alpha = 0 after a side change; a moment component
-            # released at an un-stick, omega.a_i = 0 up to its drift while held) and ends on or
-            # past it: it left and came back within the step (a rocking bounce), or it never left
-            have_dense = dense_built(have_dense, span, work)
-            ta, ga, tb, gb, k_event = surface_bracket(k, span, lev, work)
-        elif EVENTS[k, E_RESTART] == R_SPIN and g_old[k] <= 0.0 and g_new[k] <= 0.0:
-            ta, ga, have_dense = spin_bracket(k, span, lev, work, have_dense)
-            tb, gb = t + h, g_new[k]
-        elif g_old[k] > 0.0 and g_new[k] > 0.0 and g_old[k] != math.inf and g_new[k] != math.inf:
-            tm, gm, have_dense = dip_bracket(k, span, lev, work, have_dense)
-            if tm >= 0.0:
-                ta, ga, tb, gb = t, g_old[k], tm, gm
-                if reads_forces(k):
-                    dip_end = tm
-        if ta >= 0.0 and ta < first_t:
-            have_dense = dense_built(have_dense, span, work)
-            ra, rb = locate(k, ta, ga, tb, gb, span, lev)
-            if (rb < first_t or first_k < 0) and (EVENTS[k, E_HOLDS] == 0
-                                                  or spin_holds(EVENTS[k, E_COMPONENT], rb, span)):
-                first_k = k_event
-                first_t = rb
-                trk[T_DIP_END] = dip_end
-    return first_k, first_t, have_dense
-
-
-@kernel
-def dense_built(have_dense, span, work):
-    """The accepted step's dense output in F[0:7] (the step span, layout.Span, from work.y to
-    wk[W_YNEW]), built once per step: returns True."""
-    if not have_dense:
-        step_dense(span.t0, span.y0, span.h, work.wk[W_YNEW], span.sys, work.K, span.F)
-    return True
-
-
-@kernel
-def surface_bracket(k, span, lev, work):
-    """Event k (the side, or a moment sign) on the step span (layout.Span: [t, t + h] from work.y)
-    that starts on its surface and ends on or past it (dense output built): a bracket (ta, ga, tb,
-    gb) of its return to the surface, and the event to apply there (k, or EV_AGAINST1 + i for a
-    component moving against its sign)."""
-    t, h = span.t0, span.h
-    y, cs, wk = work.y, work.cs, work.wk
-    g0 = wk[W_GOLD, k]
-    g1 = wk[W_GNEW, k]
-    y_new = wk[W_YNEW]
-    i = EVENTS[k, E_COMPONENT]
-    if EVENTS[k, E_DIP] == D_SIDE:
-        # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
-        d0 = cs[CS_SIDE] * y[Y_W1] * h
-        d1 = cs[CS_SIDE] * y_new[Y_W1] * h
-    else:
-        d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], y_new, wk[W_FNEW], h)
-    ta, ga = lift_off(k, span, g0, d0, g1, d1, lev)
-    tb, gb = t + h, g1
-    k_event = k
-    moment = EVENTS[k, E_CLASS] == C_MOMENT
-    if ta < 0.0 and moment and g0 < 0.0 and d0 > 0.0:
-        # released with omega.a_i on the far side of its new sign (an impulse's residual, below
-        # spin_tol) and moving towards it, as its sign says: no event while it rises (however
-        # short the step); turned back below the surface inside the step, it moves against its
-        # sign from that turning point on
-        x_turn = hermite_peak(g0, d0, g1, d1) if d1 <= 0.0 else -1.0
-        if x_turn > 0.0:
-            ta, tb = t + x_turn * h, t + x_turn * h
-            k_event = EV_AGAINST1 + i
-    elif ta < 0.0:
-        # it never leaves: at once (a moment component moving against its new sign means the
-        # un-stick only grazed |sigma| = 1: apply_event sticks it)
-        ta, tb = t, t
-        if moment:
-            k_event = EV_AGAINST1 + i
-    return ta, ga, tb, gb, k_event
-
-
-# spin_bracket and dip_bracket are inlined into first_event, their one caller: they run for every
-# active event on every step, and a call passes the step's span and work groups (~100 words).
-@kernel(inline="always")
-def spin_bracket(k, span, lev, work, have_dense):
-    """A free component slower than spin_tol at both ends of the step span (layout.Span: [t, t + h]
-    from work.y; e.g. just released at an un-stick) can speed past spin_tol and slow to it again
-    within the step: the peak of the Hermite interpolant of g_k (exact end slopes), confirmed on
-    the dense output. Returns (the peak's time, g_k there, have_dense); the time is -1 where g_k
-    stays below spin_tol."""
-    t, h = span.t0, span.h
-    y, cs, wk = work.y, work.cs, work.wk
-    i = EVENTS[k, E_COMPONENT]
-    d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], wk[W_YNEW], wk[W_FNEW], h)
-    peak = hermite_peak(wk[W_GOLD, k], d0, wk[W_GNEW, k], d1)
-    if peak > 0.0:
-        have_dense = dense_built(have_dense, span, work)
-        gm = event_value_at(k, t + peak * h, span, lev)
-        if gm > 0.0:
-            return t + peak * h, gm, have_dense
-    return -1.0, 0.0, have_dense
-
-
-@kernel(inline="always")
-def dip_bracket(k, span, lev, work, have_dense):
-    """Event k positive at both ends of the step span (layout.Span: [t, t + h] from work.y) can
-    still reach 0 and come back within it: a bounce off alpha = 0, a brief slip demand, a needed
-    moment that touches its limit, a dip of the normal force. The cubic Hermite interpolant of g_k
-    flags the dip; the dense output confirms it. Returns (the time of the dip's minimum where g_k
-    <= 0 there, g_k there, have_dense); the time is -1 where there is no such dip."""
-    t, h = span.t0, span.h
-    y, cs, wk, trk = work.y, work.cs, work.wk, work.trk
-    g0 = wk[W_GOLD, k]
-    g1 = wk[W_GNEW, k]
-    f = wk[W_F]
-    y_new = wk[W_YNEW]
-    f_new = wk[W_FNEW]
-    how = EVENTS[k, E_DIP]
-    if how == D_SIDE:
-        # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
-        dip = hermite_dip(g0, cs[CS_SIDE] * y[Y_W1] * h, g1, cs[CS_SIDE] * y_new[Y_W1] * h)
-    elif how == D_SIGN:
-        # sigma_i omega.a_i (less spin_tol): exact slopes from the state
-        i = EVENTS[k, E_COMPONENT]
-        d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, f, y_new, f_new, h)
-        dip = hermite_dip(g0, d0, g1, d1)
-    elif how == D_SLIP:
-        # |u| less a speed: a V where the slip passes by u = 0, placed from the slip's own smooth
-        # components (a cubic in g, or its difference quotient, can step over it)
-        dip = slip_closest_approach(y, f, y_new, f_new, h)
-    elif how == D_RATES:
-        if trk[T_RATES_OLD] == 0.0:
-            event_rates(t, y, f, wk[W_GOLD], wk[W_RATEOLD], lev, span.sys)
-            trk[T_RATES_OLD] = 1.0
-        if trk[T_RATES_NEW] == 0.0:
-            event_rates(t + h, y_new, f_new, wk[W_GNEW], wk[W_RATENEW], lev, span.sys)
-            trk[T_RATES_NEW] = 1.0
-        dip = hermite_dip(g0, wk[W_RATEOLD, k] * h, g1, wk[W_RATENEW, k] * h)
-    else:
-        raise ValueError("dip_bracket: an event of the dynamics with no way to bracket a dip (E_DIP)")
-    if not dip > 0.0:
-        return -1.0, 0.0, have_dense
-    have_dense = dense_built(have_dense, span, work)
-    tm = t + dip * h
-    gm = event_value_at(k, tm, span, lev)
-    if 0.0 < gm < DIP_REFINE * min(g0, g1):
-        # the cubic's minimum is only near the dense output's: a shallow dip (a grazing double
-        # crossing) is decided by the minimum of g_k itself
-        tm, gm = brent_min(k, t, t + h, 0.0, span, lev)
-    if gm <= 0.0:
-        return tm, gm, have_dense
-    return -1.0, 0.0, have_dense
-
-
-@kernel
-def spin_holds(i, t_event, span):
-    """Would free component i stick at its spin event at t_event on span's dense output
-    (contact.spin_sticks, the test contact.stick_at_spin_tol makes)? Where it would not, the event
-    changes nothing, and the step goes on instead of restarting there (the same trajectory, fewer
-    restarts)."""
-    sys = span.sys
-    span_state(t_event, span)
-    return spin_sticks(i, t_event, sys.wk[W_YBUF], sys)
-
-
-@kernel
-def power_defect(y, dy, aux, p, cs):
-    """|dE/dtau + dissipated power| of the evaluated right-hand side dy, aux at y: 0 for the exact
-    flow, so what is left is the right-hand side's own round-off in the energy direction."""
-    rate = energy_rate_trig(y, dy, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, aux[X_SINA], aux[X_COSA])
-    return abs(rate + dy[Y_DSLIDE] + dy[Y_DK1] + dy[Y_DK2] + dy[Y_DK3])
-
-
-@kernel
-def balance_error(y, aux, d, h, defect, p, cs, consts):
-    """The energy-balance residual |Delta(E + dissipated)| of a step's increment d (before rounding:
-    wk[W_DELTA]) from y (aux: the right-hand side's there) over h, over what it may be (see
-    BALANCE_FACTOR); accepted if <= 1. defect: power_defect at the step's ends (the larger); of the
-    run's constants (layout.RunConsts) e0 = |E(0)| > 0, t_max (tau) and rtol."""
-    change, scale = energy_increment_trig(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, aux[X_SINA], aux[X_COSA])
-    dissipated = d[Y_DSLIDE] + d[Y_DK1] + d[Y_DK2] + d[Y_DK3]
-    allowed = (BALANCE_FACTOR * consts.rtol * (max(dissipated, 0.0) + consts.e0 * h / consts.t_max)
-               + BALANCE_ROUNDOFF * (scale + abs(d[Y_DSLIDE]) + abs(d[Y_DK1]) + abs(d[Y_DK2]) + abs(d[Y_DK3]))
-               + DEFECT_FACTOR * abs(h) * defect)
-    return abs(change + dissipated) / allowed
-
-
-@kernel
-def state_balance_error(y, y_new, e_cur, e_new, h, p, consts):
-    """balance_error of the kept part of a step cut at an event, from the states at its ends (the
-    dense output's increment carries the round-off of its coefficients, not of the change).
-
-    The residual's round-off, in units of EPS: E and the dissipated energy; the height's terms
-    G cos(alpha) (1 + |h|), which cancel near upright for a thick disk; and the inclination's last
-    bit times dE/dalpha ~ G (|sin alpha| + |h| cos(alpha)) + omega_1^2 (1 + |h|), which dominates
-    near flat, where E << G. Once per event, this floor adds to the budget at most the events'
-    number times it."""
-    d_cur = y[Y_DSLIDE] + y[Y_DK1] + y[Y_DK2] + y[Y_DK3]
-    d_new = y_new[Y_DSLIDE] + y_new[Y_DK1] + y_new[Y_DK2] + y_new[Y_DK3]
-    residual = (e_new + d_new) - (e_cur + d_cur)
-    a = abs(y[Y_ALPHA])
-    c = abs(math.cos(a))
-    habs = p[P_H]
-    w1 = y[Y_W1]
-    roundoff = (abs(e_cur) + abs(d_cur) + p[P_G] * (c * (1.0 + habs) + a * (abs(math.sin(a)) + habs * c))
-                + a * w1 * w1 * (1.0 + habs))
-    allowed = (BALANCE_FACTOR * consts.rtol * (max(d_new - d_cur, 0.0) + consts.e0 * h / consts.t_max)
-               + STATE_BALANCE_ROUNDOFF * roundoff)
-    return abs(residual) / allowed
-
-
-@kernel
-def try_step(t, h, consts, work, sys):
-    """One DOP853 step of size h from work.y, f = wk[W_F] (wk[W_AUX]: the right-hand side's aux
-    there) into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW], in the system sys (layout.System); returns
-    its error norm (inf for a step with a non-finite stage or end state, or one that raises the
-    energy by more than ENERGY_GUARD rtol e0), at least its energy-balance error (balance_error;
-    consts: layout.RunConsts), and counts it.
-
-    Every stage is checked, also those whose tableau weight in y_new or the error estimate is zero
-    (stages 1-4, and f_new): a right-hand side that failed there (a slaved direction that lost its
-    root returns NaN) makes the step fail, so steps shrink until the event that ends the mode is
-    located; accepted, its NaN f_new would poison every later step."""
-    y, p, cs, wk, K = work.y, work.p, work.cs, work.wk, work.K
-    rtol, atol, n = consts.rtol, consts.atol, consts.n
-    f = wk[W_F]
-    y_new = wk[W_YNEW]
-    aux = wk[W_AUX]
-    aux_new = wk[W_AUXNEW]
-    e_cur = mode_energy_at(y, aux, p, cs)
-    rk_step(eval_rhs, t, h, Point(y, f, aux), Point(y_new, wk[W_FNEW], aux_new), sys, K)
-    err = 0.0
-    for i in range(n):
-        if not math.isfinite(y_new[i]):
-            err = math.inf
-        for j in range(N_STAGES + 1):
-            if not math.isfinite(K[j, i]):
-                err = math.inf
-    e_new = mode_energy_at(y_new, aux_new, p, cs)
-    if err == 0.0 and e_new > e_cur + ENERGY_GUARD * rtol * consts.e0:
-        err = math.inf
-    if err == 0.0:
-        defect = max(power_defect(y, f, aux, p, cs), power_defect(y_new, wk[W_FNEW], aux_new, p, cs))
-        nc = norm_size(n)
-        error_scale(y, y_new, nc, rtol, atol, slip_atol(y, y_new, p, rtol, atol), wk[W_ESCALE])
-        err = max(error_norm(K, h, wk[W_ESCALE], nc), balance_error(y, aux, wk[W_DELTA], h, defect, p, cs, consts))
-    tally_step(cs, sys.istats, err <= 1.0, 1)
-    return err
-
-
-@kernel
-def norm_size(n):
-    """The components 0..norm_size(n) - 1 of a state of size n that the step's error norms run over
-    (dop853.error_norm, initial_step): the dynamics and the dissipation books (model.N_CORE). theta,
-    psi, x, y (when integrated) are passive quadratures that never feed back into the dynamics;
-    leaving them out keeps the step sequence, and so every result, identical whether or not a scene
-    asks for them."""
-    return min(n, N_CORE)
-
-
-@kernel
-def error_scale(y, y_new, n, rtol, atol, u_atol, sc):
-    """The error norm's scale of each of the components 0..n-1 of a step from y to y_new (dop853's
-    error_norm reads them): atol + rtol max(|y_i|, |y_new_i|), as in Hairer's dop853, with two
-    rules of this state's. The slip components (Y_U1, Y_U2) take the absolute tolerance u_atol
-    (slip_atol) instead of atol. The inclination's error is relative to its distance from the
-    nearer of upright and flat, min(|alpha|, pi/2 - |alpha|): near flat the dynamics and the face
-    event depend on beta = pi/2 - |alpha| (the face contact lies at beta = 1e-6 rad), which an
-    error relative to |alpha| ~ 1.57 would resolve only to rtol * 1.57 (n: norm_size)."""
-    for i in range(n):
-        mag = max(abs(y[i]), abs(y_new[i]))
-        if i == Y_ALPHA:
-            mag = min(mag, max(0.5 * math.pi - min(abs(y[i]), abs(y_new[i])), 0.0))
-        sc[i] = (u_atol if i == Y_U1 or i == Y_U2 else atol) + rtol * mag
-
-
-@kernel
-def slip_atol(y, y_new, p, rtol, atol):
-    """Absolute tolerance of the slip components on a step: atol, but rtol SLIP_NEAR slip_tol where
-    the slip is within SLIP_NEAR x slip_tol (p[P_UTOL]) of 0 at either end (see SLIP_NEAR), and not
-    below the round-off of the velocities the slip is the difference of (SLIP_ROUNDOFF |omega|)."""
-    near = SLIP_NEAR * p[P_UTOL]
-    if math.hypot(y[Y_U1], y[Y_U2]) < near or math.hypot(y_new[Y_U1], y_new[Y_U2]) < near:
-        w = max(abs(y[Y_W1]), abs(y[Y_W2]), abs(y[Y_W3]), 1.0)
-        return min(atol, max(rtol * near, SLIP_ROUNDOFF * w))
-    return atol
-
-
-@kernel
-def tally_step(cs, istats, accepted, count):
-    """Add count to the accepted or rejected step counters (and to their sliding share)."""
-    sliding = cs[CS_MODE] != ROLL
-    if accepted:
-        istats[I_STEPS] += count
-        istats[I_SLIDE_STEPS] += count * sliding
-    else:
-        istats[I_REJECTED] += count
-        istats[I_SLIDE_REJECTED] += count * sliding
-
-
-@kernel
-def mark_end(t_end, y_at_end, sys, trk, rec):
+def mark_end(t_end, y_at_end, sys, ends, rec):
     """The scene ended (halted, or reached t_max) at t_end in state y_at_end (of the system sys,
-    layout.System): its end state, energy, impact losses and event counts (trk[T_END_*]). The steps
+    layout.System): its end state, energy, impact losses and event counts (ends: layout.EndState). The steps
     after a halt only complete the levels' frequency windows and change none of them."""
     istats, fstats, y_end = sys.istats, rec.fstats, rec.y_end
     fstats[F_TEND] = t_end
     for i in range(sys.n):
         y_end[i] = y_at_end[i]
     fstats[F_EEND] = mode_energy(y_end, sys.p, sys.cs)
-    trk[T_DIMPACT_HALT] = fstats[F_DIMPACT]
-    trk[T_END_TRANS] = istats[I_TRANS]
-    trk[T_END_STICK] = istats[I_STICK]
-    trk[T_END_IMPACTS] = istats[I_IMPACTS]
+    ends.after[EA_DIMPACT] = fstats[F_DIMPACT]
+    ends.counts[EN_TRANS] = istats[I_TRANS]
+    ends.counts[EN_STICK] = istats[I_STICK]
+    ends.counts[EN_IMPACTS] = istats[I_IMPACTS]
 
 
 @kernel
@@ -498,18 +107,16 @@ def begin(lev, work, rec, sys):
     (wk[W_F], wk[W_AUX]), E(0), the event values (wk[W_GOLD]; lev: the first level's energy), the
     end's markers. Returns the outcome that ends the scene at once, else -1."""
     y, p, cs, wk = work.y, sys.p, sys.cs, sys.wk
-    trk, fstats = work.trk, rec.fstats
+    ends, fstats = work.trk.ends, rec.fstats
     f = wk[W_F]
     aux = wk[W_AUX]
     fstats[F_TIMPACT] = -math.inf
     fstats[F_THALT] = math.nan
     fstats[F_THALT_ERR] = math.nan
     fstats[F_APPROACH] = math.nan
-    trk[T_DEEP_E] = 0.0
-    trk[T_END_TRANS] = -1.0
-    trk[T_END_STICK] = -1.0
-    trk[T_END_IMPACTS] = -1.0
-    trk[T_H_AFTER] = 0.0
+    for i in range(N_EN):
+        ends.counts[i] = -1
+    ends.after[EA_H_AFTER] = 0.0
     start_code = start(y, sys)
     eval_rhs(0.0, y, sys, f, aux)
     fstats[F_E0] = mode_energy(y, p, cs)
@@ -530,17 +137,11 @@ def record_start(consts, work, rec, sys):
     maxima, the precession lattice's origin) and its starting step size (before the ceiling h_max);
     consts: layout.RunConsts."""
     y, p, cs, n, wk = work.y, sys.p, sys.cs, sys.n, sys.wk
-    trk = work.trk
     aux = wk[W_AUX]
-    sample_tau = consts.sample_tau
-    ns = sample_tau.shape[0]
-    while int(trk[T_NEXT_SAMPLE]) < ns and sample_tau[int(trk[T_NEXT_SAMPLE])] <= 0.0:
-        record_sample(y, aux, p, cs, n, rec.samples[int(trk[T_NEXT_SAMPLE])])
-        trk[T_NEXT_SAMPLE] += 1.0
+    start_tracking(y, aux, sys, consts.sample_tau, work.trk.track, rec.samples)
     if rec.traj.shape[0] > 0:
         record_traj(0.0, y, aux[X_PHI], cs, n, rec.traj, sys.istats)
-    trk[T_PHI_B] = aux[X_PHI]
-    trk[T_RATES_OLD] = 0.0
+    start_scan(work.trk.scan)
     if consts.peaks_on:
         freq_start(y[Y_THETA], aux[X_PHI], rec.fq)
     return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, consts.rtol, consts.atol, norm_size(n))
@@ -555,42 +156,15 @@ def step_after_end(t, h, t_max, trk):
     grow tenfold each until t overflowed); while the halt fit waits, as the step control has it (the
     motion speeds up towards the halt, and capped steps spent the step budget first); never past
     t_max. Returns -1 where they stop."""
-    if trk[T_H_AFTER] == 0.0:
-        trk[T_H_AFTER] = h
-        trk[T_T_AFTER] = 2.0 * t
-    if t_max - t <= 2.0 * EPS * max(abs(t), 1.0) or (t >= trk[T_T_AFTER] and not deep_pending(trk)):
+    after, track = trk.ends.after, trk.track
+    if after[EA_H_AFTER] == 0.0:
+        after[EA_H_AFTER] = h
+        after[EA_T_AFTER] = 2.0 * t
+    if t_max - t <= 2.0 * EPS * max(abs(t), 1.0) or (t >= after[EA_T_AFTER] and not deep_pending(track)):
         return -1.0
-    if deep_pending(trk):
+    if deep_pending(track):
         return min(h, t_max - t)
-    return min(h, trk[T_H_AFTER], t_max - t)
-
-
-@kernel
-def retract_step(cs, istats):
-    """An accepted step rejected after all (its kept part retried shorter)."""
-    tally_step(cs, istats, True, -1)
-    tally_step(cs, istats, False, 1)
-
-
-@kernel
-def segment_end(span, seg_end, event, check, consts):
-    """The state where the kept part [t, seg_end] of the accepted step span (layout.Span: [t, t + h]
-    from its y0) ends (wk[W_YSEG]): the step end, or the dense output at an event. Returns its
-    energy (mode_energy) and, for an event's segment where `check`, the energy balance error of the
-    kept part (held like a step's: > 1 retries the step shorter; consts: layout.RunConsts), else 0."""
-    y, t, sys = span.y0, span.t0, span.sys
-    p, cs, wk = sys.p, sys.cs, sys.wk
-    y_seg = wk[W_YSEG]
-    if not event:
-        for i in range(sys.n):
-            y_seg[i] = wk[W_YNEW, i]
-        return mode_energy_at(y_seg, wk[W_AUXNEW], p, cs), 0.0
-    dense_eval(span.F, 0, y, t, span.h, seg_end, sys.n, y_seg)
-    e_seg = mode_energy(y_seg, p, cs)
-    if not check:
-        return e_seg, 0.0
-    # the kept part ends on the dense output (7th order)
-    return e_seg, state_balance_error(y, y_seg, mode_energy_at(y, wk[W_AUX], p, cs), e_seg, seg_end - t, p, consts)
+    return min(h, after[EA_H_AFTER], t_max - t)
 
 
 @kernel
@@ -609,7 +183,7 @@ def advance(seg, ended, n, work, fstats):
     """Move the start to the end of the kept part seg (layout.Segment): its state (n components),
     and where no event restarts there the step end's f, aux and event rates; the time spent sliding
     (to the scene's end: ended)."""
-    y, cs, wk, trk = work.y, work.cs, work.wk, work.trk
+    y, cs, wk = work.y, work.cs, work.wk
     event = seg.k >= 0
     if cs[CS_MODE] != ROLL and seg.running:
         fstats[F_SLIDETIME] += (seg.end if not ended else fstats[F_TEND]) - seg.t
@@ -620,11 +194,7 @@ def advance(seg, ended, n, work, fstats):
             wk[W_F, i] = wk[W_FNEW, i]
         for i in range(N_AUX):
             wk[W_AUX, i] = wk[W_AUXNEW, i]
-    # the event rates at the new start are this step's end rates, unless an event restarts here
-    trk[T_RATES_OLD] = 1.0 if not event and trk[T_RATES_NEW] == 1.0 else 0.0
-    if trk[T_RATES_OLD] == 1.0:
-        for k in range(N_DYN_EVENTS):
-            wk[W_RATEOLD, k] = wk[W_RATENEW, k]
+    carry_rates(event, work.trk.scan, wk)
 
 
 @kernel
@@ -676,22 +246,22 @@ def carry_step_end(lev, level_pending, work):
 def finish(outcome, t, h, consts, work, rec):
     """The scene's outputs once the loop stops: outcome, the event counts, end state and energy at
     its end (kept by mark_end, else the last state), the levels' frequencies."""
-    y, p, cs, trk = work.y, work.p, work.cs, work.trk
+    y, p, cs, ends = work.y, work.p, work.cs, work.trk.ends
     istats, fstats, y_end = rec.istats, rec.fstats, rec.y_end
     if outcome < 0:
         outcome = oc.STEP_LIMIT
-    ended = trk[T_END_TRANS] >= 0.0
+    ended = ends.counts[EN_TRANS] >= 0
     if ended:
-        istats[I_TRANS] = int(trk[T_END_TRANS])
-        istats[I_STICK] = int(trk[T_END_STICK])
-        istats[I_IMPACTS] = int(trk[T_END_IMPACTS])
+        istats[I_TRANS] = ends.counts[EN_TRANS]
+        istats[I_STICK] = ends.counts[EN_STICK]
+        istats[I_IMPACTS] = ends.counts[EN_IMPACTS]
     if consts.peaks_on:
         # a window cut by a numerical stop has no value; one cut by the motion's end has its largest
         # symmetric part
-        cut = trk[T_CUT] != 0.0 or outcome == oc.NUMERICAL_ERROR
+        cut = ends.cut[0] or outcome == oc.NUMERICAL_ERROR
         finish_levels(rec.fq, rec.levels, cut)
     if ended:
-        fstats[F_DIMPACT] = trk[T_DIMPACT_HALT]   # the end state and energy were taken at the end
+        fstats[F_DIMPACT] = ends.after[EA_DIMPACT]   # the end state and energy were taken at the end
     else:
         fstats[F_TEND] = t
         for i in range(consts.n):
@@ -713,7 +283,7 @@ def next_try(t, h, outcome, consts, work, rec):
         if h < 0.0:
             return h, outcome, False, True
     if rec.istats[I_STEPS] + rec.istats[I_REJECTED] >= consts.max_steps:
-        work.trk[T_CUT] = 1.0
+        work.trk.ends.cut[0] = True
         return h, oc.STEP_LIMIT if running else outcome, False, True
     at_tmax = running and t + h >= consts.t_max
     if at_tmax:
@@ -725,7 +295,7 @@ def next_try(t, h, outcome, consts, work, rec):
         if running:
             outcome = oc.T_MAX if at_tmax else oc.STEP_SIZE_UNDERFLOW
         if outcome != oc.T_MAX:
-            work.trk[T_CUT] = 1.0
+            work.trk.ends.cut[0] = True
         return h, outcome, at_tmax, True
     return h, outcome, at_tmax, False
 
@@ -742,7 +312,7 @@ def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
     phi_c = segment_phi(seg.end, event, sys) if consts.peaks_on else 0.0
     span = Span(work.F, 0, y, seg.t, seg.h, sys)
     have_dense = seg.dense
-    if not have_dense and dense_wanted(seg, e_seg, wk[W_YSEG, Y_THETA], phi_c, consts, trk, rec.fq):
+    if not have_dense and dense_wanted(seg, e_seg, wk[W_YSEG, Y_THETA], phi_c, consts, trk.track, rec.fq):
         step_dense(seg.t, y, seg.h, wk[W_YNEW], sys, work.K, work.F)
         have_dense = True
     if seg.running:
@@ -750,16 +320,16 @@ def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
         if t_halt >= 0.0:
             outcome = oc.HALTED
             dense_eval(work.F, 0, y, seg.t, seg.h, t_halt, consts.n, wk[W_YBUF])
-            mark_end(t_halt, wk[W_YBUF], sys, trk, rec)
-            start_deep_levels(level_e, rec.levels, work.p, trk, rec.fstats)
-        elif int(trk[T_NEXT_LEVEL]) < level_e.shape[0]:
-            lev = level_e[int(trk[T_NEXT_LEVEL])]
-    elif deep_pending(trk):
-        deep_levels(span, seg.end, e_seg, trk, rec.fstats)
-    record_samples(span, seg.end, rec.fstats[F_TEND] if outcome >= 0 else math.inf, consts.sample_tau, trk, rec.samples)
+            mark_end(t_halt, wk[W_YBUF], sys, trk.ends, rec)
+            start_deep_levels(level_e, rec.levels, work.p, trk.track, rec.fstats)
+        elif trk.track.at[TK_LEVEL] < level_e.shape[0]:
+            lev = level_e[trk.track.at[TK_LEVEL]]
+    elif deep_pending(trk.track):
+        deep_levels(span, seg.end, e_seg, trk.track, rec.fstats)
+    record_samples(span, seg.end, rec.fstats[F_TEND] if outcome >= 0 else math.inf, consts.sample_tau, trk.track, rec.samples)
     # after the end, only while a level's frequencies wait for the motion (not for the whole deep
     # search of the halt fit: its Phi maxima are past the scene's end)
-    if consts.peaks_on and (seg.running or trk[T_PENDING] > 0.0):
+    if consts.peaks_on and (seg.running or pending(trk)):
         track_frequency(span, seg.end, phi_c, have_dense, seg.running, work, rec)
     return outcome, lev
 
@@ -779,28 +349,28 @@ def end_segment(seg, outcome, lev, consts, work, rec, sys):
     if rec.traj.shape[0] > 0 and outcome < 0:
         record_traj(t, y, math.nan if event else wk[W_AUXNEW, X_PHI], cs, consts.n, rec.traj, istats)
     if not event:
-        carry_step_end(lev, int(trk[T_NEXT_LEVEL]) < level_e.shape[0], work)
+        carry_step_end(lev, trk.track.at[TK_LEVEL] < level_e.shape[0], work)
         if seg.at_tmax and outcome < 0:
             outcome = oc.T_MAX
-            mark_end(t, y, sys, trk, rec)
+            mark_end(t, y, sys, trk.ends, rec)
         return outcome, False
     code = restart_after_event(seg.k, t, y, lev, sys, fstats)
     if code < 0:
         return outcome, False
     if seg.running and code == oc.FACE_CONTACT:
         # the disk lies flat: it has halted (docs/model.md, 'Halt')
-        halt_flat(t, rec.levels, trk, level_e)
+        halt_flat(t, rec.levels, trk.track, level_e)
         istats[I_FLAT] = 1
         outcome = oc.HALTED
-        mark_end(t, y, sys, trk, rec)
+        mark_end(t, y, sys, trk.ends, rec)
     elif seg.running:
         outcome = code
         fstats[F_TEND] = t
-    elif code == oc.FACE_CONTACT and deep_pending(trk):
+    elif code == oc.FACE_CONTACT and deep_pending(trk.track):
         # the halt fit waited for a deeper level, and the disk lies flat first: it halted here
         fstats[F_THALT] = t
         fstats[F_THALT_ERR] = location_tol(t)
-        trk[T_DEEP_E] = 0.0
+        end_deep_levels(trk.track)
     return outcome, True
 
 
@@ -826,7 +396,7 @@ def run(settings, level_e, sample_tau, work, rec):
     # wait for the motion after it, or the halt fit for a deeper level: until they are complete, the
     # motion ends (an event's outcome, twice the end's tau), or a guard stops. Every other end (t_max, contact lost, ...) ends the
     # motion the scene simulates: nothing is integrated past it.
-    while outcome < 0 or (outcome == oc.HALTED and (trk[T_PENDING] > 0.0 or deep_pending(trk))):
+    while outcome < 0 or (outcome == oc.HALTED and (pending(trk) or deep_pending(trk.track))):
         running = outcome < 0
         h, outcome, at_tmax, stop = next_try(t, h, outcome, consts, work, rec)
         if stop:
@@ -846,13 +416,13 @@ def run(settings, level_e, sample_tau, work, rec):
         span = Span(work.F, 0, work.y, t, h, sys)
         first_k, seg_end, have_dense = first_event(span, lev, work)
         event = first_k >= 0
-        if event and running and t < trk[T_DIP_END] < t + h:
+        if event and running and t < trk.scan.dip_end[0] < t + h:
             # an event of the forces that only the dense output shows (both step ends on the safe
             # side): its value inside the step carries the interpolant's error, amplified where a
             # held moment's balance reads the slip direction; the dip stands only if the integrated
             # state at its minimum confirms it, so the step is retried to end there
             retract_step(cs, istats)
-            h = trk[T_DIP_END] - t
+            h = trk.scan.dip_end[0] - t
             after_reject = True
             continue
         if not event:
@@ -875,10 +445,32 @@ def run(settings, level_e, sample_tau, work, rec):
     finish(outcome, t, h, consts, work, rec)
 
 
+def tracking_arrays():
+    """The state carried between steps (layout.Tracking), zeroed: its records' one allocation."""
+    return Tracking(ScanState(np.zeros(N_SC, np.bool_), np.zeros(1)),
+                    EndState(np.zeros(N_EN, np.int64), np.zeros(1, np.bool_), np.zeros(N_EA)),
+                    TrackState(np.zeros(N_TK, np.int64), np.zeros(N_TF, np.bool_), np.zeros(N_PH), np.zeros(N_FT)),
+                    np.zeros(1, np.int64))
+
+
+@kernel
+def clear_tracking(trk):
+    """Zero the state carried between steps (layout.Tracking) for a new scene on the same buffers."""
+    for rec in (trk.scan.rates, trk.ends.cut, trk.track.flags):
+        for i in range(rec.shape[0]):
+            rec[i] = False
+    for rec in (trk.scan.dip_end, trk.ends.after, trk.track.phi, trk.track.fit):
+        for i in range(rec.shape[0]):
+            rec[i] = 0.0
+    for rec in (trk.ends.counts, trk.track.at, trk.windows):
+        for i in range(rec.shape[0]):
+            rec[i] = 0
+
+
 def work_arrays():
     """The buffers a run works in (layout.Work), zeroed: the one place their shapes are written."""
     return Work(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
-                np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), np.zeros(N_TRACK))
+                np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), tracking_arrays())
 
 
 def record_arrays(n_levels, n_samples, traj_rows, peak_rows):

@@ -65,7 +65,7 @@ W_DELTA = 31      # the step's (or kept segment's) increment y_new - y before ro
 W_YFLOW = 32      # SLAVED: the state a short way along the motion (the slip direction's lag)
 W_DYFLOW = 33
 W_AUXFLOW = 34
-W_ESCALE = 35     # the error norm's per-component scales of this step (integrate.error_scale)
+W_ESCALE = 35     # the error norm's per-component scales of this step (accept.error_scale)
 N_WORK = 36
 N_WCOLS = max(N_FULL, N_AUX, N_EVENTS)   # columns of the work buffer: a state, an aux or every event's value
 
@@ -88,27 +88,42 @@ F_TEND, F_SLIDETIME, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_NFMAX, F_TIMPACT = rang
 F_THALT, F_THALT_ERR, F_APPROACH = 8, 9, 10
 N_FSTATS = 11
 
-# --- tracking state of the level/peak/sample recorders (float64) ----------------------------------
-T_NEXT_LEVEL, T_NEXT_SAMPLE, T_PHI_A, T_PHI_B, T_TA, T_TB, T_PREV_OK, T_TPREV, T_HPREV = range(9)
-T_PENDING, T_CUT, T_NPK = 9, 10, 11   # T_PENDING: level frequencies still waiting for the motion
-                  # after them; T_CUT: 1 where a numerical guard stopped the steps (step budget, step
-                  # floor), running or after a halt: the windows still open then get no value
-T_DIMPACT_HALT = 12   # impact dissipation up to the end (the steps after a halt do not count)
-T_PEAK_RING = 13  # 1: the peak buffer is a ring of its last rows (batch path; only the summary is kept)
-T_PREV_DENSE = 14  # 1: F[7:14] holds the previous step's dense output; 0: K[K_PREV:] holds its stages
-T_RATES_OLD = 15  # 1: wk[W_RATEOLD] holds the event rates at the current step start (the last step end's)
-T_RATES_NEW = 16  # 1: this step's scan computed wk[W_RATENEW] (the rates at its end)
-T_DIP_END = 17    # the first event found by an interior dip of an event of the forces: the time of the
-                  # dense output's minimum there, where an integrated step confirms it; -1 else
-T_END_TRANS, T_END_STICK, T_END_IMPACTS = 18, 19, 20   # event counts at the scene's end (halt or
-                  # t_max; -1 before it): the steps after a halt do not count
-T_H_AFTER = 21    # the last step size before the end (the steps after it do not grow past it; 0 before)
-T_T_AFTER = 22    # ... nor run past this tau (twice the end's)
-T_DEEP_E = 23     # the energy (> 0) of the next level below the last one that the halt fit waits for (0: none)
-T_DEEP_B = 24     # ... its inclination (rad)
-T_FIT_T = 25      # 3 slots: the tau of the last three levels crossed, oldest first (the halt fit's input)
-T_FIT_B = 28      # 3 slots: ... their inclinations (rad)
-N_TRACK = 31
+# --- the state the loop, the scan and the recorders carry between steps: typed records, each written
+# by one module (its owner; integrate.tracking_arrays allocates them zeroed, and clear_tracking
+# zeroes them for a batch's next scene). Grouped in Tracking (below).
+# ScanState (scan.py): rates (bool, N_SC) SC_RATES_OLD: wk[W_RATEOLD] holds the event rates at the
+# current step start (the last step end's); SC_RATES_NEW: this step's scan computed wk[W_RATENEW] (the
+# rates at its end); dip_end (float64, 1): the first event found by an interior dip of an event of the
+# forces: the time of the dense output's minimum there, where an integrated step confirms it; -1 else.
+SC_RATES_OLD, SC_RATES_NEW = 0, 1
+N_SC = 2
+# EndState (integrate.py): the scene's end (halt or t_max), after which the steps only complete the
+# levels' frequency windows and the halt fit. counts (int64, N_EN): the event counts at the end
+# (EN_TRANS, EN_STICK, EN_IMPACTS; -1 before it); cut (bool, 1): a numerical guard stopped the steps
+# (step budget, step floor), running or after a halt: the windows still open then get no value;
+# after (float64, N_EA): EA_DIMPACT the impact dissipation up to the end, EA_H_AFTER the last step
+# size before the end (0 before it), EA_T_AFTER twice the end's tau (the steps after it stop there).
+EN_TRANS, EN_STICK, EN_IMPACTS = 0, 1, 2
+N_EN = 3
+EA_DIMPACT, EA_H_AFTER, EA_T_AFTER = 0, 1, 2
+N_EA = 3
+# TrackState (tracking.py): at (int64, N_TK): TK_LEVEL the next level to cross, TK_SAMPLE the next
+# sample, TK_FHAT_PENDING the crossed levels whose f_hat waits for maxima after them, TK_NPK the
+# maxima counted; flags (bool, N_TF): TF_PREV_OK a previous segment exists, TF_PREV_DENSE F[7:14]
+# holds the previous step's dense output (else K[K_PREV:] its stages), TF_RING the peak buffer is a
+# ring of its last rows (set by the buffers' creator: the batch path keeps only the summary); phi
+# (float64, N_PH): Phi at the last two segment ends (PH_A, PH_B) and their tau (PH_TA, PH_TB), the
+# previous step's start and size (PH_TPREV, PH_HPREV); fit (float64, N_FT): the halt fit's next
+# level below the last one (FT_DEEP_E its energy, > 0; 0: none; FT_DEEP_B its inclination, rad) and
+# the last three levels crossed, oldest first (FT_T: 3 slots of tau, FT_B: 3 of inclination).
+TK_LEVEL, TK_SAMPLE, TK_FHAT_PENDING, TK_NPK = 0, 1, 2, 3
+N_TK = 4
+TF_PREV_OK, TF_PREV_DENSE, TF_RING = 0, 1, 2
+N_TF = 3
+PH_A, PH_B, PH_TA, PH_TB, PH_TPREV, PH_HPREV = range(6)
+N_PH = 6
+FT_DEEP_E, FT_DEEP_B, FT_T, FT_B = 0, 1, 2, 5
+N_FT = 8
 
 # --- RK stage buffer ----------------------------------------------------------------------------
 K_PREV = N_STAGES_EXTENDED      # first row of the previous step's stages
@@ -141,8 +156,15 @@ PEAK_COLS = 3
 # Work: what the integrator integrates and works in: the state y (N_FULL, in place: the initial
 # state in, the last state out), the parameters p (N_PARAMS), the contact state cs (N_CS), the work
 # buffer wk (N_WORK x N_WCOLS), the RK stages K (N_KROWS x N_FULL), the dense output F (14 x N_FULL)
-# and the recorders' tracking state trk (N_TRACK).
+# and the state carried between steps trk (Tracking).
 Work = namedtuple("Work", "y p cs wk K F trk")
+# Tracking: the state carried between steps, one record per owner (see SC_*, EN_*, TK_* above): scan
+# (ScanState, scan.py), ends (EndState, integrate.py), track (TrackState, tracking.py) and windows
+# (int64, 1: the levels' precession windows still open, frequency.py).
+Tracking = namedtuple("Tracking", "scan ends track windows")
+ScanState = namedtuple("ScanState", "rates dip_end")
+EndState = namedtuple("EndState", "counts cut after")
+TrackState = namedtuple("TrackState", "at flags phi fit")
 # Record: what a run writes: istats (N_ISTATS, int64), fstats (N_FSTATS), levels (n_levels x
 # LEVEL_COLS + 1: the last column L_PENDING), samples (n_samples x SAMPLE_COLS), traj (cap x
 # TRAJ_COLS), peaks (cap x PEAK_COLS), y_end (N_FULL) and the frequency windows fq
@@ -161,7 +183,7 @@ RunConsts = namedtuple("RunConsts", "n rtol atol h_max t_max max_steps peaks_on 
 # it through to the right-hand side it is given and reads only n and wk.
 System = namedtuple("System", "p cs n wk istats")
 # Point: a state y, its derivative f and the right-hand side's aux there (N_AUX): a step's start
-# and end (integrate.try_step, dop853.rk_step).
+# and end (accept.try_step, dop853.rk_step).
 Point = namedtuple("Point", "y f aux")
 # Span: the dense output that a search on it reads (roots.py): rows row0..row0 + 6 of F (work.F;
 # 0: this step's, N_DENSE: the previous step's) hold the coefficients of the step from the state

@@ -50,13 +50,13 @@ N_PARAMS = 12
 
 # --- auxiliary outputs of the right-hand side ----------------------------------------------
 X_PHI, X_F1, X_F2, X_SIG1, X_SIG2, X_SIG3, X_G1, X_G2, X_G3, X_OK = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
-X_DCROSS = 10   # SLAVED only (contact.eval_rhs): d cross/d nu at the slaved direction (< 0: attracting)
+X_DCROSS = 10   # SLAVED only (contact_rhs.eval_rhs): d cross/d nu at the slaved direction (< 0: attracting)
 # sin(alpha), cos(alpha) of the state the right-hand side was evaluated at: the energy kernels of
 # the step control and the events read them (*_trig) instead of evaluating the pair again
 X_SINA, X_COSA = 11, 12
-X_NU = 13       # SLAVED only (contact.eval_rhs): the quasi-static slip direction at this state (rad)
+X_NU = 13       # SLAVED only (contact_rhs.eval_rhs): the quasi-static slip direction at this state (rad)
 X_LAG = 14      # SLAVED only: the slip direction's lag behind it (rad); the friction acts along X_NU + X_LAG
-X_SLAVE_ERR = 15  # SLAVED only: how far the slaved direction is from exact (contact.slaved_slip; inf: invalid)
+X_SLAVE_ERR = 15  # SLAVED only: how far the slaved direction is from exact (contact_rhs.slaved_slip; inf: invalid)
 N_AUX = 16
 
 
@@ -249,7 +249,7 @@ def energy_rate_trig(y, dy, p, side, slip, s, c):
     With dy the right-hand side, energy_rate(y, dy) + dy[Y_DSLIDE] + dy[Y_DK1..3] is exactly 0 for
     the exact flow (the power balance of eq. 6.1); what the evaluated right-hand side leaves of it
     is its round-off in the energy direction, which near flat (tan(alpha) ~ 1e6 in the gyroscopic
-    terms) is far above the round-off of the energy's own terms (integrate.balance_error).
+    terms) is far above the round-off of the energy's own terms (accept.balance_error).
     Uses de/dalpha = f, df/dalpha = -e (eq. 4.9); s, c: sin, cos of y's inclination."""
     h = side * p[P_H]
     e = c + h * s

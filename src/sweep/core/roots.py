@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from .constants import EPS
-from .contact import eval_rhs
+from .contact_rhs import eval_rhs
 from .dop853 import dense_eval
 from .event_dispatch import event_value, event_values, state_event_value
 from .event_ids import EVENTS, N_EVENTS

@@ -1,6 +1,7 @@
 """Recorders that read an accepted step's dense output: halt levels, samples, Phi maxima, trajectory.
 
-They never change the trajectory. `trk` (float64, layout.T_*) carries their state between steps;
+They never change the trajectory. Their state between steps is layout.TrackState (work.trk.track:
+at, flags, phi, fit; written here only);
 the rows they write have the columns layout.L_* (levels), SA_* (samples), TR_* (trajectory) and
 PK_* (maxima of Phi). The step they read comes as a layout.Span (its dense output, from work.y, and
 the system it ran in).
@@ -9,18 +10,18 @@ from __future__ import annotations
 
 import math
 
-from .contact import eval_rhs, mode_energy
+from .contact_rhs import eval_rhs, mode_energy
 from .dop853 import N_DENSE, dense_coeffs, dense_eval
 from .event_ids import EV_LEVEL
 from .fits import halt_from_three
 from .frequency import (Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_step, open_level, peak_candidate,
                         peak_confirmed)
 from .jit import kernel
-from .layout import (CS_MODE, F_APPROACH, F_NFMAX, F_TEND, F_THALT, F_THALT_ERR, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ,
-                     K_PREV, L_ALPHA, L_FHAT, L_PENDING, L_TAU, N_CS, PK_PHI, PK_TAU, PK_THETA, SA_ENERGY, SA_MODE,
-                     SA_PHI, SA_Y, Span, System, TR_MODE, TR_PHI, TR_TAU, TR_Y, T_DEEP_B, T_DEEP_E, T_FIT_B, T_FIT_T,
-                     T_HPREV, T_NEXT_LEVEL, T_NEXT_SAMPLE, T_NPK, T_PEAK_RING, T_PENDING, T_PHI_A, T_PHI_B,
-                     T_PREV_DENSE, T_PREV_OK, T_TA, T_TB, T_TPREV, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV)
+from .layout import (CS_MODE, FT_B, FT_DEEP_B, FT_DEEP_E, FT_T, F_APPROACH, F_NFMAX, F_TEND, F_THALT, F_THALT_ERR,
+                     I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, L_ALPHA, L_FHAT, L_PENDING, L_TAU, N_CS, PH_A, PH_B,
+                     PH_HPREV, PH_TA, PH_TB, PH_TPREV, PK_PHI, PK_TAU, PK_THETA, SA_ENERGY, SA_MODE, SA_PHI, SA_Y, Span,
+                     System, TF_PREV_DENSE, TF_PREV_OK, TF_RING, TK_FHAT_PENDING, TK_LEVEL, TK_NPK, TK_SAMPLE, TR_MODE,
+                     TR_PHI, TR_TAU, TR_Y, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV)
 from .model import X_PHI, Y_ALPHA, Y_THETA, steady_rolling_energy
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
@@ -41,29 +42,47 @@ def dense_wanted(seg, e_seg, theta_seg, phi_c, consts, trk, fq):
     a sample due, a new point of the precession lattice, a bracketed Phi maximum. e_seg, theta_seg,
     phi_c: the energy (mode_energy), theta and Phi at the segment end; consts: layout.RunConsts."""
     level_e, sample_tau = consts.level_e, consts.sample_tau
-    L = int(trk[T_NEXT_LEVEL])
+    L = trk.at[TK_LEVEL]
     if seg.running and L < level_e.shape[0] and e_seg - level_e[L] <= 0.0:
         return True
-    if not seg.running and deep_pending(trk) and e_seg - trk[T_DEEP_E] <= 0.0:
+    if not seg.running and deep_pending(trk) and e_seg - trk.fit[FT_DEEP_E] <= 0.0:
         return True
-    j = int(trk[T_NEXT_SAMPLE])
+    j = trk.at[TK_SAMPLE]
     if j < sample_tau.shape[0] and sample_tau[j] <= seg.end:
         return True
     return consts.peaks_on and (lattice_due(theta_seg, fq) or peak_bracketed(phi_c, trk))
 
 
 @kernel
+def start_tracking(y, aux, sys, sample_tau, trk, samples):
+    """What the recorders take at tau = 0 from the state y (aux: its right-hand side's): the samples
+    due then (sample_tau, ascending), and Phi for the maxima (trk: layout.TrackState)."""
+    ns = sample_tau.shape[0]
+    while trk.at[TK_SAMPLE] < ns and sample_tau[trk.at[TK_SAMPLE]] <= 0.0:
+        record_sample(y, aux, sys.p, sys.cs, sys.n, samples[trk.at[TK_SAMPLE]])
+        trk.at[TK_SAMPLE] += 1
+    trk.phi[PH_B] = aux[X_PHI]
+
+
+@kernel
+def pending(trk):
+    """Do a level's frequencies still wait for the motion after it (trk: layout.Tracking): an f_hat
+    for maxima, or a precession window for lattice points?"""
+    return trk.track.at[TK_FHAT_PENDING] + trk.windows[0] > 0
+
+
+@kernel
 def peak_bracketed(phi_c, trk):
     """Phi at the last three segment ends a < b >= c: a maximum lies in the last two segments."""
-    return trk[T_PHI_B] > trk[T_PHI_A] and trk[T_PHI_B] >= phi_c and trk[T_PREV_OK] > 0.0
+    return trk.phi[PH_B] > trk.phi[PH_A] and trk.phi[PH_B] >= phi_c and trk.flags[TF_PREV_OK]
 
 
 @kernel
 def step_dense(t, y, h, y_new, sys, K, F):
-    """dop853.dense_coeffs for the contact right-hand side (contact.eval_rhs): the dense output F[0:7]
+    """dop853.dense_coeffs for the contact right-hand side (contact_rhs.eval_rhs): the dense output F[0:7]
     of the step from y at t over h to y_new, from its stages K, in the system sys (layout.System).
     A kernel of its own: the stepper's kernels are inlined into their callers, and this one
-    compiled copy serves every step's dense output (integrate.dense_built, previous_dense)."""
+    compiled copy serves every step's dense output (scan.dense_built, previous_dense)."""
     dense_coeffs(eval_rhs, t, y, h, y_new, sys, K, F)
 
 
@@ -72,11 +91,11 @@ def previous_dense(sys, work):
     """The previous step's dense output into F[7:14], from its stages kept in K[K_PREV:] (a step
     without an event: it ended in work.y, the current step's start, with f = its last stage), in
     the contact state it ran in (wk[W_CSPREV]); sys: the current step's layout.System."""
-    K, F, trk, wk = work.K, work.F, work.trk, sys.wk
-    if trk[T_PREV_DENSE] == 0.0:
+    K, F, trk, wk = work.K, work.F, work.trk.track, sys.wk
+    if not trk.flags[TF_PREV_DENSE]:
         before = System(sys.p, wk[W_CSPREV, :N_CS], sys.n, wk, sys.istats)
-        step_dense(trk[T_TPREV], wk[W_YPREV], trk[T_HPREV], work.y, before, K[K_PREV:], F[N_DENSE:])
-        trk[T_PREV_DENSE] = 1.0
+        step_dense(trk.phi[PH_TPREV], wk[W_YPREV], trk.phi[PH_HPREV], work.y, before, K[K_PREV:], F[N_DENSE:])
+        trk.flags[TF_PREV_DENSE] = True
 
 
 @kernel
@@ -90,8 +109,8 @@ def record_levels(span, seg_end, e_seg, consts, trk, rec):
     y, t, h, sys = span.y0, span.t0, span.h, span.sys
     level_e, level_out = consts.level_e, rec.levels
     nl = level_e.shape[0]
-    while int(trk[T_NEXT_LEVEL]) < nl:
-        L = int(trk[T_NEXT_LEVEL])
+    while trk.track.at[TK_LEVEL] < nl:
+        L = trk.track.at[TK_LEVEL]
         gl = e_seg - level_e[L]
         if not gl <= 0.0:
             return -1.0
@@ -108,9 +127,9 @@ def record_levels(span, seg_end, e_seg, consts, trk, rec):
         level_out[L, L_ALPHA] = ybuf[Y_ALPHA]
         if consts.peaks_on:
             level_out[L, L_PENDING] = 1.0
-            trk[T_PENDING] += 1.0
-            open_level(L, tl, rec.fq, trk)
-        trk[T_NEXT_LEVEL] = L + 1
+            trk.track.at[TK_FHAT_PENDING] += 1
+            open_level(L, tl, rec.fq, trk.windows)
+        trk.track.at[TK_LEVEL] = L + 1
         rec.istats[I_LEVELS] = L + 1
         if L + 1 == nl:
             return tl
@@ -122,9 +141,9 @@ def halt_flat(t, level_out, trk, level_e):
     """The disk lies flat at t: the levels not yet crossed are crossed now (the face impact
     dissipates what is left); levels recorded without frequencies."""
     nl = level_e.shape[0]
-    for L in range(int(trk[T_NEXT_LEVEL]), nl):
+    for L in range(trk.at[TK_LEVEL], nl):
         level_out[L, L_TAU] = t
-    trk[T_NEXT_LEVEL] = nl
+    trk.at[TK_LEVEL] = nl
 
 
 @kernel
@@ -144,15 +163,15 @@ def record_samples(span, seg_end, t_stop, sample_tau, trk, samples):
     sys = span.sys
     p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     ns = sample_tau.shape[0]
-    while int(trk[T_NEXT_SAMPLE]) < ns:
-        j = int(trk[T_NEXT_SAMPLE])
+    while trk.at[TK_SAMPLE] < ns:
+        j = trk.at[TK_SAMPLE]
         ts = sample_tau[j]
         if ts > seg_end or ts > t_stop:
             return
         dense_eval(span.F, 0, span.y0, span.t0, span.h, ts, n, wk[W_YBUF])
         eval_rhs(ts, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])
         record_sample(wk[W_YBUF], wk[W_AUXBUF], p, cs, n, samples[j])
-        trk[T_NEXT_SAMPLE] = j + 1
+        trk.at[TK_SAMPLE] = j + 1
 
 
 @kernel
@@ -176,8 +195,8 @@ def track_frequency(span, seg_end, phi_c, have_dense, running, work, rec):
     t = span.t0; its end state in wk[W_YSEG], Phi there phi_c): the precession lattice, the Phi
     maxima (the previous step's dense output where a maximum is bracketed), and the window of the
     last two segments kept for the next bracket."""
-    lattice_step(span, seg_end, work.trk, rec)
-    if peak_bracketed(phi_c, work.trk):
+    lattice_step(span, seg_end, work.trk.windows, rec)
+    if peak_bracketed(phi_c, work.trk.track):
         previous_dense(span.sys, work)
     track_peaks(span, seg_end, phi_c, running, work, rec)
     shift_peak_window(span, seg_end, phi_c, have_dense, work)
@@ -190,24 +209,24 @@ def track_peaks(this, seg_end, phi_c, running, work, rec):
     of its bracket it passes the hysteresis filter (frequency.peak_candidate); Phi at this segment
     end (phi_c) may confirm the candidate, which is then counted and resolves pending levels' f_hat."""
     sys, t = this.sys, this.t0
-    wk, F, trk = sys.wk, work.F, work.trk
+    wk, F, trk = sys.wk, work.F, work.trk.track
     peaks, istats, fq = rec.peaks, rec.istats, rec.fq
-    npk = int(trk[T_NPK])
-    pa = trk[T_PHI_A]
+    npk = trk.at[TK_NPK]
+    pa = trk.phi[PH_A]
     if peak_bracketed(phi_c, trk):
-        before = Span(F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV],
+        before = Span(F, N_DENSE, wk[W_YPREV], trk.phi[PH_TPREV], trk.phi[PH_HPREV],
                       System(sys.p, wk[W_CSPREV, :N_CS], sys.n, wk, istats))
         left, right = peak_sides(seg_end, before, this, trk)
-        tp1, pv1 = trk[T_TB], -math.inf
+        tp1, pv1 = trk.phi[PH_TB], -math.inf
         tp2, pv2 = t, -math.inf
         if left:
-            tp1, pv1 = brent_max_phi(trk[T_TA], trk[T_TB], before)
+            tp1, pv1 = brent_max_phi(trk.phi[PH_TA], trk.phi[PH_TB], before)
         if right:
             tp2, pv2 = brent_max_phi(t, seg_end, this)
         ybuf = wk[W_YBUF]
         if pv1 >= pv2:
             tpk, pvk = tp1, pv1
-            dense_eval(F, N_DENSE, wk[W_YPREV], trk[T_TPREV], trk[T_HPREV], tpk, sys.n, ybuf)
+            dense_eval(F, N_DENSE, wk[W_YPREV], trk.phi[PH_TPREV], trk.phi[PH_HPREV], tpk, sys.n, ybuf)
         else:
             tpk, pvk = tp2, pv2
             dense_eval(F, 0, this.y0, t, this.h, tpk, sys.n, ybuf)
@@ -218,31 +237,31 @@ def track_peaks(this, seg_end, phi_c, running, work, rec):
         if genuine:
             peak_candidate(tpk, pvk, thk, fq)
     if peak_confirmed(phi_c, fq):
-        if npk >= peaks.shape[0] and trk[T_PEAK_RING] == 0.0:
+        if npk >= peaks.shape[0] and not trk.flags[TF_RING]:
             istats[I_OVERFLOW] |= 2
         else:
             _add_peak(fq[0, Q_CAND_T], fq[0, Q_CAND_PHI], fq[0, Q_CAND_TH], npk, running, trk, rec)
             npk += 1
-    trk[T_NPK] = npk
+    trk.at[TK_NPK] = npk
     istats[I_PEAKS] = npk
 
 
 @kernel
 def peak_sides(seg_end, before, this, trk):
-    """Which of the two segments bracketing a maximum of Phi (the previous one, [T_TA, T_TB], and
-    [t, seg_end], with T_TB = t = this.t0) to search: (left, right). Phi at T_TB is known; read a
+    """Which of the two segments bracketing a maximum of Phi (the previous one, [PH_TA, PH_TB], and
+    [t, seg_end], with PH_TB = t = this.t0) to search: (left, right). Phi at PH_TB is known; read a
     gap past it on each side. Where it rises on one side and falls on the other, the maximum lies on
-    the rising side (for a smooth Phi, one within half the gap of T_TB falls on both sides), and a
-    search of the falling side would only creep to T_TB (Brent's golden steps, ~40 RHS calls) to
+    the rising side (for a smooth Phi, one within half the gap of PH_TB falls on both sides), and a
+    search of the falling side would only creep to PH_TB (Brent's golden steps, ~40 RHS calls) to
     lose the comparison. Otherwise, or where a difference is within PEAK_SIDE_TOL, both are searched.
     before, this: the two steps' dense outputs (layout.Span)."""
     t = this.t0
-    gap = PEAK_SIDE_GAP * min(trk[T_TB] - trk[T_TA], seg_end - t)
+    gap = PEAK_SIDE_GAP * min(trk.phi[PH_TB] - trk.phi[PH_TA], seg_end - t)
     if not gap > 0.0:
         return True, True
-    phi_b = trk[T_PHI_B]
+    phi_b = trk.phi[PH_B]
     tol = PEAK_SIDE_TOL * abs(phi_b)
-    d_left = phi_on_dense(trk[T_TB] - gap, before) - phi_b
+    d_left = phi_on_dense(trk.phi[PH_TB] - gap, before) - phi_b
     d_right = phi_on_dense(t + gap, this) - phi_b
     if d_left > tol and d_right < -tol:
         return True, False
@@ -257,7 +276,7 @@ def _add_peak(tpk, pvk, thk, npk, running, trk, rec):
     largest f_hat seen (rec.fstats[F_NFMAX]; running: the scene has not ended) and the f_hat of the
     levels waiting for it (rec.levels)."""
     level_out, peaks, fstats = rec.levels, rec.peaks, rec.fstats
-    cap = peaks.shape[0]   # row of peak j: j, or j % cap where the buffer is a ring (trk[T_PEAK_RING])
+    cap = peaks.shape[0]   # row of peak j: j, or j % cap where the buffer is a ring (flags[TF_RING])
     peaks[npk % cap, PK_TAU] = tpk
     peaks[npk % cap, PK_PHI] = pvk
     peaks[npk % cap, PK_THETA] = thk
@@ -276,7 +295,7 @@ def _add_peak(tpk, pvk, thk, npk, running, trk, rec):
                 else:
                     level_out[L, L_FHAT] = 2.0 / (peaks[j % cap, PK_TAU] - peaks[(j - 2) % cap, PK_TAU])
             level_out[L, L_PENDING] = 0.0
-            trk[T_PENDING] -= 1.0
+            trk.at[TK_FHAT_PENDING] -= 1
 
 
 @kernel
@@ -284,29 +303,29 @@ def shift_peak_window(span, seg_end, phi_c, have_dense, work):
     """Keep this segment's Phi (phi_c at seg_end), contact state and dense output (or, where it was
     not built, the stages it is built from: previous_dense) of the step span (layout.Span, from
     work.y) for the next bracket."""
-    y, cs, K, F, trk = work.y, work.cs, work.K, work.F, work.trk
+    y, cs, K, F, trk = work.y, work.cs, work.K, work.F, work.trk.track
     n, wk = span.sys.n, span.sys.wk
-    trk[T_PHI_A] = trk[T_PHI_B]
-    trk[T_TA] = trk[T_TB]
-    trk[T_PHI_B] = phi_c
-    trk[T_TB] = seg_end
+    trk.phi[PH_A] = trk.phi[PH_B]
+    trk.phi[PH_TA] = trk.phi[PH_TB]
+    trk.phi[PH_B] = phi_c
+    trk.phi[PH_TB] = seg_end
     if have_dense:
         for r in range(N_DENSE):
             for i in range(n):
                 F[N_DENSE + r, i] = F[r, i]
-        trk[T_PREV_DENSE] = 1.0
+        trk.flags[TF_PREV_DENSE] = True
     else:
         for r in range(N_STAGES + 1):
             for i in range(n):
                 K[K_PREV + r, i] = K[r, i]
-        trk[T_PREV_DENSE] = 0.0
+        trk.flags[TF_PREV_DENSE] = False
     for i in range(n):
         wk[W_YPREV, i] = y[i]
     for i in range(N_CS):
         wk[W_CSPREV, i] = cs[i]
-    trk[T_TPREV] = span.t0
-    trk[T_HPREV] = span.h
-    trk[T_PREV_OK] = 1.0
+    trk.phi[PH_TPREV] = span.t0
+    trk.phi[PH_HPREV] = span.h
+    trk.flags[TF_PREV_OK] = True
 
 
 # Each level the halt fit waits for after the last one lies this factor below the one before (decades,
@@ -336,35 +355,41 @@ def level_inclination(e, p):
 
 @kernel
 def push_fit_level(trk, tau, beta):
-    """A level crossed at tau with inclination beta joins the last three (trk[T_FIT_*])."""
+    """A level crossed at tau with inclination beta joins the last three (trk.fit[FT_T:], trk.fit[FT_B:])."""
     for j in range(2):
-        trk[T_FIT_T + j] = trk[T_FIT_T + j + 1]
-        trk[T_FIT_B + j] = trk[T_FIT_B + j + 1]
-    trk[T_FIT_T + 2] = tau
-    trk[T_FIT_B + 2] = beta
+        trk.fit[FT_T + j] = trk.fit[FT_T + j + 1]
+        trk.fit[FT_B + j] = trk.fit[FT_B + j + 1]
+    trk.fit[FT_T + 2] = tau
+    trk.fit[FT_B + 2] = beta
 
 
 @kernel
 def fit_last_three(trk):
     """(t_halt, p) of the halt fit (halt.halt_from_three) on the last three levels crossed, NaNs
     where there are fewer or the fit has no finite root."""
-    if math.isnan(trk[T_FIT_T]):
+    if math.isnan(trk.fit[FT_T]):
         return math.nan, math.nan
-    return halt_from_three(trk[T_FIT_T], trk[T_FIT_T + 1], trk[T_FIT_T + 2],
-                           trk[T_FIT_B], trk[T_FIT_B + 1], trk[T_FIT_B + 2])
+    return halt_from_three(trk.fit[FT_T], trk.fit[FT_T + 1], trk.fit[FT_T + 2],
+                           trk.fit[FT_B], trk.fit[FT_B + 1], trk.fit[FT_B + 2])
 
 
 @kernel
 def deep_pending(trk):
     """Is a level below the last one still awaited for the halt fit (its energy, > 0, in trk)?"""
-    return trk[T_DEEP_E] > 0.0
+    return trk.fit[FT_DEEP_E] > 0.0
+
+
+@kernel
+def end_deep_levels(trk):
+    """The halt fit waits for no deeper level (the disk lies flat first: it halted there)."""
+    trk.fit[FT_DEEP_E] = 0.0
 
 
 @kernel
 def next_deep_level(trk, p):
     """The halt fit waits for the level DEEP_FACTOR below the last one crossed."""
-    trk[T_DEEP_B] = trk[T_FIT_B + 2] / DEEP_FACTOR
-    trk[T_DEEP_E] = steady_rolling_energy(trk[T_DEEP_B], p)
+    trk.fit[FT_DEEP_B] = trk.fit[FT_B + 2] / DEEP_FACTOR
+    trk.fit[FT_DEEP_E] = steady_rolling_energy(trk.fit[FT_DEEP_B], p)
 
 
 @kernel
@@ -376,8 +401,8 @@ def start_deep_levels(level_e, levels, p, trk, fstats):
     flat (docs/model.md, 'Halt time')."""
     nl = level_e.shape[0]
     for j in range(3):
-        trk[T_FIT_T + j] = math.nan
-        trk[T_FIT_B + j] = math.nan
+        trk.fit[FT_T + j] = math.nan
+        trk.fit[FT_B + j] = math.nan
     for L in range(max(nl - 3, 0), nl):
         push_fit_level(trk, levels[L, L_TAU], level_inclination(level_e[L], p))
     th, _ = fit_last_three(trk)
@@ -393,15 +418,15 @@ def deep_levels(span, seg_end, e_seg, trk, fstats):
     root, the halt time, its error (the remainder t_halt - t_last) and the approach exponent go to
     fstats (F_THALT, F_THALT_ERR, F_APPROACH), and the search ends."""
     y, t, p, cs = span.y0, span.t0, span.sys.p, span.sys.cs
-    while deep_pending(trk) and e_seg - trk[T_DEEP_E] <= 0.0:
-        le = trk[T_DEEP_E]
+    while deep_pending(trk) and e_seg - trk.fit[FT_DEEP_E] <= 0.0:
+        le = trk.fit[FT_DEEP_E]
         gl0 = mode_energy(y, p, cs) - le
         if gl0 <= 0.0:
             tl = t
         else:
             ta, tb = locate(EV_LEVEL, t, gl0, seg_end, e_seg - le, span, le)
             tl = 0.5 * (ta + tb)
-        push_fit_level(trk, tl, trk[T_DEEP_B])
+        push_fit_level(trk, tl, trk.fit[FT_DEEP_B])
         th, pw = fit_last_three(trk)
         if math.isnan(th):
             next_deep_level(trk, p)
@@ -409,4 +434,4 @@ def deep_levels(span, seg_end, e_seg, trk, fstats):
             fstats[F_THALT] = th
             fstats[F_THALT_ERR] = th - tl
             fstats[F_APPROACH] = pw
-            trk[T_DEEP_E] = 0.0
+            trk.fit[FT_DEEP_E] = 0.0

@@ -1,0 +1,323 @@
+"""The contact's right-hand side per contact state (constants.ROLL, SLIDE, SLAVED), and the slip speeds
+that bound the modes. The kernels take the system they evaluate as one group, `sys` (layout.System:
+parameters, contact state, state size, work buffer, counters); slip_tol is p[P_UTOL].
+
+Modes (docs/model.md, 'Modes, signs and sticking'):
+  ROLL    no slip; friction is what rolling needs, inside the static cone |F| <= mu_s Phi.
+  SLIDE   friction -mu_d Phi u/|u| (eq. 4.7), the slip integrated in Cartesian form.
+  SLAVED  a slow slip, |u| <= the slaving speed u_s (slave_speed: slave_tol mu_d Phi / (1 + |theta'|)): its direction
+          is not integrated but solved at every evaluation as the slow manifold of the direction
+          dynamics (the direction rate, ~ mu_d Phi / u, is the stiff mode of the sliding equations
+          at u -> 0): the quasi-static direction nu*, where the slip acceleration is parallel to the
+          slip, plus the lag behind it, first order in the relaxation time (slaved_slip). Entered at a slip onset (u = 0) and from SLIDE where
+          |u| falls to u_s onto the attracting quasi-static direction, if there is one (slip.try_slave);
+          it hands over to SLIDE where u grows past SLAVE_EXIT u_s or the direction folds away, and
+          ends in ROLL where u.s returns to 0 (located events; the velocity is continuous).
+"""
+from __future__ import annotations
+
+import math
+
+from .constants import BELOW, EPS, ROLL, SLAVED, SLIDE
+from .jit import kernel
+from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_SLAVE_OFF, CS_STUCK, I_RHS, System, W_AUXFLOW,
+                     W_AUXSLOPE, W_DYFLOW, W_DYSLOPE, W_PFRICTION, W_YFLOW, W_YSLIP)
+from .model import (Contact, N_PARAMS, P_A, P_MUD, P_SLAVE, P_UTOL, X_COSA, X_DCROSS, X_LAG, X_NU, X_OK, X_PHI, X_SINA,
+                    X_SLAVE_ERR, Y_ALPHA, Y_U1, Y_U2, Y_W3, energy_from_trig, rhs)
+
+
+
+# The slip direction is slaved at least where its relaxation time |u|/(mu_d Phi) is below SLAVE_FLOOR
+# (units of chi), whatever slave_tol: near flat the motion's rate 1 + |theta'| grows without bound
+# and slave_tol / rate alone left creeping slips to be integrated down to slip_tol, ~1/|u| steps
+# each (a harness scene ran into step_limit at slip_tol 1e-13 m/s). The slaved direction's error
+# there is second order in SLAVE_FLOOR (docs/model.md, 'Slow slip').
+SLAVE_FLOOR = 1e-7
+
+
+# A slaved slip returns to SLIDE only where it has grown to SLAVE_EXIT times the slaving speed: the
+# two modes' boundaries differ, so a slip near the slaving speed cannot switch at every step. The
+# slaved direction's error grows as the square of the relaxation time (docs/model.md, 'Slow slip'):
+# at 4 times the slaving speed slips that never left SLAVED carried 30 times the error of those at 2.
+SLAVE_EXIT = 2.0
+
+
+# ... and in the floor's region (SLAVE_FLOOR) where it has grown to FLOOR_EXIT times its speed, as
+# before slave_tol existed: exiting there at twice the speed cost 29 % more steps in the paper's
+# disk at mu_d = mu_s
+FLOOR_EXIT = 4.0
+
+
+# A passage by u = 0 is resolved in time where it takes at least this many ulps of tau (slip_floor).
+SLIP_RESOLUTION = 256.0
+
+
+# Secant iterations of the slaved direction: converged when the angle update is below DIR_TOL rad.
+DIR_TOL = 1e-14
+
+
+# ... or when cross is at its round-off floor: |cross| <= DIR_NOISE |slip acceleration|. Near a fold
+# (d cross/d nu small) the secant can stall there, two iterates giving the same rounded cross, before
+# its angle update gets below DIR_TOL: the root is then found to machine precision, not lost.
+DIR_NOISE = 64.0 * EPS
+
+
+DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
+
+
+# tau: forward-difference step of d cross/d tau along the motion at a fixed direction (the lag):
+# truncation O(FLOW_DTAU) relative, round-off ~EPS |a_P| / FLOW_DTAU, both far below the lag's
+# own neglected second order
+FLOW_DTAU = 1e-7
+
+
+DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
+
+
+DIR_MAXIT = 30
+
+
+@kernel
+def slip_roundoff(t, aux, p):
+    """The round-off floor of a slip's approach to u = 0 at tau = t (u_hat): the speed that the
+    friction's deceleration, at most ~mu_d Phi (1 + 1/A) (aux: the right-hand side's at the state),
+    takes off the slip in SLIP_RESOLUTION ulps of tau. A slide that passes or spirals closer to
+    u = 0 than that turns its direction within steps below the step-size floor (2 EPS tau)."""
+    decel = p[P_MUD] * max(aux[X_PHI], 0.0) * (1.0 + 1.0 / p[P_A])
+    return SLIP_RESOLUTION * EPS * max(abs(t), 1.0) * decel
+
+
+@kernel
+def slip_floor(t, aux, p, cs):
+    """The slip speed (u_hat) at which a slide meets its fate (EV_SLIP_SLOW, slow_slide): slip_tol
+    (cs[CS_FLOOR] for a slide followed BELOW it), or where larger the round-off floor (slip_roundoff), where
+    the fate is taken instead, an O(floor) change of the velocity."""
+    floor = cs[CS_FLOOR] if cs[CS_SLAVE_OFF] == BELOW else p[P_UTOL]
+    return max(floor, slip_roundoff(t, aux, p))
+
+
+@kernel
+def slave_speed(y, aux, p):
+    """Slip speed (u_hat) below which the slip direction is slaved: where its relaxation time
+    |u|/(mu_d Phi) times the rate of the motion, 1 + |theta'| (the precession rate theta' =
+    omega_3 sec alpha, eq. 2.3, in units of 1/chi), is below slave_tol (p[P_SLAVE]), and at least
+    where the relaxation time alone is below SLAVE_FLOOR, and at least slip_tol."""
+    rate = 1.0 + abs(y[Y_W3] / aux[X_COSA])
+    return max(p[P_UTOL], p[P_MUD] * aux[X_PHI] * max(SLAVE_FLOOR, p[P_SLAVE] / rate))
+
+
+@kernel
+def exit_speed(y, aux, p):
+    """Slip speed (u_hat) past which a slaved slip slides (SLIDE): SLAVE_EXIT times the slaving
+    speed of slave_tol, at least FLOOR_EXIT times the floor's (slave_speed)."""
+    rate = 1.0 + abs(y[Y_W3] / aux[X_COSA])
+    return max(FLOOR_EXIT * p[P_UTOL],
+               p[P_MUD] * aux[X_PHI] * max(FLOOR_EXIT * SLAVE_FLOOR, SLAVE_EXIT * p[P_SLAVE] / rate))
+
+
+@kernel
+def mode_energy(y, p, cs):
+    """Energy of the state in the contact state cs (eq. 6.1 corrected; the slip counts when sliding)."""
+    return _mode_energy_trig(y, p, cs, math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA]))
+
+
+@kernel
+def mode_energy_at(y, aux, p, cs):
+    """mode_energy(y, p, cs) from the sine and cosine of alpha in aux, the right-hand side's at y."""
+    return _mode_energy_trig(y, p, cs, aux[X_SINA], aux[X_COSA])
+
+
+@kernel
+def _mode_energy_trig(y, p, cs, s, c):
+    side = int(cs[CS_SIDE])
+    u1, u2 = (0.0, 0.0) if cs[CS_MODE] == ROLL else (y[Y_U1], y[Y_U2])
+    return energy_from_trig(y, p, side, u1, u2, s, c)
+
+
+@kernel(inline="always")
+def _model(t, y, sys, mode, dy, aux, n0x, n0y):
+    """The model's right-hand side in mode ROLL or SLIDE (a constant at each call site, so that LLVM
+    specialises the copy), the friction along (n0x, n0y) at slip speeds <= slip_tol; counts the call."""
+    cs = sys.cs
+    rhs(t, y, sys.p, Contact(mode, int(cs[CS_SIDE]), cs[CS_SIG:CS_SIG + 3], cs[CS_STUCK:CS_STUCK + 3], n0x, n0y),
+        sys.n, dy, aux)
+    sys.istats[I_RHS] += 1
+
+
+@kernel
+def slide_model(t, y, sys, dy, aux, n0x, n0y):
+    """The sliding right-hand side (contact states SLIDE and SLAVED), the friction along (n0x, n0y) at
+    slip speeds <= slip_tol: the one compiled copy of the sliding model, which every sliding
+    evaluation calls (the rolling one is inlined into eval_rhs, where the steps of a rolling motion
+    call it; each inlined copy of the model costs ~3 s of compilation)."""
+    _model(t, y, sys, SLIDE, dy, aux, n0x, n0y)
+
+
+@kernel
+def model_call(t, y, sys, dy, aux, n0x, n0y):
+    """The model for the contact state sys.cs (SLAVED evaluates as sliding, along (n0x, n0y)), where a
+    discrete update reads the right-hand side once (start_slip, set_slip)."""
+    if sys.cs[CS_MODE] == ROLL:
+        eval_rhs(t, y, sys, dy, aux)
+    else:
+        slide_model(t, y, sys, dy, aux, n0x, n0y)
+
+
+@kernel
+def eval_rhs(t, y, sys, dy, aux):
+    """d y/d tau and contact quantities (aux) for the contact state cs; counts its model calls."""
+    cs, n = sys.cs, sys.n
+    mode = cs[CS_MODE]
+    if mode == SLAVED:
+        nu, lag, dcross, ok, err = slaved_slip(cs[CS_NU], t, y, sys, dy, aux)
+        # the sliding equations at the slip vector itself with the friction along s(nu + lag): the
+        # slip acceleration, the friction power (mu_d Phi s.u) and the energy stay those of one
+        # Newton-Euler motion, so the energy books close however far u turns from s
+        friction_along(nu + lag, t, y, sys, dy, aux)
+        aux[X_DCROSS] = dcross
+        aux[X_NU] = nu
+        aux[X_LAG] = lag
+        aux[X_SLAVE_ERR] = err
+        if ok < 0.0:
+            aux[X_OK] = ok
+        elif ok == 0.0:
+            # no slaved direction near the last one (it folded away inside this step): a NaN
+            # derivative makes the step fail, so steps shrink until EV_SLAVE_LOST is located
+            for i in range(n):
+                dy[i] = math.nan
+    elif mode == SLIDE:
+        un = math.hypot(y[Y_U1], y[Y_U2])
+        nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
+        ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
+        _model(t, y, sys, SLIDE, dy, aux, nx, ny)
+    else:
+        # (the rolling model inlined: the steps of a rolling motion call it, and a call passes ~50
+        # words of arguments)
+        _model(t, y, sys, ROLL, dy, aux, 1.0, 0.0)
+
+
+@kernel
+def slip_rates(nu, u, t, y, sys, dy, aux, ys):
+    """(cross, dot) of the slip acceleration with the slip direction s = (cos nu, sin nu), for the
+    slip vector u s; the full right-hand side is left in dy, aux."""
+    n = sys.n
+    c = math.cos(nu)
+    s = math.sin(nu)
+    for i in range(n):
+        ys[i] = y[i]
+    ys[Y_U1] = u * c
+    ys[Y_U2] = u * s
+    slide_model(t, ys, sys, dy, aux, c, s)
+    return dy[Y_U2] * c - dy[Y_U1] * s, dy[Y_U1] * c + dy[Y_U2] * s
+
+
+@kernel
+def slaved_direction(nu0, u, t, y, sys, dy, aux, ys):
+    """Slip direction near nu0 at which the slip acceleration is parallel to the slip (secant).
+
+    Returns nu; dy, aux hold the right-hand side there. aux[X_OK] = 0 if it does not converge.
+    """
+    xa = nu0
+    ca, da = slip_rates(xa, u, t, y, sys, dy, aux, ys)
+    if abs(ca) <= DIR_NOISE * math.hypot(ca, da):
+        return xa
+    xb = nu0 + 1e-6
+    cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
+    for _ in range(DIR_MAXIT):
+        if abs(cb) <= DIR_NOISE * math.hypot(cb, db) or abs(xb - xa) < DIR_TOL:
+            return xb
+        if cb == ca:
+            break
+        # a damped secant: the root moves little between calls, and a flat stretch of cross (a
+        # near-fold) must not throw the iterate onto another root
+        dx = -cb * (xb - xa) / (cb - ca)
+        xc = xb + max(-DIR_MAXSTEP, min(DIR_MAXSTEP, dx))
+        xa, ca = xb, cb
+        xb = xc
+        cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
+    if aux[X_OK] > 0.0:
+        aux[X_OK] = 0.0   # (a Painleve flag, -1, from the model stays)
+    return xb
+
+
+@kernel
+def friction_along(nu, t, y, sys, dy, aux):
+    """The sliding right-hand side at the state's own slip vector with the friction along s(nu),
+    whatever |u| (the parameters with slip_tol, where the model freezes the friction direction,
+    lifted to inf, in wk[W_PFRICTION])."""
+    p, wk = sys.p, sys.wk
+    pf = wk[W_PFRICTION]
+    for i in range(N_PARAMS):
+        pf[i] = p[i]
+    pf[P_UTOL] = math.inf
+    slide_model(t, y, System(pf, sys.cs, sys.n, wk, sys.istats), dy, aux, math.cos(nu), math.sin(nu))
+
+
+@kernel
+def direction_lag(nu, u, rates, t, y, sys, dy):
+    """The lag (rad) of a slow slip's direction behind the quasi-static direction nu, first order
+    in the relaxation time: on the slow manifold of d nu/d tau = cross(nu)/u the direction is
+    nu* + delta, and with delta = k u (the lag scales with the slip, whose own rate u'/u = rad/u is
+    as fast as the direction's) u (nu*' + delta') = c' delta gives delta = u nu*'/(c' - rad)
+    (c' = d cross/d nu < 0 where nu attracts, rad = u' the slip's rate along s), with
+    nu*' = -(d cross/d tau at fixed nu)/c' (docs/model.md, 'Slow slip'). dy: the right-hand side
+    at the slip vector u s(nu) (slip_rates'), rates = (cross, rad, c') there; d cross/d tau by a
+    forward difference along that motion. 0 where nu does not attract that way (c' - rad >= 0)."""
+    cross0, rad0, dcross = rates
+    den = dcross * (dcross - rad0)
+    if not (dcross < 0.0 and dcross - rad0 < 0.0 and u > 0.0):
+        return 0.0
+    # the step along the motion, short enough that the slip speed stays positive on it
+    step = min(FLOW_DTAU, 0.5 * u / abs(rad0)) if rad0 < 0.0 else FLOW_DTAU
+    wk = sys.wk
+    yf = wk[W_YFLOW]
+    for i in range(sys.n):
+        yf[i] = y[i] + step * dy[i]
+    cross_f, _ = slip_rates(nu, u + step * rad0, t + step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW], wk[W_YSLIP])
+    return -u * ((cross_f - cross0) / step) / den
+
+
+@kernel
+def root_lag(nu, u, t, y, sys, dy, aux):
+    """(lag, c', err) of the slow slip at the quasi-static direction nu (slaved_slip's): dy, aux get
+    the right-hand side at the slip vector u s(nu)."""
+    wk = sys.wk
+    cross0, rad0 = slip_rates(nu, u, t, y, sys, dy, aux, wk[W_YSLIP])
+    return lag_and_error(nu, u, cross0, t, y, sys, dy, aux)
+
+
+@kernel
+def lag_and_error(nu, u, cross0, t, y, sys, dy, aux):
+    """(lag, c', err) at the quasi-static direction nu, dy, aux the right-hand side at the slip vector
+    u s(nu) and cross0 its cross: c' = d cross/d nu by a forward difference, the lag
+    (direction_lag) and the slaved direction's error measure (slaved_slip)."""
+    wk = sys.wk
+    rad0 = dy[Y_U1] * math.cos(nu) + dy[Y_U2] * math.sin(nu)
+    cross1, _ = slip_rates(nu + DCROSS_DNU, u, t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP])
+    dcross = (cross1 - cross0) / DCROSS_DNU
+    lag = direction_lag(nu, u, (cross0, rad0, dcross), t, y, sys, dy)
+    relax = rad0 - dcross
+    err = math.inf
+    if dcross < 0.0 and relax > 0.0:
+        err = u * (1.0 + abs(y[Y_W3] / aux[X_COSA])) / relax + abs(lag)
+    return lag, dcross, err
+
+
+@kernel
+def slaved_slip(nu0, t, y, sys, dy, aux):
+    """The slow slip's direction at the state: (nu*, lag, c', ok, err). nu* is the quasi-static
+    direction continued from nu0 (slaved_direction), the friction acts along nu* + lag
+    (direction_lag), c' = d cross/d nu there; ok is slaved_direction's aux[X_OK] (0: no root
+    near nu0). err measures how far the first-order slow manifold is from exact: the direction's
+    relaxation time |u|/|c' - rad| times the motion's rate 1 + |theta'|, plus the lag itself
+    (the neglected terms are of the order of their product and of the lag squared); inf where the
+    direction does not relax onto nu* + lag (c' - rad >= 0). dy, aux are left with the
+    right-hand side at the slip vector |u| s(nu*)."""
+    u = math.hypot(y[Y_U1], y[Y_U2])
+    nu = slaved_direction(nu0, u, t, y, sys, dy, aux, sys.wk[W_YSLIP])
+    ok = aux[X_OK]
+    cross0 = dy[Y_U2] * math.cos(nu) - dy[Y_U1] * math.sin(nu)
+    lag, dcross, err = lag_and_error(nu, u, cross0, t, y, sys, dy, aux)
+    if not ok > 0.0:
+        lag = 0.0
+    return nu, lag, dcross, ok, err
