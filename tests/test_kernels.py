@@ -56,13 +56,6 @@ def _ev_sys(p, cs):
     return _sys(p, cs, M.N_CORE, wk, ist)
 
 
-def _group(p, cs, wk, F, trk=None, y=None):
-    """The run's Work group (layout.Work) around the given buffers, as the roots and recorders take it."""
-    y = np.zeros(M.N_FULL) if y is None else y
-    trk = I.tracking_arrays() if trk is None else trk
-    return L.Work(y, p, cs, wk, np.zeros((L.N_KROWS, M.N_FULL)), F, trk)
-
-
 def _consts(rtol=1e-10, atol=1e-12, t_max=100.0, max_steps=10**9, e0=1.0, n=M.N_CORE):
     """The run's constants (layout.RunConsts) with the given values, no levels, no samples."""
     return L.RunConsts(n, rtol, atol, math.inf, t_max, max_steps, False, e0, np.zeros(0), np.zeros(0))
@@ -994,44 +987,43 @@ def test_next_try_clips_at_t_max_and_stops_only_on_budget_floor_or_after_the_end
 
     consts = _consts(t_max=100.0, max_steps=50)
     wk, istats = _work()
-    work = _group(np.zeros(M.N_PARAMS), np.zeros(L.N_CS), wk, np.zeros((2 * D.N_DENSE, M.N_FULL)))
-    rec = L.Record(istats, np.zeros(L.N_FSTATS), None, None, None, None, None, None)
+    work = I.work_arrays()
 
-    assert next_try(10.0, 0.5, -1, consts, work, rec) == (0.5, -1, False, False)
+    assert next_try(10.0, 0.5, -1, consts, work, istats) == (0.5, -1, False, False)
     # a try past t_max ends there exactly
-    assert next_try(99.75, 0.5, -1, consts, work, rec) == (0.25, -1, True, False)
+    assert next_try(99.75, 0.5, -1, consts, work, istats) == (0.25, -1, True, False)
     # the smallest step that moves tau is 2 eps tau: under it the scene ends, at t_max as T_MAX
     t_near = 100.0 - EPS * 100.0
-    h, outcome, at_tmax, stop = next_try(t_near, 0.5, -1, consts, work, rec)
+    h, outcome, at_tmax, stop = next_try(t_near, 0.5, -1, consts, work, istats)
     assert (outcome, at_tmax, stop) == (oc.T_MAX, True, True) and h == 100.0 - t_near
     # (t_max is where the motion ends: the frequency windows still open keep their symmetric part)
     assert not work.trk.ends.cut[0]
     # ... elsewhere as STEP_SIZE_UNDERFLOW (nothing in the model decides by the step size), a
     # numerical stop: the windows still open get no value
-    assert next_try(10.0, 1.5 * EPS * 10.0, -1, consts, work, rec)[1:] == (oc.STEP_SIZE_UNDERFLOW, False, True)
+    assert next_try(10.0, 1.5 * EPS * 10.0, -1, consts, work, istats)[1:] == (oc.STEP_SIZE_UNDERFLOW, False, True)
     assert work.trk.ends.cut[0]
     I.clear_tracking(work.trk)
-    assert next_try(10.0, 2.5 * EPS * 10.0, -1, consts, work, rec)[1:] == (-1, False, False)
+    assert next_try(10.0, 2.5 * EPS * 10.0, -1, consts, work, istats)[1:] == (-1, False, False)
     # the step budget counts accepted and rejected tries; it stops the steps after the end too
     istats[L.I_STEPS], istats[L.I_REJECTED] = 30, 20
-    assert next_try(10.0, 0.5, -1, consts, work, rec)[1:] == (oc.STEP_LIMIT, False, True)
+    assert next_try(10.0, 0.5, -1, consts, work, istats)[1:] == (oc.STEP_LIMIT, False, True)
     assert work.trk.ends.cut[0]
     I.clear_tracking(work.trk)
-    assert next_try(10.0, 0.5, oc.HALTED, consts, work, rec)[1:] == (oc.HALTED, False, True)
+    assert next_try(10.0, 0.5, oc.HALTED, consts, work, istats)[1:] == (oc.HALTED, False, True)
     assert work.trk.ends.cut[0]
     istats[L.I_STEPS] = 0
     I.clear_tracking(work.trk)
     # after a halt (at tau 40): the steps that complete the frequency windows, no longer than the last one,
     # and none past twice the end's tau, nor past t_max
     after = work.trk.ends.after
-    assert next_try(40.0, 0.5, oc.HALTED, consts, work, rec) == (0.5, oc.HALTED, False, False)
+    assert next_try(40.0, 0.5, oc.HALTED, consts, work, istats) == (0.5, oc.HALTED, False, False)
     assert after[L.EA_H_AFTER] == 0.5 and after[L.EA_T_AFTER] == 80.0
-    assert next_try(60.0, 4.0, oc.HALTED, consts, work, rec) == (0.5, oc.HALTED, False, False)
-    assert next_try(99.9, 0.2, oc.HALTED, consts, work, rec) == (-1.0, oc.HALTED, False, True)
+    assert next_try(60.0, 4.0, oc.HALTED, consts, work, istats) == (0.5, oc.HALTED, False, False)
+    assert next_try(99.9, 0.2, oc.HALTED, consts, work, istats) == (-1.0, oc.HALTED, False, True)
     # twice the end's tau is where the motion after it ends, not a numerical stop
     assert not work.trk.ends.cut[0]
     # ... while the halt fit waits for a level below the last one, they go on past it, up to t_max
     work.trk.track.fit[L.FT_DEEP_E] = 1e-3
-    assert next_try(90.0, 0.2, oc.HALTED, consts, work, rec) == (0.2, oc.HALTED, False, False)
-    assert next_try(99.9, 0.2, oc.HALTED, consts, work, rec)[0] == pytest.approx(0.1)
-    assert next_try(100.0, 0.2, oc.HALTED, consts, work, rec) == (-1.0, oc.HALTED, False, True)
+    assert next_try(90.0, 0.2, oc.HALTED, consts, work, istats) == (0.2, oc.HALTED, False, False)
+    assert next_try(99.9, 0.2, oc.HALTED, consts, work, istats)[0] == pytest.approx(0.1)
+    assert next_try(100.0, 0.2, oc.HALTED, consts, work, istats) == (-1.0, oc.HALTED, False, True)

@@ -117,9 +117,9 @@ def kernel_state(scene: dict):
     peaks, fq = np.empty((1 << 16, Y.PEAK_COLS)), np.zeros((F.FQ_LEVEL0 + nl, F.FQ_COLS))
     y = np.zeros(Y.N_FULL)
     y[:len(y0)] = y0
-    work = Y.Work(y, sc.params.copy(), np.zeros(Y.N_CS), np.zeros((Y.N_WORK, Y.N_WCOLS)),
-                  np.zeros((Y.N_KROWS, Y.N_FULL)), np.zeros((2 * N_DENSE, Y.N_FULL)), I.tracking_arrays())
-    I.run(settings, level_e, np.zeros(0), work, Y.Record(istats, fstats, levels, np.zeros((0, Y.SAMPLE_COLS)),
+    sys = Y.System(sc.params.copy(), np.zeros(Y.N_CS), I.state_size(settings), np.zeros((Y.N_WORK, Y.N_WCOLS)), istats)
+    work = Y.Work(y, np.zeros((Y.N_KROWS, Y.N_FULL)), np.zeros((2 * N_DENSE, Y.N_FULL)), I.tracking_arrays())
+    I.run(settings, level_e, np.zeros(0), sys, work, Y.Record(fstats, levels, np.zeros((0, Y.SAMPLE_COLS)),
                                                           np.empty((0, Y.TRAJ_COLS)), peaks, np.zeros(Y.N_FULL), fq))
     assert istats[Y.I_OVERFLOW] == 0
     tpk = peaks[:istats[Y.I_PEAKS], 0]

@@ -79,7 +79,7 @@ def try_step(t, h, consts, work, sys):
     (stages 1-4, and f_new): a right-hand side that failed there (a slaved direction that lost its
     root returns NaN) makes the step fail, so steps shrink until the event that ends the mode is
     located; accepted, its NaN f_new would poison every later step."""
-    y, p, cs, wk, K = work.y, work.p, work.cs, work.wk, work.K
+    y, p, cs, wk, K = work.y, sys.p, sys.cs, sys.wk, work.K
     rtol, atol, n = consts.rtol, consts.atol, consts.n
     f = wk[W_F]
     y_new = wk[W_YNEW]

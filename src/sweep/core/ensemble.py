@@ -7,8 +7,8 @@ and MAX_LEVELS / PEAK_RING: `solve_index` runs on the buffers each of sweep.ense
 allocates once (`work_buffers`).
 
 The arrays travel in named groups (namedtuples of arrays, which numba passes as their arrays): the
-batch's BatchInputs and BatchOutputs, a worker's SceneInputs and Fits, and the run's layout.Work and
-layout.Record.
+batch's BatchInputs and BatchOutputs, a worker's SceneInputs and Fits, and the run's layout.System,
+layout.Work and layout.Record.
 
 The only difference to `sweep.simulate` is the peak buffer: a ring of the last PEAK_RING normal-
 force maxima (layout.TF_RING) instead of every maximum, since the summary needs only the last
@@ -24,10 +24,10 @@ import numpy as np
 
 from .fits import N_DERIVED, summary_fits
 from .frequency import FQ_LEVEL0
-from .integrate import clear_tracking, record_arrays, run, work_arrays
+from .integrate import clear_tracking, record_arrays, run, state_size, system_arrays, work_arrays
 from .jit import kernel
 from .layout import (I_FLAT, I_OVERFLOW, LEVEL_COLS, L_PENDING, L_PRECESSION, L_TAU, N_CS, N_FSTATS, N_ISTATS,
-                     N_SETTINGS, Record, TF_RING)
+                     N_SETTINGS, Record, System, TF_RING)
 from .model import N_FULL, N_PARAMS
 
 # rows of the per-scene scratch: level times (s), precession frequencies (Hz)
@@ -65,10 +65,11 @@ def zero_rows(a, rows):
 # whole again, so each layer between solve_index and run cost ~3 s of LLVM time at the first
 # simulate_batch (10 s with them separate, 4 s inlined; benchmarks/compile_time.py).
 @kernel(inline="always")
-def solve_scene(inp, chi, work, rec, fits):
+def solve_scene(inp, chi, sys, work, rec, fits):
     """Integrate one scene on a worker's buffers, as integrate.integrate does without samples or
-    trajectory, then its fits. inp (SceneInputs, nl = inp.level_e.shape[0] levels), chi (s); work
-    and rec (layout.Work, layout.Record) have a worker's sizes: rec.levels MAX_LEVELS rows, of
+    trajectory, then its fits. inp (SceneInputs, nl = inp.level_e.shape[0] levels), chi (s); sys,
+    work and rec (layout.System: its arrays, the state size set here from the settings; layout.Work,
+    layout.Record) have a worker's sizes: rec.levels MAX_LEVELS rows, of
     which the first nl receive the levels (layout.LEVEL_COLS, then pending), rec.fq the frequency
     windows (core.frequency); fits.derived the D_* numbers. Every buffer is reset here."""
     nl = inp.level_e.shape[0]
@@ -76,10 +77,10 @@ def solve_scene(inp, chi, work, rec, fits):
         work.y[i] = inp.y0[i]
         rec.y_end[i] = 0.0
     for i in range(N_PARAMS):
-        work.p[i] = inp.p[i]
+        sys.p[i] = inp.p[i]
     for i in range(N_CS):
-        work.cs[i] = 0.0
-    zero_rows(work.wk, work.wk.shape[0])
+        sys.cs[i] = 0.0
+    zero_rows(sys.wk, sys.wk.shape[0])
     zero_rows(work.K, work.K.shape[0])
     zero_rows(work.F, work.F.shape[0])
     zero_rows(rec.peaks, rec.peaks.shape[0])
@@ -87,7 +88,7 @@ def solve_scene(inp, chi, work, rec, fits):
     clear_tracking(work.trk)
     work.trk.track.flags[TF_RING] = True
     for i in range(N_ISTATS):
-        rec.istats[i] = 0
+        sys.istats[i] = 0
     for i in range(N_FSTATS):
         rec.fstats[i] = 0.0
     lev = rec.levels
@@ -96,26 +97,27 @@ def solve_scene(inp, chi, work, rec, fits):
             lev[L, c] = math.nan
         lev[L, L_PENDING] = 0.0
     # the scene's own sizes: nl levels, no samples, no trajectory
-    run(inp.settings, inp.level_e, fits.scratch[0, :0], work,
-        Record(rec.istats, rec.fstats, lev[:nl], rec.samples[:0], rec.traj[:0], rec.peaks, rec.y_end,
-               rec.fq[:FQ_LEVEL0 + nl]))
+    run(inp.settings, inp.level_e, fits.scratch[0, :0],
+        System(sys.p, sys.cs, state_size(inp.settings), sys.wk, sys.istats), work,
+        Record(rec.fstats, lev[:nl], rec.samples[:0], rec.traj[:0], rec.peaks, rec.y_end, rec.fq[:FQ_LEVEL0 + nl]))
     # the fits on the level times (s) and precession frequencies (Hz), as sweep.simulate forms them
     scratch = fits.scratch
     for L in range(nl):
         scratch[R_LEVEL_T, L] = lev[L, L_TAU] * chi
         scratch[R_PREC_HZ, L] = abs(lev[L, L_PRECESSION]) / chi / TWO_PI
-    summary_fits(scratch[R_LEVEL_T], scratch[R_PREC_HZ], inp.levels, nl, rec.istats[I_FLAT] != 0,
+    summary_fits(scratch[R_LEVEL_T], scratch[R_PREC_HZ], inp.levels, nl, sys.istats[I_FLAT] != 0,
                  rec.fstats, chi, fits.derived)
 
 
 # --- a worker over the batch ---------------------------------------------------------------------
 def work_buffers():
-    """One worker's buffers, (SceneInputs, Work, Record, Fits), allocated once per thread."""
+    """One worker's buffers, (SceneInputs, System, Work, Record, Fits), allocated once per thread (the
+    System's arrays; each scene's run gets its own state size)."""
     inp = SceneInputs(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_SETTINGS), np.zeros(MAX_LEVELS),
                       np.zeros(MAX_LEVELS))
     # no samples, no trajectory: solve_scene runs on none of their rows
-    return inp, work_arrays(), record_arrays(MAX_LEVELS, 0, 0, PEAK_RING), Fits(np.zeros((N_SCRATCH, MAX_LEVELS)),
-                                                                               np.zeros(N_DERIVED))
+    return (inp, system_arrays(N_FULL), work_arrays(), record_arrays(MAX_LEVELS, 0, 0, PEAK_RING),
+            Fits(np.zeros((N_SCRATCH, MAX_LEVELS)), np.zeros(N_DERIVED)))
 
 
 @kernel
@@ -135,10 +137,10 @@ def load_inputs(i, batch_in, inp):
 
 
 @kernel
-def store_outputs(i, nl, rec, fits, batch_out):
+def store_outputs(i, nl, istats, rec, fits, batch_out):
     """Copy a worker's results for scene i (nl levels) into the batch's outputs (BatchOutputs)."""
     for j in range(N_ISTATS):
-        batch_out.ISTATS[i, j] = rec.istats[j]
+        batch_out.ISTATS[i, j] = istats[j]
     for j in range(N_FSTATS):
         batch_out.FSTATS[i, j] = rec.fstats[j]
     for L in range(nl):
@@ -151,17 +153,18 @@ def store_outputs(i, nl, rec, fits, batch_out):
 
 
 @kernel(inline="always")
-def solve_loaded(inp, nl, chi, work, rec, fits):
-    """solve_scene on the first nl levels of a worker's loaded inputs."""
-    solve_scene(SceneInputs(inp.y0, inp.p, inp.settings, inp.level_e[:nl], inp.levels[:nl]), chi, work, rec, fits)
+def solve_loaded(nl, chi, buffers):
+    """solve_scene on the first nl levels of a worker's loaded inputs (buffers: work_buffers())."""
+    inp, sys, work, rec, fits = buffers
+    solve_scene(SceneInputs(inp.y0, inp.p, inp.settings, inp.level_e[:nl], inp.levels[:nl]), chi, sys, work, rec, fits)
 
 
 @kernel(nogil=True)
 def solve_index(i, batch_in, batch_out, buffers):
     """Scene i of the batch on one CPU worker's buffers (work_buffers()), from batch_in
     (BatchInputs) into batch_out (BatchOutputs); releases the GIL: threads run in parallel."""
-    inp, work, rec, fits = buffers
+    inp, sys, work, rec, fits = buffers
     nl, chi = load_inputs(i, batch_in, inp)
-    solve_loaded(inp, nl, chi, work, rec, fits)
-    store_outputs(i, nl, rec, fits, batch_out)
-    return rec.istats[I_OVERFLOW]
+    solve_loaded(nl, chi, buffers)
+    store_outputs(i, nl, sys.istats, rec, fits, batch_out)
+    return sys.istats[I_OVERFLOW]

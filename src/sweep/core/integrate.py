@@ -179,11 +179,11 @@ def segment_phi(seg_end, event, sys):
 
 
 @kernel
-def advance(seg, ended, n, work, fstats):
-    """Move the start to the end of the kept part seg (layout.Segment): its state (n components),
+def advance(seg, ended, sys, work, fstats):
+    """Move the start to the end of the kept part seg (layout.Segment): its state (sys.n components),
     and where no event restarts there the step end's f, aux and event rates; the time spent sliding
     (to the scene's end: ended)."""
-    y, cs, wk = work.y, work.cs, work.wk
+    y, cs, n, wk = work.y, sys.cs, sys.n, sys.wk
     event = seg.k >= 0
     if cs[CS_MODE] != ROLL and seg.running:
         fstats[F_SLIDETIME] += (seg.end if not ended else fstats[F_TEND]) - seg.t
@@ -229,11 +229,11 @@ def restart_after_event(k, t, y, lev, sys, fstats):
 
 
 @kernel
-def carry_step_end(lev, level_pending, work):
-    """A step that ended without an event (work.y now its end state): its end's event values start
+def carry_step_end(lev, level_pending, y, sys):
+    """A step that ended without an event (y now its end state, of the system sys): its end's event values start
     the next step (the level's from the energy, +inf once every level is crossed), and a slaved
     direction is continued to its end."""
-    y, p, cs, wk = work.y, work.p, work.cs, work.wk
+    p, cs, wk = sys.p, sys.cs, sys.wk
     for k in range(N_DYN_EVENTS):
         wk[W_GOLD, k] = wk[W_GNEW, k]
     wk[W_GOLD, EV_LEVEL] = mode_energy_at(y, wk[W_AUX], p, cs) - lev if level_pending else math.inf
@@ -243,11 +243,11 @@ def carry_step_end(lev, level_pending, work):
 
 
 @kernel
-def finish(outcome, t, h, consts, work, rec):
-    """The scene's outputs once the loop stops: outcome, the event counts, end state and energy at
+def finish(outcome, t, consts, sys, work, rec):
+    """The scene's outputs once the loop stops at t: outcome, the event counts, end state and energy at
     its end (kept by mark_end, else the last state), the levels' frequencies."""
-    y, p, cs, ends = work.y, work.p, work.cs, work.trk.ends
-    istats, fstats, y_end = rec.istats, rec.fstats, rec.y_end
+    y, p, cs, ends = work.y, sys.p, sys.cs, work.trk.ends
+    istats, fstats, y_end = sys.istats, rec.fstats, rec.y_end
     if outcome < 0:
         outcome = oc.STEP_LIMIT
     ended = ends.counts[EN_TRANS] >= 0
@@ -268,21 +268,20 @@ def finish(outcome, t, h, consts, work, rec):
             y_end[i] = y[i]
         fstats[F_EEND] = mode_energy(y_end, p, cs)
     istats[I_OUTCOME] = outcome
-    fstats[F_HLAST] = h
 
 
 @kernel
-def next_try(t, h, outcome, consts, work, rec):
+def next_try(t, h, outcome, consts, work, istats):
     """The size of the next try from t (h: the step control's), or where the loop stops: after the
     scene's end the Phi maxima's steps (step_after_end), the step budget, t_max, the smallest step
-    that still moves tau (consts: layout.RunConsts). Returns (h, outcome, whether the step ends at t_max,
+    that still moves tau (consts: layout.RunConsts; istats: the step counts). Returns (h, outcome, whether the step ends at t_max,
     whether to stop)."""
     running = outcome < 0
     if not running:
         h = step_after_end(t, h, consts.t_max, work.trk)
         if h < 0.0:
             return h, outcome, False, True
-    if rec.istats[I_STEPS] + rec.istats[I_REJECTED] >= consts.max_steps:
+    if istats[I_STEPS] + istats[I_REJECTED] >= consts.max_steps:
         work.trk.ends.cut[0] = True
         return h, oc.STEP_LIMIT if running else outcome, False, True
     at_tmax = running and t + h >= consts.t_max
@@ -306,7 +305,7 @@ def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
     e_seg) holds: the levels it crosses (HALTED at the last, with its end state), the samples, the
     Phi maxima (consts: layout.RunConsts; sys: the step's layout.System). Returns (the outcome, the energy of
     the next level to cross)."""
-    y, wk, trk = work.y, work.wk, work.trk
+    y, wk, trk = work.y, sys.wk, work.trk
     level_e = consts.level_e
     event = seg.k >= 0
     phi_c = segment_phi(seg.end, event, sys) if consts.peaks_on else 0.0
@@ -321,7 +320,7 @@ def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
             outcome = oc.HALTED
             dense_eval(work.F, 0, y, seg.t, seg.h, t_halt, consts.n, wk[W_YBUF])
             mark_end(t_halt, wk[W_YBUF], sys, trk.ends, rec)
-            start_deep_levels(level_e, rec.levels, work.p, trk.track, rec.fstats)
+            start_deep_levels(level_e, rec.levels, sys.p, trk.track, rec.fstats)
         elif trk.track.at[TK_LEVEL] < level_e.shape[0]:
             lev = level_e[trk.track.at[TK_LEVEL]]
     elif deep_pending(trk.track):
@@ -340,16 +339,16 @@ def end_segment(seg, outcome, lev, consts, work, rec, sys):
     (restart_after_event: an outcome there ends the scene; a disk lying flat has halted), or the
     step end's values carried on (at t_max the scene ends). consts: layout.RunConsts; sys: the step's
     layout.System. Returns (the outcome, whether the loop stops)."""
-    y, cs, wk, trk = work.y, work.cs, work.wk, work.trk
-    istats, fstats = rec.istats, rec.fstats
+    y, cs, wk, trk = work.y, sys.cs, sys.wk, work.trk
+    istats, fstats = sys.istats, rec.fstats
     level_e = consts.level_e
     event = seg.k >= 0
-    advance(seg, outcome >= 0, consts.n, work, fstats)
+    advance(seg, outcome >= 0, sys, work, fstats)
     t = seg.end
     if rec.traj.shape[0] > 0 and outcome < 0:
         record_traj(t, y, math.nan if event else wk[W_AUXNEW, X_PHI], cs, consts.n, rec.traj, istats)
     if not event:
-        carry_step_end(lev, trk.track.at[TK_LEVEL] < level_e.shape[0], work)
+        carry_step_end(lev, trk.track.at[TK_LEVEL] < level_e.shape[0], y, sys)
         if seg.at_tmax and outcome < 0:
             outcome = oc.T_MAX
             mark_end(t, y, sys, trk.ends, rec)
@@ -375,15 +374,16 @@ def end_segment(seg, outcome, lev, consts, work, rec, sys):
 
 
 @kernel
-def run(settings, level_e, sample_tau, work, rec):
-    """Integrate one scene (the initial state in work.y, its parameters in work.p) into rec
-    (layout.Work, layout.Record: the buffers' shapes): step, scan the accepted step for the
-    earliest event, record the kept part, restart at its end. settings (layout.S_*), level_e the
-    levels' energies (dimensionless), sample_tau the sample times (tau), ascending: read once here
-    into the run's constants (layout.RunConsts), with E(0) from begin."""
-    p, cs, wk, trk = work.p, work.cs, work.wk, work.trk
-    istats = rec.istats
-    sys = System(p, cs, state_size(settings), wk, istats)
+def run(settings, level_e, sample_tau, sys, work, rec):
+    """Integrate one scene (the initial state in work.y, its parameters in sys.p) into sys.istats
+    and rec (layout.System, its n the settings' state_size; layout.Work, layout.Record: the
+    buffers' shapes): step, scan the accepted step for the earliest event, record the kept part,
+    restart at its end. settings (layout.S_*), level_e the levels' energies (dimensionless),
+    sample_tau the sample times (tau), ascending: read once here into the run's constants
+    (layout.RunConsts), with E(0) from begin."""
+    if sys.n != state_size(settings):
+        raise ValueError("run: the system's state size is not the settings' (state_size)")
+    cs, wk, trk, istats = sys.cs, sys.wk, work.trk, sys.istats
     lev = level_e[0] if level_e.shape[0] > 0 else math.nan
     outcome = begin(lev, work, rec, sys)
     h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
@@ -398,7 +398,7 @@ def run(settings, level_e, sample_tau, work, rec):
     # motion the scene simulates: nothing is integrated past it.
     while outcome < 0 or (outcome == oc.HALTED and (pending(trk) or deep_pending(trk.track))):
         running = outcome < 0
-        h, outcome, at_tmax, stop = next_try(t, h, outcome, consts, work, rec)
+        h, outcome, at_tmax, stop = next_try(t, h, outcome, consts, work, istats)
         if stop:
             break
         err = try_step(t, h, consts, work, sys)
@@ -442,7 +442,8 @@ def run(settings, level_e, sample_tau, work, rec):
         if stop:
             break
         h = h_next
-    finish(outcome, t, h, consts, work, rec)
+    rec.fstats[F_HLAST] = h
+    finish(outcome, t, consts, sys, work, rec)
 
 
 def tracking_arrays():
@@ -467,10 +468,15 @@ def clear_tracking(trk):
             rec[i] = 0
 
 
+def system_arrays(n):
+    """The system a run evaluates (layout.System) for a state of n components (state_size), zeroed:
+    the parameters, contact state, work buffer and counters; the one place their shapes are written."""
+    return System(np.zeros(N_PARAMS), np.zeros(N_CS), n, np.zeros((N_WORK, N_WCOLS)), np.zeros(N_ISTATS, np.int64))
+
+
 def work_arrays():
-    """The buffers a run works in (layout.Work), zeroed: the one place their shapes are written."""
-    return Work(np.zeros(N_FULL), np.zeros(N_PARAMS), np.zeros(N_CS), np.zeros((N_WORK, N_WCOLS)),
-                np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), tracking_arrays())
+    """The buffers a run integrates in (layout.Work), zeroed: the one place their shapes are written."""
+    return Work(np.zeros(N_FULL), np.zeros((N_KROWS, N_FULL)), np.zeros((2 * N_DENSE, N_FULL)), tracking_arrays())
 
 
 def record_arrays(n_levels, n_samples, traj_rows, peak_rows):
@@ -479,7 +485,7 @@ def record_arrays(n_levels, n_samples, traj_rows, peak_rows):
     written (a level's L_PENDING 0), the rest zeroed. The one place their shapes are written."""
     levels = np.full((n_levels, LEVEL_COLS + 1), np.nan)
     levels[:, L_PENDING] = 0.0
-    return Record(np.zeros(N_ISTATS, np.int64), np.zeros(N_FSTATS), levels, np.full((n_samples, SAMPLE_COLS), np.nan),
+    return Record(np.zeros(N_FSTATS), levels, np.full((n_samples, SAMPLE_COLS), np.nan),
                   np.zeros((traj_rows, TRAJ_COLS)), np.zeros((peak_rows, PEAK_COLS)), np.zeros(N_FULL),
                   np.zeros((FQ_LEVEL0 + n_levels, FQ_COLS)))
 
@@ -492,13 +498,14 @@ def integrate(y0, p, settings, level_e, sample_tau, traj_cap=0, peak_cap=16384):
     samples (layout.SA_*), trajectory (layout.TR_*), peaks (layout.PK_*: the counted maxima),
     y_end (N_FULL)."""
     while True:
+        sys = system_arrays(state_size(settings))
+        sys.p[:] = p
         work = work_arrays()
         work.y[:y0.shape[0]] = y0
-        work.p[:] = p
         rec = record_arrays(level_e.shape[0], sample_tau.shape[0], traj_cap,
                             peak_cap if settings[S_PEAKS] > 0.0 else 0)
-        run(settings, level_e, sample_tau, work, rec)
-        istats = rec.istats
+        run(settings, level_e, sample_tau, sys, work, rec)
+        istats = sys.istats
         over = istats[I_OVERFLOW]
         if over == 0:
             break

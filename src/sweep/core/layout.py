@@ -153,11 +153,11 @@ PEAK_COLS = 3
 # --- the buffers of one run, grouped ------------------------------------------------------------
 # numba passes a namedtuple of arrays as its arrays (no copy, no cost); a kernel takes the group
 # and unpacks what it uses.
-# Work: what the integrator integrates and works in: the state y (N_FULL, in place: the initial
-# state in, the last state out), the parameters p (N_PARAMS), the contact state cs (N_CS), the work
-# buffer wk (N_WORK x N_WCOLS), the RK stages K (N_KROWS x N_FULL), the dense output F (14 x N_FULL)
-# and the state carried between steps trk (Tracking).
-Work = namedtuple("Work", "y p cs wk K F trk")
+# Work: what the integrator integrates in: the state y (N_FULL, in place: the initial state in, the
+# last state out), the RK stages K (N_KROWS x N_FULL), the dense output F (14 x N_FULL) and the
+# state carried between steps trk (Tracking). The parameters, contact state and work buffer are the
+# System's (below): each array of a run is in exactly one of System, Work and Record.
+Work = namedtuple("Work", "y K F trk")
 # Tracking: the state carried between steps, one record per owner (see SC_*, EN_*, TK_* above): scan
 # (ScanState, scan.py), ends (EndState, integrate.py), track (TrackState, tracking.py) and windows
 # (int64, 1: the levels' precession windows still open, frequency.py).
@@ -165,11 +165,11 @@ Tracking = namedtuple("Tracking", "scan ends track windows")
 ScanState = namedtuple("ScanState", "rates dip_end")
 EndState = namedtuple("EndState", "counts cut after")
 TrackState = namedtuple("TrackState", "at flags phi fit")
-# Record: what a run writes: istats (N_ISTATS, int64), fstats (N_FSTATS), levels (n_levels x
+# Record: what a run writes besides its counts (System.istats): fstats (N_FSTATS), levels (n_levels x
 # LEVEL_COLS + 1: the last column L_PENDING), samples (n_samples x SAMPLE_COLS), traj (cap x
 # TRAJ_COLS), peaks (cap x PEAK_COLS), y_end (N_FULL) and the frequency windows fq
 # (FQ_LEVEL0 + n_levels x FQ_COLS, core.frequency). A buffer of 0 rows switches its recorder off.
-Record = namedtuple("Record", "istats fstats levels samples traj peaks y_end fq")
+Record = namedtuple("Record", "fstats levels samples traj peaks y_end fq")
 # RunConsts: the run's constants, read once from the settings (integrate.run): n the state size (the
 # components integrated: model.N_CORE, N_THETA or N_FULL), rtol, atol, h_max (tau; inf: no
 # ceiling), t_max (tau), max_steps (the step budget, accepted and rejected), peaks_on (the normal
@@ -179,8 +179,9 @@ Record = namedtuple("Record", "istats fstats levels samples traj peaks y_end fq"
 RunConsts = namedtuple("RunConsts", "n rtol atol h_max t_max max_steps peaks_on e0 level_e sample_tau")
 # System: what the right-hand side of a contact state reads and where it counts: the parameters p
 # (N_PARAMS), the contact state cs (N_CS), the state size n, the work buffer wk (its rows the
-# evaluations use as scratch) and istats (I_RHS, and the events' counts). The stepper (dop853) passes
-# it through to the right-hand side it is given and reads only n and wk.
+# evaluations use as scratch) and istats (N_ISTATS, int64: I_RHS, the steps' and events' counts, the
+# outcome). The stepper (dop853) passes it through to the right-hand side it is given and reads only
+# n and wk. integrate.system_arrays allocates it; a run's n is its settings' state_size.
 System = namedtuple("System", "p cs n wk istats")
 # Point: a state y, its derivative f and the right-hand side's aux there (N_AUX): a step's start
 # and end (accept.try_step, dop853.rk_step).

@@ -37,7 +37,7 @@ def first_event(span, lev, work):
     (work.trk.scan: layout.ScanState), so a step costs one RHS evaluation for them.
     """
     t, h = span.t0, span.h
-    wk, scan = work.wk, work.trk.scan
+    wk, scan = span.sys.wk, work.trk.scan
     g_old = wk[W_GOLD]
     g_new = wk[W_GNEW]
     have_dense = False
@@ -109,7 +109,7 @@ def dense_built(have_dense, span, work):
     """The accepted step's dense output in F[0:7] (the step span, layout.Span, from work.y to
     wk[W_YNEW]), built once per step: returns True."""
     if not have_dense:
-        step_dense(span.t0, span.y0, span.h, work.wk[W_YNEW], span.sys, work.K, span.F)
+        step_dense(span.t0, span.y0, span.h, span.sys.wk[W_YNEW], span.sys, work.K, span.F)
     return True
 
 
@@ -120,7 +120,7 @@ def surface_bracket(k, span, lev, work):
     gb) of its return to the surface, and the event to apply there (k, or EV_AGAINST1 + i for a
     component moving against its sign)."""
     t, h = span.t0, span.h
-    y, cs, wk = work.y, work.cs, work.wk
+    y, cs, wk = work.y, span.sys.cs, span.sys.wk
     g0 = wk[W_GOLD, k]
     g1 = wk[W_GNEW, k]
     y_new = wk[W_YNEW]
@@ -163,7 +163,7 @@ def spin_bracket(k, span, lev, work, have_dense):
     the dense output. Returns (the peak's time, g_k there, have_dense); the time is -1 where g_k
     stays below spin_tol."""
     t, h = span.t0, span.h
-    y, cs, wk = work.y, work.cs, work.wk
+    y, cs, wk = work.y, span.sys.cs, span.sys.wk
     i = EVENTS[k, E_COMPONENT]
     d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], wk[W_YNEW], wk[W_FNEW], h)
     peak = hermite_peak(wk[W_GOLD, k], d0, wk[W_GNEW, k], d1)
@@ -183,7 +183,7 @@ def dip_bracket(k, span, lev, work, have_dense):
     flags the dip; the dense output confirms it. Returns (the time of the dip's minimum where g_k
     <= 0 there, g_k there, have_dense); the time is -1 where there is no such dip."""
     t, h = span.t0, span.h
-    y, cs, wk, scan = work.y, work.cs, work.wk, work.trk.scan
+    y, cs, wk, scan = work.y, span.sys.cs, span.sys.wk, work.trk.scan
     g0 = wk[W_GOLD, k]
     g1 = wk[W_GNEW, k]
     f = wk[W_F]

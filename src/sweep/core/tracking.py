@@ -130,7 +130,7 @@ def record_levels(span, seg_end, e_seg, consts, trk, rec):
             trk.track.at[TK_FHAT_PENDING] += 1
             open_level(L, tl, rec.fq, trk.windows)
         trk.track.at[TK_LEVEL] = L + 1
-        rec.istats[I_LEVELS] = L + 1
+        sys.istats[I_LEVELS] = L + 1
         if L + 1 == nl:
             return tl
     return -1.0
@@ -210,7 +210,7 @@ def track_peaks(this, seg_end, phi_c, running, work, rec):
     end (phi_c) may confirm the candidate, which is then counted and resolves pending levels' f_hat."""
     sys, t = this.sys, this.t0
     wk, F, trk = sys.wk, work.F, work.trk.track
-    peaks, istats, fq = rec.peaks, rec.istats, rec.fq
+    peaks, istats, fq = rec.peaks, sys.istats, rec.fq
     npk = trk.at[TK_NPK]
     pa = trk.phi[PH_A]
     if peak_bracketed(phi_c, trk):
@@ -240,7 +240,8 @@ def track_peaks(this, seg_end, phi_c, running, work, rec):
         if npk >= peaks.shape[0] and not trk.flags[TF_RING]:
             istats[I_OVERFLOW] |= 2
         else:
-            _add_peak(fq[0, Q_CAND_T], fq[0, Q_CAND_PHI], fq[0, Q_CAND_TH], npk, running, trk, rec)
+            if _add_peak(fq[0, Q_CAND_T], fq[0, Q_CAND_PHI], fq[0, Q_CAND_TH], npk, running, trk, rec):
+                istats[I_OVERFLOW] |= 2   # a ring too short for a level's look-back (never on the CPU path)
             npk += 1
     trk.at[TK_NPK] = npk
     istats[I_PEAKS] = npk
@@ -274,8 +275,9 @@ def peak_sides(seg_end, before, this, trk):
 def _add_peak(tpk, pvk, thk, npk, running, trk, rec):
     """Count maximum npk of Phi (tau tpk, value pvk, theta thk) into rec.peaks (layout.PK_*), the
     largest f_hat seen (rec.fstats[F_NFMAX]; running: the scene has not ended) and the f_hat of the
-    levels waiting for it (rec.levels)."""
+    levels waiting for it (rec.levels). Returns True where a level's look-back outgrows a ring buffer."""
     level_out, peaks, fstats = rec.levels, rec.peaks, rec.fstats
+    short = False
     cap = peaks.shape[0]   # row of peak j: j, or j % cap where the buffer is a ring (flags[TF_RING])
     peaks[npk % cap, PK_TAU] = tpk
     peaks[npk % cap, PK_PHI] = pvk
@@ -291,11 +293,12 @@ def _add_peak(tpk, pvk, thk, npk, running, trk, rec):
                 j -= 1
             if j >= 2:
                 if j - 2 <= npk - cap:
-                    rec.istats[I_OVERFLOW] |= 2   # a ring too short for this look-back (never on the CPU path)
+                    short = True
                 else:
                     level_out[L, L_FHAT] = 2.0 / (peaks[j % cap, PK_TAU] - peaks[(j - 2) % cap, PK_TAU])
             level_out[L, L_PENDING] = 0.0
             trk.at[TK_FHAT_PENDING] -= 1
+    return short
 
 
 @kernel
@@ -303,7 +306,7 @@ def shift_peak_window(span, seg_end, phi_c, have_dense, work):
     """Keep this segment's Phi (phi_c at seg_end), contact state and dense output (or, where it was
     not built, the stages it is built from: previous_dense) of the step span (layout.Span, from
     work.y) for the next bracket."""
-    y, cs, K, F, trk = work.y, work.cs, work.K, work.F, work.trk.track
+    y, cs, K, F, trk = work.y, span.sys.cs, work.K, work.F, work.trk.track
     n, wk = span.sys.n, span.sys.wk
     trk.phi[PH_A] = trk.phi[PH_B]
     trk.phi[PH_TA] = trk.phi[PH_TB]
