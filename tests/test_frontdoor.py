@@ -166,7 +166,7 @@ def test_cold_numba_cache_is_detected_and_old_caches_pruned(tmp_path):
     cache = tmp_path / "__pycache__" / "numba-0123456789abcdef"
     cache.mkdir(parents=True)
     assert frontdoor.numba_cache_cold(cache)                            # never compiled
-    (cache / "contact.eval_rhs-150.py311.nbi").write_bytes(b"")
+    (cache / "contact_rhs.eval_rhs-150.py311.nbi").write_bytes(b"")
     assert frontdoor.numba_cache_cold(cache)                            # the main loop is not there yet
     (cache / "integrate.run-400.py311.nbi").write_bytes(b"")
     assert not frontdoor.numba_cache_cold(cache)                        # cached
@@ -193,7 +193,7 @@ def test_numba_cache_is_keyed_by_every_kernel_source(tmp_path):
     model = pkg / "core" / "model.py"
     model.write_text(model.read_text() + "\n# edited\n")
     assert jit.sources_digest(paths, pkg) != jit.DIGEST
-    assert {p.name for p in jit.KERNEL_SOURCES} >= {"model.py", "contact.py", "integrate.py", "outcomes.py"}
+    assert {p.name for p in jit.KERNEL_SOURCES} >= {"model.py", "contact_rhs.py", "event_rules.py", "event_dispatch.py", "integrate.py", "outcomes.py"}
     assert jit.DIGEST[:16] in jit.cache_dir().name
     # the kernels are located there, with the digest as their stamp
     from sweep.core import integrate

@@ -222,7 +222,7 @@ def test_core_fingerprint_covers_physics_not_pipeline(tmp_path, monkeypatch):
     assert grid.core_fingerprint() == base
     (pkg / "plots.py").write_text((pkg / "plots.py").read_text() + "\n# figure edit\n")
     assert grid.core_fingerprint() == base
-    (pkg / "core" / "contact.py").write_text((pkg / "core" / "contact.py").read_text() + "\n# physics edit\n")
+    (pkg / "core" / "contact_rhs.py").write_text((pkg / "core" / "contact_rhs.py").read_text() + "\n# physics edit\n")
     assert grid.core_fingerprint() != base
 
 
