@@ -53,7 +53,7 @@ WIDE_ALLOWED = {
     "roots.event_rates": _BUFFERS, "roots.locate": "a bracket (ta, ga, tb, gb) of event k on a span at a level",
     "roots.sign_slopes": "a step's two ends (y, f) and its size for component i's sign",
     "scan.lift_off": "a bracket's end values and slopes (g0, d0, g1, d1) of event k on a span at a level",
-    "tracking._add_peak": _BUFFERS, "tracking.dense_wanted": _BUFFERS, "tracking.record_traj": _BUFFERS,
+    "tracking._add_peak": _BUFFERS, "tracking.dense_wanted": _BUFFERS,
     "tracking.step_dense": _STEPPER, "tracking.track_frequency": _BUFFERS,
 }
 # a module of the core that outgrows this is split along its seams (contact_rhs / slip / moments /

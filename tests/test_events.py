@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sweep.core import event_codegen as EC
 from sweep.core import event_dispatch as ED
 from sweep.core import event_ids as ID
 from sweep.core import event_rules as ER
@@ -17,11 +18,11 @@ from sweep.core import model as M
 
 
 def test_the_generated_ids_and_dispatch_are_the_generators_text():
-    """event_ids.py and event_dispatch.py are what event_rules writes: a row or a function added to
-    event_rules.py without `python -m sweep.core.event_rules` fails here."""
+    """event_ids.py and event_dispatch.py are what event_codegen writes: a row or a function added to
+    event_rules.py without `python -m sweep.core.event_codegen` fails here."""
     folder = Path(ER.__file__).parent
-    assert (folder / ER.IDS_MODULE).read_text() == ER.ids_source()
-    assert (folder / ER.DISPATCH_MODULE).read_text() == ER.dispatch_source()
+    assert (folder / EC.IDS_MODULE).read_text() == EC.ids_source()
+    assert (folder / EC.DISPATCH_MODULE).read_text() == EC.dispatch_source()
 
 
 def test_the_ids_are_the_rows_of_the_rules():
@@ -31,7 +32,7 @@ def test_the_ids_are_the_rows_of_the_rules():
     for k, r in enumerate(ER.RULES):
         assert getattr(ID, f"EV_{r.name}") == k
         assert tuple(ID.EVENTS[k]) == (r.cls, r.forces, r.dip, r.restart, r.component, r.holds)
-    assert ER.table_sizes() == (ID.N_DYN_EVENTS, ID.N_EVENTS)
+    assert EC.table_sizes() == (ID.N_DYN_EVENTS, ID.N_EVENTS)
 
 
 def _kernel(name):
@@ -66,9 +67,9 @@ def test_the_generator_refuses_a_table_a_dispatch_could_not_serve(change, messag
     k, fields = change
     rules = _rules_with(k, **fields)
     with pytest.raises(ValueError, match=message):
-        ER.ids_source(rules)
+        EC.ids_source(rules)
     with pytest.raises(ValueError, match=message):
-        ER.dispatch_source(rules)
+        EC.dispatch_source(rules)
 
 
 def test_an_id_outside_the_table_raises_in_every_dispatch():

@@ -12,8 +12,8 @@
     contact_rhs.py  the right-hand side per contact state (roll, slide, slaved slip), the slip speeds
     slip.py      slip onset, hand-over between slide and slaved slip, a slow slide's fate
     moments.py   the dry-friction moment components (Filippov): stick test, stop at spin_tol, signs
-    event_rules.py  the events' table: each event's row beside its value and update functions, and
-                 the generator of event_ids.py (ids, table) and event_dispatch.py (the dispatch)
+    event_rules.py  the events' table: each event's row beside its value and update functions
+    event_codegen.py  generates event_ids.py (ids, table) and event_dispatch.py (the dispatch) from it
     impulse.py   plastic contact impulse (side change)
     tableau.py   DOP853 coefficients
     dop853_sums.py  the tableau's sums as straight-line code, generated from tableau.py

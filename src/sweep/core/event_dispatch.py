@@ -1,5 +1,5 @@
 """The events' dispatch, GENERATED from event_rules.py: do not edit; edit its rows and functions and
-rerun `python -m sweep.core.event_rules`.
+rerun `python -m sweep.core.event_codegen`.
 
 Each id calls the functions its row registers (event_rules.RULES); an id with none raises.
 """

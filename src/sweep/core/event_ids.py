@@ -1,5 +1,5 @@
 """The events' ids and their table, GENERATED from event_rules.py: do not edit; edit its rows and
-rerun `python -m sweep.core.event_rules`.
+rerun `python -m sweep.core.event_codegen`.
 
 An event's id is the position of its row: the events of the dynamics 0 .. N_DYN_EVENTS - 1 (scanned
 on every step), the levels' event (event functions end at N_EVENTS), then the ids that are

@@ -140,7 +140,7 @@ def record_start(consts, work, rec, sys):
     aux = wk[W_AUX]
     start_tracking(y, aux, sys, consts.sample_tau, work.trk.track, rec.samples)
     if rec.traj.shape[0] > 0:
-        record_traj(0.0, y, aux[X_PHI], cs, n, rec.traj, sys.istats)
+        record_traj(0.0, y, aux[X_PHI], sys, rec.traj)
     start_scan(work.trk.scan)
     if consts.peaks_on:
         freq_start(y[Y_THETA], aux[X_PHI], rec.fq)
@@ -346,7 +346,7 @@ def end_segment(seg, outcome, lev, consts, work, rec, sys):
     advance(seg, outcome >= 0, sys, work, fstats)
     t = seg.end
     if rec.traj.shape[0] > 0 and outcome < 0:
-        record_traj(t, y, math.nan if event else wk[W_AUXNEW, X_PHI], cs, consts.n, rec.traj, istats)
+        record_traj(t, y, math.nan if event else wk[W_AUXNEW, X_PHI], sys, rec.traj)
     if not event:
         carry_step_end(lev, trk.track.at[TK_LEVEL] < level_e.shape[0], y, sys)
         if seg.at_tmax and outcome < 0:

@@ -175,8 +175,10 @@ def record_samples(span, seg_end, t_stop, sample_tau, trk, samples):
 
 
 @kernel
-def record_traj(t, y, phi, cs, n, traj, istats):
-    """Append one trajectory row (layout.TR_*; flags an overflow instead of growing the buffer)."""
+def record_traj(t, y, phi, sys, traj):
+    """Append one trajectory row (layout.TR_*: y's sys.n components, the mode of sys.cs; counted in
+    sys.istats, which flags an overflow instead of growing the buffer)."""
+    cs, n, istats = sys.cs, sys.n, sys.istats
     i = istats[I_TRAJ]
     if i >= traj.shape[0]:
         istats[I_OVERFLOW] |= 1
