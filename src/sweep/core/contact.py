@@ -36,7 +36,7 @@ from .constants import AT_FLOOR, BELOW, EPS, HANDOVER_ARMED, HANDOVER_OFF, ROLL,
 from .impulse import project_velocity, stop_axis_rate
 from .jit import kernel
 from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SLAVE_OFF, CS_SIDE, CS_SIG, CS_STUCK, W_AUXTMP,
-                     W_AUXFLOW, W_AUXSLOPE, W_DYFLOW, W_DYSLOPE, W_DYTMP, W_GBUF, W_YFLOW, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
+                     W_AUXDRIFT, W_AUXFLOW, W_AUXSLOPE, W_DYDRIFT, W_DYFLOW, W_YDRIFT, W_DYSLOPE, W_DYTMP, W_GBUF, W_YFLOW, W_PFRICTION, W_SCRATCH, W_YSLIP, I_RHS, I_STICK, I_TRANS, I_IMPACTS, F_DIMPACT, F_TIMPACT,
                      System)
 from .model import (N_PARAMS, P_A, P_SLAVE, P_K1, P_K2, P_K3, P_MUD, P_MUS, P_UTOL, P_WTOL, Y_DK1, X_COSA, X_DCROSS, X_F1, X_F2, X_G1, X_OK, X_PHI, X_SIG1, X_SINA, X_LAG, X_NU, X_SLAVE_ERR, Y_ALPHA,
                     Y_DSLIDE, Y_U1, Y_U2, Y_W1, Y_W2, Y_W3, Contact, energy_from_trig, moment_axes_rates, rhs, sign_rate)
@@ -84,6 +84,10 @@ DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
 # truncation O(FLOW_DTAU) relative, round-off ~EPS |a_P| / FLOW_DTAU, both far below the lag's
 # own neglected second order
 FLOW_DTAU = 1e-7
+# tau x (1 + |theta'|): the step along the slaved motion over which the first-order manifold's
+# direction is differenced (second_order_lag): truncation O(DRIFT_DTAU) relative in a second-order
+# term, round-off ~DIR_TOL (1 + |theta'|) / DRIFT_DTAU
+DRIFT_DTAU = 1e-4
 DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
 DIR_MAXIT = 30
 # attracting_direction's answer where the slip direction is carried into the Painleve singularity
@@ -197,11 +201,20 @@ def slaved_direction(nu0, u, t, y, sys, dy, aux, ys):
 
     Returns nu; dy, aux hold the right-hand side there. aux[X_OK] = 0 if it does not converge.
     """
+    return direction_from(nu0, 0.0, u, t, y, sys, dy, aux, ys)
+
+
+@kernel
+def direction_from(nu0, slope, u, t, y, sys, dy, aux, ys):
+    """slaved_direction from nu0, its first update a Newton step with slope (d cross/d nu near the
+    root, < 0) where one is known, else from a probe 1e-6 rad away; then the same damped secant."""
     xa = nu0
     ca, da = slip_rates(xa, u, t, y, sys, dy, aux, ys)
     if abs(ca) <= DIR_NOISE * math.hypot(ca, da):
         return xa
     xb = nu0 + 1e-6
+    if slope < 0.0:
+        xb = nu0 - max(-DIR_MAXSTEP, min(DIR_MAXSTEP, ca / slope))
     cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
     for _ in range(DIR_MAXIT):
         if abs(cb) <= DIR_NOISE * math.hypot(cb, db) or abs(xb - xa) < DIR_TOL:
@@ -211,6 +224,8 @@ def slaved_direction(nu0, u, t, y, sys, dy, aux, ys):
         # a damped secant: the root moves little between calls, and a flat stretch of cross (a
         # near-fold) must not throw the iterate onto another root
         dx = -cb * (xb - xa) / (cb - ca)
+        if abs(dx) < DIR_TOL:
+            return xb   # (the next iterate would be within DIR_TOL: xb is the root to that)
         xc = xb + max(-DIR_MAXSTEP, min(DIR_MAXSTEP, dx))
         xa, ca = xb, cb
         xb = xc
@@ -300,7 +315,65 @@ def slaved_slip(nu0, t, y, sys, dy, aux):
     lag, dcross, err = lag_and_error(nu, u, cross0, t, y, sys, dy, aux)
     if not ok > 0.0:
         lag = 0.0
+    elif sys.p[P_SLAVE] > 0.0 and abs(lag) * err > EPS:
+        lag, err = second_order(nu, lag, dcross, err, t, y, sys, dy, aux)
     return nu, lag, dcross, ok, err
+
+
+@kernel
+def second_order(nu, lag, dcross, err, t, y, sys, dy, aux):
+    """(lag, err) of the second-order slow manifold from the first-order one (lag, err:
+    lag_and_error's at the quasi-static direction nu): the lag to second order (second_order_lag,
+    with the right-hand side along nu + lag in dy, aux), and the error measure raised to the
+    series' own: the second-order term d2 over the first, |d2| / (|lag| + |d2|), estimates the
+    expansion's parameter (where the manifold moves faster than the motion's rate 1 + |theta'|
+    tells, it exceeds the first-order measure), and times |d2| the neglected third order; err
+    becomes the larger of the first-order measure and the cube root of that third order, so that
+    err <= slave_tol bounds the neglected terms by slave_tol^3 as it bounds the first-order
+    manifold's by slave_tol^2 (docs/model.md, 'Slow slip'). Below that product's round-off
+    (|lag| err <= EPS) the second order is not computed."""
+    friction_along(nu + lag, t, y, sys, dy, aux)
+    lag2 = second_order_lag(nu, lag, dcross, t, y, sys, dy, aux)
+    d2 = abs(lag2 - lag)
+    return lag2, max(err, (d2 * d2 / abs(lag)) ** (1.0 / 3.0))
+
+
+@kernel
+def second_order_lag(nu, lag, dcross, t, y, sys, dy, aux):
+    """The slow manifold's lag behind nu* to second order in the relaxation time. On the manifold
+    nu = h(state) the direction dynamics u nu' = cross(nu) read u Dh = cross(h) (D: the rate along
+    the motion with the friction along h), exact. The first-order manifold h1 = nu* + lag
+    (slaved_slip's) makes the residual second order; here Dh1 is a forward difference of h1 over
+    DRIFT_DTAU / (1 + |theta'|) along the motion with the friction along h1 (dy, aux: the
+    right-hand side there), and h solves cross(h) = u Dh1 by secant steps from h1 with the slope
+    c' = dcross: the neglected terms are third order (docs/model.md, 'Slow slip'). Returns the lag
+    h - nu*; the first-order one where the slaved direction is lost along the difference."""
+    wk = sys.wk
+    n = sys.n
+    u = math.hypot(y[Y_U1], y[Y_U2])
+    yf, dyf, auxf = wk[W_YDRIFT], wk[W_DYDRIFT], wk[W_AUXDRIFT]
+    rad = (y[Y_U1] * dy[Y_U1] + y[Y_U2] * dy[Y_U2]) / u
+    step = DRIFT_DTAU / (1.0 + abs(y[Y_W3] / aux[X_COSA]))
+    if rad < 0.0:
+        step = min(step, 0.5 * u / -rad)
+    for i in range(n):
+        yf[i] = y[i] + step * dy[i]
+    uf = u + step * rad
+    # (started where nu* moves to at its first-order rate, lag (c' - rad)/u: the root is then a
+    # Newton step away)
+    nuf = direction_from(nu + step * lag * (dcross - rad) / u, dcross, uf, t + step, yf, sys, dyf, auxf, wk[W_YSLIP])
+    if not auxf[X_OK] > 0.0:
+        return lag
+    crossf = dyf[Y_U2] * math.cos(nuf) - dyf[Y_U1] * math.sin(nuf)
+    lagf, _, _ = lag_and_error(nuf, uf, crossf, t + step, yf, sys, dyf, auxf)
+    if lagf == 0.0:
+        return lag
+    drift = u * ((nuf + lagf) - (nu + lag)) / step
+    # one Newton step from h1 with the slope at nu*: the correction d2 is of the order of the lag
+    # times the expansion's parameter, and the step's own error, of d2 times the slope's change
+    # over lag + d2, is third order
+    cross1, _ = slip_rates(nu + lag, u, t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP])
+    return lag - max(-abs(lag), min(abs(lag), (cross1 - drift) / dcross))
 
 
 @kernel
@@ -560,8 +633,10 @@ def settle_onto(root, t, y, sys, strict):
     left as it was. Returns SETTLED, AGAINST or INACCURATE."""
     p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     side = int(cs[CS_SIDE])
-    lag, _, err = root_lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     u = math.hypot(y[Y_U1], y[Y_U2])
+    lag, dcross, err = root_lag(root, u, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+    if p[P_SLAVE] > 0.0 and abs(lag) * err > EPS:
+        lag, err = second_order(root, lag, dcross, err, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     along = root + lag
     if strict and p[P_SLAVE] > 0.0 and u > SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]:
         # the slow manifold is no good approximation here, or the slip's direction has yet to
@@ -569,7 +644,7 @@ def settle_onto(root, t, y, sys, strict):
         # relaxation time): the slip slides on
         turn = math.atan2(y[Y_U2], y[Y_U1]) - along
         turn = abs(math.atan2(math.sin(turn), math.cos(turn)))
-        if not (err <= p[P_SLAVE] and turn <= p[P_SLAVE]):
+        if not (err <= p[P_SLAVE] and turn <= p[P_SLAVE] * p[P_SLAVE]):
             return INACCURATE
     saved = wk[W_YSLIP]
     for i in range(n):
