@@ -80,14 +80,14 @@ DIR_TOL = 1e-14
 # its angle update gets below DIR_TOL: the root is then found to machine precision, not lost.
 DIR_NOISE = 64.0 * EPS
 DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
-# tau: forward-difference step of d cross/d tau along the motion at a fixed direction (the lag):
-# truncation O(FLOW_DTAU) relative, round-off ~EPS |a_P| / FLOW_DTAU, both far below the lag's
-# own neglected second order
-FLOW_DTAU = 1e-7
+# tau: central-difference step of d cross/d tau along the motion at a fixed direction (the lag):
+# truncation O(FLOW_DTAU^2) relative, round-off ~EPS |a_P| / FLOW_DTAU; the second order differences
+# the lag again over DRIFT_DTAU, which takes that round-off times 1 / DRIFT_DTAU
+FLOW_DTAU = 1e-5
 # tau x (1 + |theta'|): the step along the slaved motion over which the first-order manifold's
 # direction is differenced (second_order_lag): truncation O(DRIFT_DTAU) relative in a second-order
 # term, round-off ~DIR_TOL (1 + |theta'|) / DRIFT_DTAU
-DRIFT_DTAU = 1e-4
+DRIFT_DTAU = 1e-5
 DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
 DIR_MAXIT = 30
 # attracting_direction's answer where the slip direction is carried into the Painleve singularity
@@ -257,19 +257,23 @@ def direction_lag(nu, u, rates, t, y, sys, dy):
     (c' = d cross/d nu < 0 where nu attracts, rad = u' the slip's rate along s), with
     nu*' = -(d cross/d tau at fixed nu)/c' (docs/model.md, 'Slow slip'). dy: the right-hand side
     at the slip vector u s(nu) (slip_rates'), rates = (cross, rad, c') there; d cross/d tau by a
-    forward difference along that motion. 0 where nu does not attract that way (c' - rad >= 0)."""
+    central difference along that motion (its round-off enters the second order's difference of
+    the lag, second_order_lag). 0 where nu does not attract that way (c' - rad >= 0)."""
     cross0, rad0, dcross = rates
     den = dcross * (dcross - rad0)
     if not (dcross < 0.0 and dcross - rad0 < 0.0 and u > 0.0):
         return 0.0
-    # the step along the motion, short enough that the slip speed stays positive on it
-    step = min(FLOW_DTAU, 0.5 * u / abs(rad0)) if rad0 < 0.0 else FLOW_DTAU
+    # the step along the motion, short enough that the slip speed stays positive on it both ways
+    step = min(FLOW_DTAU, 0.5 * u / abs(rad0)) if rad0 != 0.0 else FLOW_DTAU
     wk = sys.wk
     yf = wk[W_YFLOW]
     for i in range(sys.n):
         yf[i] = y[i] + step * dy[i]
     cross_f, _ = slip_rates(nu, u + step * rad0, t + step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW], wk[W_YSLIP])
-    return -u * ((cross_f - cross0) / step) / den
+    for i in range(sys.n):
+        yf[i] = y[i] - step * dy[i]
+    cross_b, _ = slip_rates(nu, u - step * rad0, t - step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW], wk[W_YSLIP])
+    return -u * ((cross_f - cross_b) / (2.0 * step)) / den
 
 
 @kernel
