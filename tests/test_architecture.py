@@ -40,6 +40,8 @@ WIDE_ALLOWED = {
     "contact_rhs._model": _SLIP_SOLVE, "contact_rhs.direction_lag": _SLIP_SOLVE, "contact_rhs.lag_and_error": _SLIP_SOLVE,
     "contact_rhs.model_call": _SLIP_SOLVE, "contact_rhs.root_lag": _SLIP_SOLVE, "contact_rhs.slaved_direction": _SLIP_SOLVE,
     "contact_rhs.slide_model": _SLIP_SOLVE, "contact_rhs.slip_rates": _SLIP_SOLVE, "slip.dip_crosses": _SLIP_SOLVE,
+    "contact_rhs.direction_from": _SLIP_SOLVE, "contact_rhs.second_order": _SLIP_SOLVE,
+    "contact_rhs.second_order_lag": _SLIP_SOLVE,
     "dop853.dense_coeffs": _STEPPER, "dop853.dense_component": _STEPPER, "dop853.dense_eval": _STEPPER,
     "dop853.initial_step": _STEPPER, "dop853.rk_step": _STEPPER,
     "fits.summary_fits": "the fits' inputs as plain arrays and counts (called from numba and from Python alike)",

@@ -117,6 +117,8 @@ ROUNDOFF = 1e-14                  # ... or |cross| below this fraction of the sl
 DIR_JUMP = 0.3                    # rad: a root farther than this from the last one is another root
 DCROSS_STEP = 1e-6                # rad: central difference of d cross/d nu (error ~1e-12 relative)
 FLOW_STEP = 1e-6                  # tau: central difference of d cross/d tau along the motion (the lag)
+EPS = float(np.finfo(float).eps)
+DRIFT_STEP = 1e-4                 # tau x (1 + |theta'|): central difference of the first-order manifold (Disk.manifold)
 
 # events in a fixed order (a tie goes to the first)
 SIGN = ("sign0", "sign1", "sign2")
@@ -340,6 +342,49 @@ class Disk:
         lag = u * root_rate / (dc - rad0)
         return lag, u * (1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA]))) / (rad0 - dc) + abs(lag)
 
+    def manifold(self, nu, u, t, y, c):
+        """(lag, err) of the slow manifold to second order in the relaxation time. The manifold
+        h(state) obeys u Dh = cross(h) exactly (D: the rate along the motion, the friction along h).
+        The first-order manifold h1 = nu + lag (Disk.lag) is differenced centrally along the motion
+        at the slip vector u s(h1) with the friction along h1 (each side's root continued from nu
+        and its own first-order lag), and h solves cross(h) = u Dh1 (secant to convergence): the
+        residual is third order. err: the first-order measure, or where larger the cube root of the
+        third order's estimate d2^2/|lag| (d2 = h - h1) (docs/model.md, 'Slow slip'). The first
+        order where slave_tol is 0 or |lag| err is at round-off."""
+        lag, err = self.lag(nu, u, t, y, c)
+        if not (self.p[P_SLAVE] > 0.0 and math.isfinite(err) and abs(lag) * err > EPS):
+            return lag, err
+        h1 = nu + lag
+        ys = np.array(y[:self.n], dtype=float)
+        ys[Y_U1], ys[Y_U2] = u * math.cos(h1), u * math.sin(h1)
+        dy, _ = self.model(t, ys, SLIDE, c, math.cos(h1), math.sin(h1))
+        rad = dy[Y_U1] * math.cos(h1) + dy[Y_U2] * math.sin(h1)
+        step = DRIFT_STEP / (1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA])))
+        if rad != 0.0:
+            step = min(step, 0.5 * u / abs(rad))
+        ends = []
+        for sgn in (1.0, -1.0):
+            z = ys + sgn * step * dy
+            uz = math.hypot(z[Y_U1], z[Y_U2])
+            root = self.slaved_root(nu, uz, t + sgn * step, z, c)
+            if math.isnan(root):
+                return lag, err
+            lz, ez = self.lag(root, uz, t + sgn * step, z, c)
+            if not math.isfinite(ez):
+                return lag, err
+            ends.append(root + lz)
+        drift = u * (ends[0] - ends[1]) / (2.0 * step)
+        xa, xb = h1, h1 + 1e-9
+        fa = self.cross_dot(xa, u, t, y, c)[0] - drift
+        fb = self.cross_dot(xb, u, t, y, c)[0] - drift
+        for _ in range(20):
+            if fb == fa or abs(xb - xa) < 1e-16:
+                break
+            xa, fa, xb = xb, fb, xb - fb * (xb - xa) / (fb - fa)
+            fb = self.cross_dot(xb, u, t, y, c)[0] - drift
+        d2 = xb - h1
+        return xb - nu, max(err, (d2 * d2 / abs(lag)) ** (1.0 / 3.0))
+
     def slaved_root(self, seed, u, t, y, c):
         """The root of cross(nu) continued from seed (secant); NaN if none within DIR_JUMP."""
         xa, xb = seed, seed + 1e-7
@@ -373,7 +418,7 @@ class Disk:
                 aux = np.full(N_AUX, math.nan)
                 aux[X_OK] = 0.0
                 return dy, aux, nu
-            lag, err = self.lag(nu, u, t, y, c)
+            lag, err = self.manifold(nu, u, t, y, c)
             dy, aux = self.model(t, y, SLIDE, c, math.cos(nu + lag), math.sin(nu + lag), self.pf)
             aux[X_NU], aux[X_LAG], aux[X_SLAVE_ERR] = nu, lag, err
             return dy, aux, nu
@@ -658,7 +703,7 @@ class Disk:
         'inaccurate'."""
         saved = y.copy()
         u = math.hypot(y[Y_U1], y[Y_U2])
-        lag, err = self.lag(root, u, t, y, c)
+        lag, err = self.manifold(root, u, t, y, c)
         along = root + lag
         turn = math.atan2(y[Y_U2], y[Y_U1]) - along
         turn = abs(math.atan2(math.sin(turn), math.cos(turn)))
@@ -706,7 +751,7 @@ class Disk:
         if c.mode == SLAVED:
             u = math.hypot(y[Y_U1], y[Y_U2])
             root = self.slaved_root(c.nu, u, t, y, c)
-            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root + self.lag(root, u, t, y, c)[0]
+            nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root + self.manifold(root, u, t, y, c)[0]
         was = c.stuck[i]
         c.stuck[i] = True
         if c.mode == SLAVED:
@@ -725,7 +770,7 @@ class Disk:
         un = math.hypot(y[Y_U1], y[Y_U2])
         if c.mode == SLAVED:
             root = self.slaved_root(c.nu, un, t, y, c)
-            lag, err = (0.0, math.inf) if math.isnan(root) else self.lag(root, un, t, y, c)
+            lag, err = (0.0, math.inf) if math.isnan(root) else self.manifold(root, un, t, y, c)
             nu = math.atan2(y[Y_U2], y[Y_U1]) if math.isnan(root) else root + lag
             _, aux = self.model(t, y, SLIDE, c, math.cos(nu), math.sin(nu), self.pf)
             return self.slaved_margin(y, aux, err) <= 0.0

@@ -20,8 +20,8 @@ import math
 
 from .constants import BELOW, EPS, ROLL, SLAVED, SLIDE
 from .jit import kernel
-from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_SLAVE_OFF, CS_STUCK, I_RHS, System, W_AUXFLOW,
-                     W_AUXSLOPE, W_DYFLOW, W_DYSLOPE, W_PFRICTION, W_YFLOW, W_YSLIP)
+from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_SLAVE_OFF, CS_STUCK, I_RHS, System, W_AUXDRIFT,
+                     W_AUXFLOW, W_AUXSLOPE, W_DYDRIFT, W_DYFLOW, W_DYSLOPE, W_PFRICTION, W_YDRIFT, W_YFLOW, W_YSLIP)
 from .model import (Contact, N_PARAMS, P_A, P_MUD, P_SLAVE, P_UTOL, X_COSA, X_DCROSS, X_LAG, X_NU, X_OK, X_PHI, X_SINA,
                     X_SLAVE_ERR, Y_ALPHA, Y_U1, Y_U2, Y_W3, energy_from_trig, rhs)
 
@@ -65,10 +65,14 @@ DIR_NOISE = 64.0 * EPS
 DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
 
 
-# tau: forward-difference step of d cross/d tau along the motion at a fixed direction (the lag):
-# truncation O(FLOW_DTAU) relative, round-off ~EPS |a_P| / FLOW_DTAU, both far below the lag's
-# own neglected second order
-FLOW_DTAU = 1e-7
+# tau: central-difference step of d cross/d tau along the motion at a fixed direction (the lag):
+# truncation O(FLOW_DTAU^2) relative, round-off ~EPS |a_P| / FLOW_DTAU; the second order differences
+# the lag again over DRIFT_DTAU, which takes that round-off times 1 / DRIFT_DTAU
+FLOW_DTAU = 1e-5
+# tau x (1 + |theta'|): the step along the slaved motion over which the first-order manifold's
+# direction is differenced (second_order_lag): truncation O(DRIFT_DTAU) relative in a second-order
+# term, round-off ~DIR_TOL (1 + |theta'|) / DRIFT_DTAU
+DRIFT_DTAU = 1e-5
 
 
 DIR_MAXSTEP = 0.25  # rad: largest secant update of the slaved direction
@@ -217,11 +221,20 @@ def slaved_direction(nu0, u, t, y, sys, dy, aux, ys):
 
     Returns nu; dy, aux hold the right-hand side there. aux[X_OK] = 0 if it does not converge.
     """
+    return direction_from(nu0, 0.0, u, t, y, sys, dy, aux, ys)
+
+
+@kernel
+def direction_from(nu0, slope, u, t, y, sys, dy, aux, ys):
+    """slaved_direction from nu0, its first update a Newton step with slope (d cross/d nu near the
+    root, < 0) where one is known, else from a probe 1e-6 rad away; then the same damped secant."""
     xa = nu0
     ca, da = slip_rates(xa, u, t, y, sys, dy, aux, ys)
     if abs(ca) <= DIR_NOISE * math.hypot(ca, da):
         return xa
     xb = nu0 + 1e-6
+    if slope < 0.0:
+        xb = nu0 - max(-DIR_MAXSTEP, min(DIR_MAXSTEP, ca / slope))
     cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
     for _ in range(DIR_MAXIT):
         if abs(cb) <= DIR_NOISE * math.hypot(cb, db) or abs(xb - xa) < DIR_TOL:
@@ -231,6 +244,8 @@ def slaved_direction(nu0, u, t, y, sys, dy, aux, ys):
         # a damped secant: the root moves little between calls, and a flat stretch of cross (a
         # near-fold) must not throw the iterate onto another root
         dx = -cb * (xb - xa) / (cb - ca)
+        if abs(dx) < DIR_TOL:
+            return xb   # (the next iterate would be within DIR_TOL: xb is the root to that)
         xc = xb + max(-DIR_MAXSTEP, min(DIR_MAXSTEP, dx))
         xa, ca = xb, cb
         xb = xc
@@ -262,19 +277,23 @@ def direction_lag(nu, u, rates, t, y, sys, dy):
     (c' = d cross/d nu < 0 where nu attracts, rad = u' the slip's rate along s), with
     nu*' = -(d cross/d tau at fixed nu)/c' (docs/model.md, 'Slow slip'). dy: the right-hand side
     at the slip vector u s(nu) (slip_rates'), rates = (cross, rad, c') there; d cross/d tau by a
-    forward difference along that motion. 0 where nu does not attract that way (c' - rad >= 0)."""
+    central difference along that motion (its round-off enters the second order's difference of
+    the lag, second_order_lag). 0 where nu does not attract that way (c' - rad >= 0)."""
     cross0, rad0, dcross = rates
     den = dcross * (dcross - rad0)
     if not (dcross < 0.0 and dcross - rad0 < 0.0 and u > 0.0):
         return 0.0
-    # the step along the motion, short enough that the slip speed stays positive on it
-    step = min(FLOW_DTAU, 0.5 * u / abs(rad0)) if rad0 < 0.0 else FLOW_DTAU
+    # the step along the motion, short enough that the slip speed stays positive on it both ways
+    step = min(FLOW_DTAU, 0.5 * u / abs(rad0)) if rad0 != 0.0 else FLOW_DTAU
     wk = sys.wk
     yf = wk[W_YFLOW]
     for i in range(sys.n):
         yf[i] = y[i] + step * dy[i]
     cross_f, _ = slip_rates(nu, u + step * rad0, t + step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW], wk[W_YSLIP])
-    return -u * ((cross_f - cross0) / step) / den
+    for i in range(sys.n):
+        yf[i] = y[i] - step * dy[i]
+    cross_b, _ = slip_rates(nu, u - step * rad0, t - step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW], wk[W_YSLIP])
+    return -u * ((cross_f - cross_b) / (2.0 * step)) / den
 
 
 @kernel
@@ -320,4 +339,62 @@ def slaved_slip(nu0, t, y, sys, dy, aux):
     lag, dcross, err = lag_and_error(nu, u, cross0, t, y, sys, dy, aux)
     if not ok > 0.0:
         lag = 0.0
+    elif sys.p[P_SLAVE] > 0.0 and abs(lag) * err > EPS:
+        lag, err = second_order(nu, lag, dcross, err, t, y, sys, dy, aux)
     return nu, lag, dcross, ok, err
+
+
+@kernel
+def second_order(nu, lag, dcross, err, t, y, sys, dy, aux):
+    """(lag, err) of the second-order slow manifold from the first-order one (lag, err:
+    lag_and_error's at the quasi-static direction nu): the lag to second order (second_order_lag,
+    with the right-hand side along nu + lag in dy, aux), and the error measure raised to the
+    series' own: the second-order term d2 over the first, |d2| / (|lag| + |d2|), estimates the
+    expansion's parameter (where the manifold moves faster than the motion's rate 1 + |theta'|
+    tells, it exceeds the first-order measure), and times |d2| the neglected third order; err
+    becomes the larger of the first-order measure and the cube root of that third order, so that
+    err <= slave_tol bounds the neglected terms by slave_tol^3 as it bounds the first-order
+    manifold's by slave_tol^2 (docs/model.md, 'Slow slip'). Below that product's round-off
+    (|lag| err <= EPS) the second order is not computed."""
+    friction_along(nu + lag, t, y, sys, dy, aux)
+    lag2 = second_order_lag(nu, lag, dcross, t, y, sys, dy, aux)
+    d2 = abs(lag2 - lag)
+    return lag2, max(err, (d2 * d2 / abs(lag)) ** (1.0 / 3.0))
+
+
+@kernel
+def second_order_lag(nu, lag, dcross, t, y, sys, dy, aux):
+    """The slow manifold's lag behind nu* to second order in the relaxation time. On the manifold
+    nu = h(state) the direction dynamics u nu' = cross(nu) read u Dh = cross(h) (D: the rate along
+    the motion with the friction along h), exact. The first-order manifold h1 = nu* + lag
+    (slaved_slip's) makes the residual second order; here Dh1 is a forward difference of h1 over
+    DRIFT_DTAU / (1 + |theta'|) along the motion with the friction along h1 (dy, aux: the
+    right-hand side there), and h solves cross(h) = u Dh1 by secant steps from h1 with the slope
+    c' = dcross: the neglected terms are third order (docs/model.md, 'Slow slip'). Returns the lag
+    h - nu*; the first-order one where the slaved direction is lost along the difference."""
+    wk = sys.wk
+    n = sys.n
+    u = math.hypot(y[Y_U1], y[Y_U2])
+    yf, dyf, auxf = wk[W_YDRIFT], wk[W_DYDRIFT], wk[W_AUXDRIFT]
+    rad = (y[Y_U1] * dy[Y_U1] + y[Y_U2] * dy[Y_U2]) / u
+    step = DRIFT_DTAU / (1.0 + abs(y[Y_W3] / aux[X_COSA]))
+    if rad < 0.0:
+        step = min(step, 0.5 * u / -rad)
+    for i in range(n):
+        yf[i] = y[i] + step * dy[i]
+    uf = u + step * rad
+    # (started where nu* moves to at its first-order rate, lag (c' - rad)/u: the root is then a
+    # Newton step away)
+    nuf = direction_from(nu + step * lag * (dcross - rad) / u, dcross, uf, t + step, yf, sys, dyf, auxf, wk[W_YSLIP])
+    if not auxf[X_OK] > 0.0:
+        return lag
+    crossf = dyf[Y_U2] * math.cos(nuf) - dyf[Y_U1] * math.sin(nuf)
+    lagf, _, _ = lag_and_error(nuf, uf, crossf, t + step, yf, sys, dyf, auxf)
+    if lagf == 0.0:
+        return lag
+    drift = u * ((nuf + lagf) - (nu + lag)) / step
+    # one Newton step from h1 with the slope at nu*: the correction d2 is of the order of the lag
+    # times the expansion's parameter, and the step's own error, of d2 times the slope's change
+    # over lag + d2, is third order
+    cross1, _ = slip_rates(nu + lag, u, t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP])
+    return lag - max(-abs(lag), min(abs(lag), (cross1 - drift) / dcross))

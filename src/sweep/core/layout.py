@@ -66,7 +66,10 @@ W_YFLOW = 32      # SLAVED: the state a short way along the motion (the slip dir
 W_DYFLOW = 33
 W_AUXFLOW = 34
 W_ESCALE = 35     # the error norm's per-component scales of this step (accept.error_scale)
-N_WORK = 36
+W_YDRIFT = 36     # SLAVED: the state a short way along the slaved motion (the slow manifold's drift)
+W_DYDRIFT = 37
+W_AUXDRIFT = 38
+N_WORK = 39
 N_WCOLS = max(N_FULL, N_AUX, N_EVENTS)   # columns of the work buffer: a state, an aux or every event's value
 
 # --- settings vector: the run's inputs (float64; a scene's row of a batch), read once into RunConsts ---

@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 
 from .. import outcomes as oc
-from .constants import AT_FLOOR, BELOW, HANDOVER_ARMED, HANDOVER_OFF, ROLL, SLAVED, SLIDE, SLOW_OFF
-from .contact_rhs import (SLAVE_FLOOR, eval_rhs, model_call, root_lag, slave_speed, slaved_direction, slip_floor,
-                          slip_rates, slip_roundoff)
+from .constants import AT_FLOOR, BELOW, EPS, HANDOVER_ARMED, HANDOVER_OFF, ROLL, SLAVED, SLIDE, SLOW_OFF
+from .contact_rhs import (SLAVE_FLOOR, eval_rhs, model_call, root_lag, second_order, slave_speed, slaved_direction,
+                          slip_floor, slip_rates, slip_roundoff)
 from .impulse import project_velocity
 from .jit import kernel
 from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SLAVE_OFF, W_AUXSLOPE, W_AUXTMP, W_DYSLOPE, W_DYTMP,
@@ -283,8 +283,10 @@ def settle_onto(root, t, y, sys, strict):
     left as it was. Returns SETTLED, AGAINST or INACCURATE."""
     p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     side = int(cs[CS_SIDE])
-    lag, _, err = root_lag(root, math.hypot(y[Y_U1], y[Y_U2]), t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     u = math.hypot(y[Y_U1], y[Y_U2])
+    lag, dcross, err = root_lag(root, u, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+    if p[P_SLAVE] > 0.0 and abs(lag) * err > EPS:
+        lag, err = second_order(root, lag, dcross, err, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     along = root + lag
     if strict and p[P_SLAVE] > 0.0 and u > SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]:
         # the slow manifold is no good approximation here, or the slip's direction has yet to
@@ -292,7 +294,7 @@ def settle_onto(root, t, y, sys, strict):
         # relaxation time): the slip slides on
         turn = math.atan2(y[Y_U2], y[Y_U1]) - along
         turn = abs(math.atan2(math.sin(turn), math.cos(turn)))
-        if not (err <= p[P_SLAVE] and turn <= p[P_SLAVE]):
+        if not (err <= p[P_SLAVE] and turn <= p[P_SLAVE] * p[P_SLAVE]):
             return INACCURATE
     saved = wk[W_YSLIP]
     for i in range(n):
