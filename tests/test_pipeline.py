@@ -508,3 +508,5 @@ def test_last_round_line_reports_the_finished_maps_rough_cells():
     assert adaptive.round_line("x", "mu_d 0.3", rec).endswith("no round left; rough 7 cells")
     rec["next"] = {"outcome": 1, "failed": 0, "error": 2, "rough": 4}
     assert adaptive.round_line("x", "mu_d 0.3", rec).endswith("rough 4 cells")
+    rec["holdout"] = 3
+    assert ": 10 scenes, 3 of them the hold-out (100 of 400" in adaptive.round_line("x", "mu_d 0.3", rec)

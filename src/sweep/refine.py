@@ -12,8 +12,8 @@ its 2^d children cells. A cell is refined when
   failed numerically (sweep.outcomes FAILED), or
 * its interpolation error estimate, for one of the driving outputs, exceeds the tolerance;
 
-unless its error does not fall as the cells shrink (ROUGH): sensitive dynamics, where refining
-buys nothing, reported as rough with its local spread.
+unless its error does not fall as the cells shrink (ROUGH): structure finer than the lattice,
+where refining buys nothing, reported as rough.
 
 The error estimate is the hierarchical surplus: a node computed at round k is also predicted by
 multilinear interpolation from the corners of the cell of round k - 1 it lies in (log values for
@@ -25,7 +25,11 @@ get surpluses too, against the lattice of stride 2S (every other node of round 0
 The reconstructed map's error bars are calibrated on the map itself (`bar_factors`): every node
 computed after round 0 is a test of interpolation in the coarser cell it lies in (its surplus is
 that interpolation's true error), so the share of tests within factor x indicator fixes the
-factor, per class of cell and bin of the indicator (split-conformal prediction).
+factor, per class of cell and bin of the indicator (split-conformal prediction). Those tests
+come from the cells the map chose to refine, the hard ones, so a map large enough for it also
+computes a hold-out in its last round (`holdout_size`): a uniform random sample of the nodes it
+would reconstruct, left out of the reconstruction, whose errors calibrate the bars of the
+reconstructed nodes directly (`holdout_bars`).
 
 Everything is a function of the set of computed nodes and their values, so the same config
 computes the same nodes (determinism: ties are broken by node index), and a round can be planned
