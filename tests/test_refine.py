@@ -269,7 +269,7 @@ def test_rough_leaves_count_the_finished_maps_rough_cells():
     assert refine.rough_leaves(lat, f2, st2) == 0
 
 
-def test_the_last_round_computes_a_deterministic_holdout_outside_the_cells():
+def test_the_last_round_computes_a_deterministic_holdout_outside_the_cells(monkeypatch):
     lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
                                "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
     oc, val, _ = synthetic(lat)
@@ -281,6 +281,13 @@ def test_the_last_round_computes_a_deterministic_holdout_outside_the_cells():
     hold = refine.holdout_mask(lat, f, st)                   # planned again: the same nodes
     np.testing.assert_array_equal(np.nonzero(hold)[0], refine._flat(lat, plans[-1].holdout))
     assert (f.round[hold] == lat.rounds).all()
+    # a map whose hold-out another draw made (another seed, another numpy) keeps its own: the
+    # last round's nodes that the plan does not refine with
+    with monkeypatch.context() as mp:
+        mp.setattr(refine, "HOLDOUT_SEED", refine.HOLDOUT_SEED + 1)
+        assert not np.array_equal(refine._flat(lat, refine.plan_round(lat, f.subset(f.round < lat.rounds), st,
+                                                                      lat.rounds).holdout), np.nonzero(hold)[0])
+        np.testing.assert_array_equal(refine.holdout_mask(lat, f, st), hold)
     # the hold-out is not part of the map's cells: they are those of the refinement alone
     known = f.subset(~hold)
     refined = set(map(tuple, plans[-1].nodes)) - set(map(tuple, plans[-1].holdout))

@@ -458,15 +458,19 @@ def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
 
 def holdout_mask(lat: Lattice, f: Fields, st: Settings) -> np.ndarray:
     """The computed nodes that are the last round's hold-out (bool (size,)): the last round is
-    planned again from the rounds before it (deterministic), so no file needs to record them.
-    They are tests of the reconstruction, not part of the map's cells."""
+    planned again from the rounds before it (deterministic), so no file needs to record them;
+    every node of the last round that the plan does not refine with is one (so a map computed
+    by another plan still gets cells made of refinement nodes only). They are tests of the
+    reconstruction, not part of the map's cells."""
     out = np.zeros(lat.size, bool)
     last = f.computed & (f.round == lat.rounds)
     if not holdout_size(lat, st) or not last.any():
         return out
     plan = plan_round(lat, f.subset(f.round < lat.rounds), st, lat.rounds)
-    out[_flat(lat, plan.holdout)] = True
-    return out & last
+    refining = np.zeros(lat.size, bool)
+    refining[_flat(lat, plan.nodes)] = True
+    refining[_flat(lat, plan.holdout)] = False
+    return last & ~refining
 
 
 def rough_leaves(lat: Lattice, f: Fields, st: Settings) -> int:
