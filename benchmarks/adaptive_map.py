@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/adaptive_map.py [--points 33] [--planes paper,friction] [--jobs 2]
                                                [--max-share 0.25] [--start 5] [--tolerance 0.01]
+                                               [--draws 8] [--sensitivity 3]
 
 For each plane (a 2-D map of the pipeline's `refine:` mode; the other axes fixed):
 
@@ -11,9 +12,10 @@ For each plane (a 2-D map of the pipeline's `refine:` mode; the other axes fixed
    rerun with the same settings computes nothing);
 2. the adaptive map (sweep.refine.plan_round / reconstruct, the rounds the pipeline runs), whose
    computed nodes take their values from the dense lattice: the integrator is deterministic, so
-   these are the values the pipeline would compute;
+   these are the values the pipeline would compute (its last round's hold-out included: those
+   nodes count as computed);
 3. uniform sampling with at least as many scenes: every second node (stride 2), reconstructed the
-   same way (nearest outcome, multilinear in log t_halt, the same error bars).
+   same way (nearest outcome, multilinear in log t_halt; no hold-out, so the surpluses' bars).
 
 Reports, side by side: scenes computed (share of the lattice), outcome wrong (share of the
 lattice's nodes), boundary displacement (for every node with a wrong outcome, the Chebyshev
@@ -22,7 +24,12 @@ max), t_halt's relative error at the reconstructed nodes that halted in both (me
 also where the map is smooth: the issue's criterion, |second difference of log t_halt| < 0.01
 along both axes, and the ratio of uniform's median there to the adaptive one's), the share of
 those nodes where the error bar holds (|error| <= t_halt_interpolation_error), and the median bar
-relative to the value.
+relative to the value. Then: the lattice-scale noise where smooth (sigma from fourth
+differences) and how much larger the fourth differences are where n_transitions changes within
+the stencil; the adaptive map's coverage, median bar and outcome errors over `--draws` other draws
+of its hold-out (seeds 0..draws-1); with `--sensitivity N`, N smooth and N rough nodes rerun at
+tighter knobs (rtol, slip_tol, slave_tol) and with the first axis moved by +-1e-10, and the
+smoothest lattice line of each axis rerun at all the tight knobs at once (sigma before/after).
 
 Planes: `paper` is issue #52's plane (mu_d 0.3, the paper's k1, k2, k3; alpha0 0.05..1.5 rad x
 omega0 2..200 rad/s log-spaced); `friction` is mu_d 0.05..0.45 x k3 0..8e-4 m at alpha0 1.0 rad,
