@@ -325,7 +325,7 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
            name: str | None = None) -> Path:
     """Every map's rounds -> the cube on the full lattice (atomic write): computed nodes with their
     values, the others reconstructed (sweep.refine.reconstruct), with `computed`, `round`, `rough`
-    and `<X>_interpolation_error` for every continuous output X."""
+    `holdout` and `<X>_interpolation_error` for every continuous output X."""
     import xarray as xr
 
     results = Path(results)
@@ -340,6 +340,7 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
     computed = np.zeros(n, np.int8)
     rnd = np.full(n, -1, np.int8)
     rough = np.zeros(n, np.int8)
+    holdout = np.zeros(n, np.int8)
     n_files = 0
     lat = lattice(settings)
     for map_id, outer in maps(settings).items():
@@ -369,6 +370,8 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
         computed[pos] = state.fields.computed
         rnd[pos] = state.fields.round
         rough[pos] = m.rough
+        if m.holdout is not None:
+            holdout[pos] = m.holdout
     csizes = _io.cube_chunksizes(shape + (n_levels,))
     axes = _grid.AXES
     data_vars, encoding = {}, {}
@@ -393,7 +396,11 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
         "units": "1", "long_name": "reconstructed in a rough cell: its error did not fall as the cells shrank "
                                    "(structure finer than the lattice); its error bars are those of the loud nodes", **flag,
         "flag_meanings": "smooth_or_computed rough"})
-    for key in ("computed", "rough"):
+    data_vars["holdout"] = (axes, holdout.reshape(shape), {
+        "units": "1", "long_name": "computed as the last round's hold-out: a random test of the reconstruction "
+                                   "that calibrates the error bars, not interpolated from", **flag,
+        "flag_meanings": "not_holdout holdout"})
+    for key in ("computed", "rough", "holdout"):
         encoding[key] = _io.variable_encoding("flag", csizes[:-1])
     encoding["round"] = {"dtype": "int8", "_FillValue": None, "zlib": True, "complevel": _io.COMPLEVEL,
                          "shuffle": True, "chunksizes": csizes[:-1]}
