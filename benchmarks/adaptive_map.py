@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/adaptive_map.py [--points 33] [--planes paper,friction] [--jobs 2]
                                                [--max-share 0.25] [--start 5] [--tolerance 0.01]
+                                               [--draws 8] [--sensitivity 3]
 
 For each plane (a 2-D map of the pipeline's `refine:` mode; the other axes fixed):
 
@@ -11,9 +12,10 @@ For each plane (a 2-D map of the pipeline's `refine:` mode; the other axes fixed
    rerun with the same settings computes nothing);
 2. the adaptive map (sweep.refine.plan_round / reconstruct, the rounds the pipeline runs), whose
    computed nodes take their values from the dense lattice: the integrator is deterministic, so
-   these are the values the pipeline would compute;
+   these are the values the pipeline would compute (its last round's hold-out included: those
+   nodes count as computed);
 3. uniform sampling with at least as many scenes: every second node (stride 2), reconstructed the
-   same way (nearest outcome, multilinear in log t_halt, the same error bars).
+   same way (nearest outcome, multilinear in log t_halt; no hold-out, so the surpluses' bars).
 
 Reports, side by side: scenes computed (share of the lattice), outcome wrong (share of the
 lattice's nodes), boundary displacement (for every node with a wrong outcome, the Chebyshev
@@ -22,7 +24,12 @@ max), t_halt's relative error at the reconstructed nodes that halted in both (me
 also where the map is smooth: the issue's criterion, |second difference of log t_halt| < 0.01
 along both axes, and the ratio of uniform's median there to the adaptive one's), the share of
 those nodes where the error bar holds (|error| <= t_halt_interpolation_error), and the median bar
-relative to the value.
+relative to the value. Then: the lattice-scale noise where smooth (sigma from fourth
+differences) and how much larger the fourth differences are where n_transitions changes within
+the stencil; the adaptive map's coverage, median bar and outcome errors over `--draws` other draws
+of its hold-out (seeds 0..draws-1); with `--sensitivity N`, N smooth and N rough nodes rerun at
+tighter knobs (rtol, slip_tol, slave_tol) and with the first axis moved by +-1e-10, and the
+smoothest lattice line of each axis rerun at all the tight knobs at once (sigma before/after).
 
 Planes: `paper` is issue #52's plane (mu_d 0.3, the paper's k1, k2, k3; alpha0 0.05..1.5 rad x
 omega0 2..200 rad/s log-spaced); `friction` is mu_d 0.05..0.45 x k3 0..8e-4 m at alpha0 1.0 rad,
@@ -32,6 +39,7 @@ Solver and stop settings: config/config.yaml's (rtol 1e-10, t_max 120 s).
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import math
 import sys
 import time
@@ -145,6 +153,107 @@ def noise_floor(lat, truth: adaptive.MapState, smooth: np.ndarray) -> float:
     return float(np.median(d) / (0.6745 * math.sqrt(70))) if d.size else math.nan
 
 
+def staircase(lat, truth: adaptive.MapState, smooth: np.ndarray) -> tuple[float, float, float]:
+    """(median |4th difference| of log t_halt where n_transitions is the same at the stencil's 5
+    nodes, where it is not, the share of stencils where it is) over the smooth stencils along both
+    axes: whether the lattice-scale 'noise' is the steps t_halt takes where a roll/slip transition
+    is gained or lost between neighbouring scenes."""
+    g = np.log(truth.fields.values["t_halt"][:, 0]).reshape(lat.shape)
+    n = truth.raw["n_transitions"].reshape(lat.shape)
+    same, other = [], []
+    for a in range(2):
+        h, nn = np.moveaxis(g, a, 0), np.moveaxis(n, a, 0)
+        m = np.moveaxis(smooth.reshape(lat.shape), a, 0)[2:-2]
+        d4 = np.abs(h[4:] - 4 * h[3:-1] + 6 * h[2:-2] - 4 * h[1:-3] + h[:-4])
+        const = (nn[4:] == nn[2:-2]) & (nn[3:-1] == nn[2:-2]) & (nn[1:-3] == nn[2:-2]) & (nn[:-4] == nn[2:-2])
+        ok = m & np.isfinite(d4)
+        same.append(d4[ok & const])
+        other.append(d4[ok & ~const])
+    same, other = np.concatenate(same), np.concatenate(other)
+    med = (lambda a: float(np.median(a)) if a.size else math.nan)
+    return med(same), med(other), same.size / max(1, same.size + other.size)
+
+
+def sensitivity(settings: dict, lat, truth: adaptive.MapState, smooth: np.ndarray, count: int) -> None:
+    """Rerun `count` smooth and `count` rough halted nodes (fixed choice) with tighter knobs and
+    perturbed starts, and print the largest change of log t_halt of each against the stored value
+    and against the node's neighbours: numerical noise or structure of the dynamics?"""
+    import copy
+    import importlib
+
+    simulate = importlib.import_module("sweep.simulate").simulate
+    (_, outer), = adaptive.maps(settings).items()
+    g = np.log(truth.fields.values["t_halt"][:, 0])
+    gg = g.reshape(lat.shape)
+    d2 = np.zeros(lat.shape)
+    d2[1:-1, 1:-1] = np.fmax(np.abs(gg[2:, 1:-1] - 2 * gg[1:-1, 1:-1] + gg[:-2, 1:-1]),
+                             np.abs(gg[1:-1, 2:] - 2 * gg[1:-1, 1:-1] + gg[1:-1, :-2]))
+    halted = np.isfinite(g) & (truth.fields.outcome == outcomes.HALTED)
+    rng = np.random.default_rng(5)
+    ax0 = lat.axes[0]
+    knobs = {"rtol 1e-12": {"solver": {"rtol": 1e-12, "atol": 1e-14}}, "slip_tol 1e-11": {"solver": {"slip_tol": 1e-11}},
+             "slave_tol 3e-4": {"solver": {"slave_tol": 3e-4}}, f"{ax0} +1e-10": 1e-10, f"{ax0} -1e-10": -1e-10}
+    for kind, pool in (("smooth", halted & smooth), ("rough", halted & (np.nan_to_num(d2.ravel()) > 0.1))):
+        worst = {k: 0.0 for k in knobs}
+        nb = []
+        for i in rng.choice(np.nonzero(pool)[0], min(count, int(pool.sum())), replace=False):
+            node = np.unravel_index(i, lat.shape)
+            for k, change in knobs.items():
+                full = dict(outer, **dict(zip(lat.axes, lat.point(node))))
+                if not isinstance(change, dict):
+                    full[ax0] += change
+                sc = grid.scene(settings, tuple(float(full[a]) for a in grid.AXES))
+                for sec, kv in (change.items() if isinstance(change, dict) else ()):
+                    sc = dict(sc, **{sec: dict(copy.deepcopy(sc[sec]), **kv)})
+                worst[k] = max(worst[k], abs(math.log(simulate(sc).summary["t_halt"]) - g[i]))
+            nb += [abs(gg[node[0] + a, node[1] + b] - g[i]) for a, b in ((1, 0), (-1, 0), (0, 1), (0, -1))
+                   if 0 <= node[0] + a < lat.shape[0] and 0 <= node[1] + b < lat.shape[1]]
+        print(f"  sensitivity, {count} {kind} nodes: largest |change of log t_halt| "
+              + ", ".join(f"{k} {v:.1e}" for k, v in worst.items())
+              + f"; between lattice neighbours: median {np.nanmedian(nb):.1e}", flush=True)
+    # the lattice-scale noise along the smoothest lattice line of each axis, at all the tight knobs at once
+    tight = {k: v for c in knobs.values() if isinstance(c, dict) for k, v in c["solver"].items()}
+    sm = (smooth & halted).reshape(lat.shape)
+    for a in range(lat.ndim):
+        other = int(np.argmax(np.moveaxis(sm, a, 0).sum(axis=0)))
+        line = np.nonzero(np.moveaxis(sm, a, 0)[:, other])[0]
+        nodes = [tuple(i if b == a else other for b in range(lat.ndim)) for i in range(line.min(), line.max() + 1)]
+        pts = [tuple(float(dict(outer, **dict(zip(lat.axes, lat.point(n))))[x]) for x in grid.AXES) for n in nodes]
+        scenes = [dict(sc, solver=dict(sc["solver"], **tight)) for sc in (grid.scene(settings, p) for p in pts)]
+        with concurrent.futures.ProcessPoolExecutor(2) as pool:
+            got = np.log([r.summary["t_halt"] for r in pool.map(simulate, scenes)])
+        base = np.array([gg[n] for n in nodes])
+        sig = (lambda h: float(np.nanmedian(np.abs(h[4:] - 4 * h[3:-1] + 6 * h[2:-2] - 4 * h[1:-3] + h[:-4]))
+                                / (0.6745 * math.sqrt(70))))
+        print(f"  along {lat.axes[a]} ({len(nodes)} nodes at {lat.axes[1 - a]} index {other}): sigma {sig(base):.3e} "
+              f"at the config's knobs, {sig(got):.3e} at {tight}; |change of log t_halt| median "
+              f"{np.nanmedian(np.abs(got - base)):.1e}, max {np.nanmax(np.abs(got - base)):.1e}", flush=True)
+
+
+def draws(lat, st, truth: adaptive.MapState, smooth: np.ndarray, seeds: int) -> None:
+    """The adaptive map's figures over `seeds` draws of its hold-out (HOLDOUT_SEED 0..seeds-1): how
+    much one map's coverage and median bar owe to its draw."""
+    import contextlib
+    import io
+
+    keep = refine.HOLDOUT_SEED
+    rows = []
+    try:
+        for seed in range(seeds):
+            refine.HOLDOUT_SEED = seed
+            with contextlib.redirect_stdout(io.StringIO()):
+                rows.append(metrics(lat, st, truth, adaptive_fields(lat, st, truth), smooth))
+    finally:
+        refine.HOLDOUT_SEED = keep
+    for key, label, fmt in (("holds", "error bar holds", "{:.1%}"), ("bar_med", "median bar / value", "{:.2%}"),
+                            ("outcome_wrong", "outcome wrong", "{:.2%}")):
+        v = np.array([r[key] for r in rows])
+        print(f"  over {seeds} draws of the hold-out: {label} min {fmt.format(v.min())}, median "
+              f"{fmt.format(float(np.median(v)))}, max {fmt.format(v.max())}"
+              + (f"; >= 90 % in {int((v >= 0.9).sum())}" if key == "holds" else "")
+              + (f"; <= 5 % in {int((v <= 0.05).sum())}" if key == "bar_med" else ""), flush=True)
+
+
 def displacement(lat, truth_oc: np.ndarray, got: np.ndarray) -> tuple[float, float]:
     """(mean, max) over nodes with a wrong outcome of the Chebyshev distance (cells) to the
     nearest node whose true outcome is the one given there."""
@@ -207,6 +316,9 @@ def main() -> None:
     ap.add_argument("--start", type=int, default=9, help="start_points (round 0's points per axis)")
     ap.add_argument("--tolerance", type=float, default=0.01)
     ap.add_argument("--dense-only", action="store_true", help="compute the dense lattices and stop")
+    ap.add_argument("--draws", type=int, default=8, help="draws of the hold-out to report the spread over (0: none)")
+    ap.add_argument("--sensitivity", type=int, default=0,
+                    help="rerun this many smooth and rough nodes with tighter knobs and perturbed starts")
     args = ap.parse_args()
     for plane in args.planes.split(","):
         settings = settings_of(plane, args.points, args.start, args.max_share, args.tolerance)
@@ -237,6 +349,13 @@ def main() -> None:
               f"t_halt| < 0.01 along both axes); there log t_halt's lattice-scale noise is sigma = {sigma:.3%} "
               f"(fourth differences), uniform's median error {u['err_med_smooth'] / sigma:.1f} sigma")
         print(f"  uniform / adaptive t_halt median error where smooth: {ratio:.1f}x", flush=True)
+        same, other, share = staircase(lat, truth, smooth)
+        print(f"  smooth stencils with the same n_transitions at all 5 nodes ({share:.0%}): median |4th difference| "
+              f"{same:.1e}; where it changes: {other:.1e} ({other / same:.0f}x)", flush=True)
+        if args.draws:
+            draws(lat, st, truth, smooth, args.draws)
+        if args.sensitivity:
+            sensitivity(settings, lat, truth, smooth, args.sensitivity)
 
 
 if __name__ == "__main__":

@@ -415,6 +415,8 @@ def test_adaptive_map_rounds_cube_and_figure(adaptive_run):
             assert (v[comp_mask & np.isfinite(v)] == 0).all(), name
     with xr.open_dataset(res / "cube.nc") as c:
         assert c.t_halt_interpolation_error.attrs["units"] == "s" and "flag_meanings" in c.computed.attrs
+        # the CI map is too small for a hold-out (sweep.refine.holdout_size); the flag says so
+        assert "flag_meanings" in c.holdout.attrs and int(c.holdout.sum()) == recs[-1]["holdout"] == 0
         # a computed node holds what the scene gives when run on its own
         sub = c.where(c.computed == 1, drop=True).stack(p=grid.AXES).dropna("p", subset=["t_halt"])
         p = sub.p.values[len(sub.p) // 2]
@@ -508,3 +510,5 @@ def test_last_round_line_reports_the_finished_maps_rough_cells():
     assert adaptive.round_line("x", "mu_d 0.3", rec).endswith("no round left; rough 7 cells")
     rec["next"] = {"outcome": 1, "failed": 0, "error": 2, "rough": 4}
     assert adaptive.round_line("x", "mu_d 0.3", rec).endswith("rough 4 cells")
+    rec["holdout"] = 3
+    assert ": 10 scenes, 3 of them the hold-out (100 of 400" in adaptive.round_line("x", "mu_d 0.3", rec)

@@ -273,7 +273,8 @@ def round_line(name: str, label: str, rec: Mapping) -> str:
              if nxt else "no round left")
     # after the last round: the rough cells of the finished map
     rough = nxt["rough"] if nxt else rec.get("rough_final", 0)
-    return (f"sweep {name}: map {label}: round {rec['round']}/{rec['rounds']}: {rec['scenes']} scenes "
+    hold = f", {rec['holdout']} of them the hold-out" if rec.get("holdout") else ""
+    return (f"sweep {name}: map {label}: round {rec['round']}/{rec['rounds']}: {rec['scenes']} scenes{hold} "
             f"({rec['computed']} of {rec['lattice']}, {100 * rec['share']:.1f} %, budget "
             f"{100 * rec['max_share']:.0f} %); {still}; rough {rough} cells")
 
@@ -295,7 +296,7 @@ def run_round(settings: Mapping, map_id: str, k: int, results: str | Path, out_p
     computed = int(state.fields.computed.sum())
     rec = {
         "round": k, "rounds": lat.rounds, "map": outer, "scenes": int(len(plan.nodes)),
-        "chunks": [c.id for c in chunks], "chunks_run": ran, "computed": computed, "lattice": lat.size,
+        "holdout": int(len(plan.holdout)), "chunks": [c.id for c in chunks], "chunks_run": ran, "computed": computed, "lattice": lat.size,
         "share": computed / lat.size, "max_share": settings["refine"]["max_share"],
         "planned_from": {"flagged": plan.flagged, "refined": plan.refined, "skipped": plan.skipped,
                          "rough": plan.rough},
@@ -324,7 +325,7 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
            name: str | None = None) -> Path:
     """Every map's rounds -> the cube on the full lattice (atomic write): computed nodes with their
     values, the others reconstructed (sweep.refine.reconstruct), with `computed`, `round`, `rough`
-    and `<X>_interpolation_error` for every continuous output X."""
+    `holdout` and `<X>_interpolation_error` for every continuous output X."""
     import xarray as xr
 
     results = Path(results)
@@ -339,6 +340,7 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
     computed = np.zeros(n, np.int8)
     rnd = np.full(n, -1, np.int8)
     rough = np.zeros(n, np.int8)
+    holdout = np.zeros(n, np.int8)
     n_files = 0
     lat = lattice(settings)
     for map_id, outer in maps(settings).items():
@@ -368,6 +370,8 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
         computed[pos] = state.fields.computed
         rnd[pos] = state.fields.round
         rough[pos] = m.rough
+        if m.holdout is not None:
+            holdout[pos] = m.holdout
     csizes = _io.cube_chunksizes(shape + (n_levels,))
     axes = _grid.AXES
     data_vars, encoding = {}, {}
@@ -390,9 +394,13 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
         "units": "1", "long_name": "the refinement round that computed the node (-1: reconstructed)"})
     data_vars["rough"] = (axes, rough.reshape(shape), {
         "units": "1", "long_name": "reconstructed in a rough cell: its error did not fall as the cells shrank "
-                                   "(sensitive dynamics); its error bars are the local spread", **flag,
+                                   "(structure finer than the lattice); its error bars are those of the loud nodes", **flag,
         "flag_meanings": "smooth_or_computed rough"})
-    for key in ("computed", "rough"):
+    data_vars["holdout"] = (axes, holdout.reshape(shape), {
+        "units": "1", "long_name": "computed as the last round's hold-out: a random test of the reconstruction "
+                                   "that calibrates the error bars, not interpolated from", **flag,
+        "flag_meanings": "not_holdout holdout"})
+    for key in ("computed", "rough", "holdout"):
         encoding[key] = _io.variable_encoding("flag", csizes[:-1])
     encoding["round"] = {"dtype": "int8", "_FillValue": None, "zlib": True, "complevel": _io.COMPLEVEL,
                          "shuffle": True, "chunksizes": csizes[:-1]}
@@ -480,8 +488,8 @@ def map_figure(cube_path: str | Path, figure: str | Path, max_maps: int = 4) -> 
         n_comp = int(ds.computed.sum())
         n_all = int(ds.computed.size)
         fig.suptitle(f"sweep '{ds.attrs.get('sweep_name', '?')}': adaptive map, {n_comp} of {n_all} nodes computed "
-                     f"({100 * n_comp / n_all:.1f} %; black dots); red hatching: rough cells (error bars = local "
-                     "spread)", fontsize=10)
+                     f"({100 * n_comp / n_all:.1f} %; black dots); red hatching: rough cells (the error did "
+                     "not fall as the cells shrank)", fontsize=10)
     figure = Path(figure)
     figure.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(figure, dpi=110)

@@ -12,8 +12,8 @@ its 2^d children cells. A cell is refined when
   failed numerically (sweep.outcomes FAILED), or
 * its interpolation error estimate, for one of the driving outputs, exceeds the tolerance;
 
-unless its error does not fall as the cells shrink (ROUGH): sensitive dynamics, where refining
-buys nothing, reported as rough with its local spread.
+unless its error does not fall as the cells shrink (ROUGH): structure finer than the lattice,
+where refining buys nothing, reported as rough.
 
 The error estimate is the hierarchical surplus: a node computed at round k is also predicted by
 multilinear interpolation from the corners of the cell of round k - 1 it lies in (log values for
@@ -25,7 +25,11 @@ get surpluses too, against the lattice of stride 2S (every other node of round 0
 The reconstructed map's error bars are calibrated on the map itself (`bar_factors`): every node
 computed after round 0 is a test of interpolation in the coarser cell it lies in (its surplus is
 that interpolation's true error), so the share of tests within factor x indicator fixes the
-factor, per class of cell and bin of the indicator (split-conformal prediction).
+factor, per class of cell and bin of the indicator (split-conformal prediction). Those tests
+come from the cells the map chose to refine, the hard ones, so a map large enough for it also
+computes a hold-out in its last round (`holdout_size`): a uniform random sample of the nodes it
+would reconstruct, left out of the reconstruction, whose errors calibrate the bars of the
+reconstructed nodes directly (`holdout_bars`).
 
 Everything is a function of the set of computed nodes and their values, so the same config
 computes the same nodes (determinism: ties are broken by node index), and a round can be planned
@@ -63,6 +67,18 @@ ERROR_SHARE = 0.5
 COVERAGE = 0.9
 MIN_CALIBRATION = 20
 BIN_TESTS = 200
+# The hold-out (a random sample of the nodes the finished map would reconstruct, computed in the
+# last round as tests of its reconstruction, `holdout_size`): this share of the budget, when that is
+# HOLDOUT_MIN nodes at least; drawn with a fixed seed (determinism). The map's own surpluses test
+# only the cells it chose to refine, the hard ones (their quietest tenth errs ~5x more than the
+# quietest half of the reconstructed nodes on issue #52's plane), so only a sample of the
+# reconstructed nodes themselves can show how small the error is where the map is quiet.
+HOLDOUT_SHARE = 0.14
+HOLDOUT_MIN = 60
+HOLDOUT_SEED = 52
+# The bars calibrated on the hold-out: the reconstructed nodes split at this quantile of their
+# error scale (`Map.scale`) into quiet and loud, each bin's bar its tests' conformal quantile.
+QUIET_SHARE = 0.6
 
 
 def is_lattice_size(n: int) -> bool:
@@ -188,6 +204,13 @@ class Fields:
         self.outcome[idx] = outcome
         for k, v in values.items():
             self.values[k][idx] = np.asarray(v, dtype=float).reshape(len(idx), -1)
+
+    def subset(self, keep: np.ndarray) -> "Fields":
+        """A copy that knows only the computed nodes where `keep` (bool (size,)) is true: what
+        was known before those others were computed."""
+        keep = keep & self.computed
+        return Fields(keep.copy(), np.where(keep, self.round, -1), np.where(keep, self.outcome, -1),
+                      {k: np.where(keep[:, None], v, np.nan) for k, v in self.values.items()}, dict(self.log))
 
     def transformed(self, name: str) -> np.ndarray:
         """The values in the space they are interpolated in: log for a log output whose computed
@@ -365,13 +388,22 @@ def cell_states(lat: Lattice, f: Fields, st: Settings, level: int, lower: np.nda
 @dataclass
 class Plan:
     """The nodes of a round (lexicographic), and what the round found: cells flagged per reason,
-    refined, left for the budget, rough."""
+    refined, left for the budget, rough; `holdout`: the nodes of the last round's hold-out
+    (among `nodes`; holdout_size)."""
     round: int
     nodes: np.ndarray
     flagged: dict[str, int]
     refined: int
     skipped: int
     rough: int
+    holdout: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+
+
+def holdout_size(lat: Lattice, st: Settings) -> int:
+    """How many nodes the last round computes as a hold-out: HOLDOUT_SHARE of the budget, or none
+    where that is fewer than HOLDOUT_MIN (or the map has no round after round 0)."""
+    n = math.floor(HOLDOUT_SHARE * st.budget)
+    return n if lat.rounds >= 1 and n >= HOLDOUT_MIN else 0
 
 
 def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
@@ -389,7 +421,9 @@ def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
     want = by_outcome | by_error
     # outcome boundaries and failures first, then the largest errors; ties by position
     order = sorted(np.nonzero(want)[0], key=lambda i: (0 if by_outcome[i] else 1, -err[i], tuple(low[i])))
-    left = st.budget - int(f.computed.sum())
+    # every round leaves room for the last round's hold-out
+    n_hold = holdout_size(lat, st)
+    left = st.budget - n_hold - int(f.computed.sum())
     # the error's share of what is left: later rounds keep room for the outcome boundaries,
     # which need every round down to stride 1
     error_left = left if k == lat.rounds else math.floor(ERROR_SHARE * left)
@@ -408,10 +442,35 @@ def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
         if not by_outcome[i]:
             error_left -= len(new)
         refined += 1
-    nodes = np.array(np.unravel_index(np.nonzero(taken)[0], lat.shape)).T.astype(np.int64)
+    hold = np.zeros(0, np.int64)
+    if n_hold and k == lat.rounds:
+        # a uniform sample of the nodes the map will reconstruct (fixed seed)
+        cand = np.nonzero(~f.computed & ~taken)[0]
+        pick = np.random.default_rng(HOLDOUT_SEED).choice(len(cand), min(n_hold, len(cand)), replace=False)
+        hold = np.sort(cand[pick])
+        taken[hold] = True
+    as_nodes = (lambda idx: np.array(np.unravel_index(idx, lat.shape)).T.astype(np.int64).reshape(-1, lat.ndim))
     flagged = {"outcome": int(cs["disagree"].sum()), "failed": int(cs["failed"].sum()),
                "error": int(((err > 1.0) & ~cs["rough"]).sum())}
-    return Plan(k, nodes.reshape(-1, lat.ndim), flagged, refined, skipped, int((cs["rough"] & ~by_outcome).sum()))
+    return Plan(k, as_nodes(np.nonzero(taken)[0]), flagged, refined, skipped, int((cs["rough"] & ~by_outcome).sum()),
+                as_nodes(hold))
+
+
+def holdout_mask(lat: Lattice, f: Fields, st: Settings) -> np.ndarray:
+    """The computed nodes that are the last round's hold-out (bool (size,)): the last round is
+    planned again from the rounds before it (deterministic), so no file needs to record them;
+    every node of the last round that the plan does not refine with is one (so a map computed
+    by another plan still gets cells made of refinement nodes only). They are tests of the
+    reconstruction, not part of the map's cells."""
+    out = np.zeros(lat.size, bool)
+    last = f.computed & (f.round == lat.rounds)
+    if not holdout_size(lat, st) or not last.any():
+        return out
+    plan = plan_round(lat, f.subset(f.round < lat.rounds), st, lat.rounds)
+    refining = np.zeros(lat.size, bool)
+    refining[_flat(lat, plan.nodes)] = True
+    refining[_flat(lat, plan.holdout)] = False
+    return last & ~refining
 
 
 def rough_leaves(lat: Lattice, f: Fields, st: Settings) -> int:
@@ -419,6 +478,7 @@ def rough_leaves(lat: Lattice, f: Fields, st: Settings) -> int:
     flags rough and no outcome boundary or failure runs through (the rough regions the map
     reports, what a last round's progress line counts)."""
     out = 0
+    f = f.subset(~holdout_mask(lat, f, st))
     surs = {name: surpluses(lat, f, name) for name in st.outputs}
     for level, low in cells(lat, f.computed).items():
         if level >= lat.rounds or not len(low):
@@ -438,13 +498,17 @@ class Map:
     """The full lattice rebuilt: per node (flat) its outcome, the index of the corner that gave
     its categorical values (itself where computed), each continuous output with its
     interpolation error bar (absolute, the output's units; 0 where computed), and whether its
-    cell is rough."""
+    cell is rough; `scale`: per continuous output, each reconstructed node's error scale (in its
+    interpolation space: the spread of the corners it is interpolated from plus its cell's
+    bar_indicator; NaN where computed); `holdout`: the hold-out nodes (holdout_mask), or None."""
     outcome: np.ndarray
     source: np.ndarray
     values: dict[str, np.ndarray]
     bars: dict[str, np.ndarray]
     rough: np.ndarray
     cell_level: np.ndarray
+    scale: dict[str, np.ndarray] = field(default_factory=dict)
+    holdout: np.ndarray | None = None
 
 
 def leaf_of(lat: Lattice, computed: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -606,7 +670,66 @@ def bar_factors(lat: Lattice, f: Fields, st: Settings, name: str, sur: np.ndarra
 
 
 def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
-    """The full map from the computed nodes (see the module's docstring for the bars)."""
+    """The full map from the computed nodes (see the module's docstring for the bars): the map's
+    cells are interpolated without the hold-out nodes, whose errors then calibrate the bars
+    (holdout_bars); in the map they are computed nodes like the others."""
+    hold = holdout_mask(lat, f, st)
+    if not hold.any():
+        return _interpolate(lat, f, st)
+    known = f.subset(~hold)
+    m = _interpolate(lat, known, st)
+    holdout_bars(f, known, m, hold)
+    idx = np.nonzero(hold)[0]
+    m.outcome[idx] = f.outcome[idx]
+    m.source[idx] = idx
+    m.rough[idx] = False
+    m.cell_level[idx] = -1
+    for name, v in f.values.items():
+        m.values[name][idx] = v[idx]
+        m.bars[name][idx] = np.where(np.isfinite(v[idx]), 0.0, np.nan)
+        m.scale[name][idx] = np.nan
+    m.holdout = hold
+    return m
+
+
+def holdout_bars(f: Fields, known: Fields, m: Map, hold: np.ndarray) -> None:
+    """Replace the bars of `m` (reconstructed from `known`: `f` without the hold-out nodes `hold`) by bars calibrated on the hold-out (split-conformal on a uniform sample of the nodes
+    reconstructed, so its COVERAGE holds for them): per output and component, the reconstructed
+    nodes with a value split at the QUIET_SHARE quantile of their error scale (`m.scale`) into
+    quiet and loud; each bin's bar (in the interpolation space) is the conformal quantile
+    (_quantile) of its hold-out tests' |error|, in the loud bin at least the bar calibrated on the
+    surpluses (the loud bin mixes rough cells with merely steep ones: its constant bar is not
+    allowed to undercut the per-class one). A bin with fewer than MIN_CALIBRATION tests keeps the
+    bars calibrated on the surpluses."""
+    idx = np.nonzero(hold)[0]
+    for name, v in f.values.items():
+        log = known.is_log(name)
+        est, scale = m.values[name], m.scale[name]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g_true = np.log(v[idx]) if log else v[idx]
+            g_est = np.log(est) if log else est
+        rec = (m.cell_level >= 0)[:, None] & np.isfinite(est)                 # (n, m): reconstructed, a value
+        for c in range(v.shape[1]):
+            pop = rec[:, c]
+            if not pop.any():
+                continue
+            sc = np.where(np.isfinite(scale[:, c]), scale[:, c], np.inf)
+            cut = np.quantile(sc[pop], QUIET_SHARE, method="inverted_cdf")
+            err = np.abs(g_true[:, c] - g_est[idx, c])
+            ok = np.isfinite(err)
+            for loud in (False, True):
+                in_bin = (sc > cut) if loud else (sc <= cut)
+                tests = err[ok & in_bin[idx]]
+                if len(tests) < MIN_CALIBRATION:
+                    continue
+                q = _quantile(tests)
+                sel = pop & in_bin & ~hold
+                bar = est[sel, c] * np.expm1(q) if log else np.full(int(sel.sum()), q)
+                m.bars[name][sel, c] = np.fmax(bar, m.bars[name][sel, c]) if loud else bar
+
+
+def _interpolate(lat: Lattice, f: Fields, st: Settings) -> Map:
+    """The full map from the computed nodes of `f`, bars calibrated on its surpluses."""
     n = lat.size
     all_nodes = np.array(np.unravel_index(np.arange(n), lat.shape)).T.astype(np.int64)
     outcome = f.outcome.copy()
@@ -616,8 +739,9 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
     rough_node = np.zeros(n, bool)
     cell_level = np.full(n, -1, np.int64)
     miss = np.nonzero(~f.computed)[0]
+    scales = {k: np.full(v.shape, np.nan) for k, v in f.values.items()}
     if not miss.size:
-        return Map(outcome, source, values, bars, rough_node, cell_level)
+        return Map(outcome, source, values, bars, rough_node, cell_level, scales)
     nodes = all_nodes[miss]
     level, lower = leaf_of(lat, f.computed, nodes)
     cell_level[miss] = level
@@ -659,6 +783,8 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
             cls = cell_class(lat, f, st, int(k), ucells, g_all, driving, cell_rough)[inv]    # (n, m)
             # no indicator (no surplus at this level around): the corners' spread
             bar = np.where(np.isfinite(ind), factors[name].bar(cls, ind), spread)
+            scales[name][tgt] = np.where(np.isfinite(spread) | np.isfinite(ind),
+                                         np.nan_to_num(spread) + np.nan_to_num(ind), np.nan)
             if f.is_log(name):
                 x = np.exp(est)
                 absbar = x * np.expm1(bar)
@@ -667,7 +793,7 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
             absbar = np.where(np.isfinite(x), absbar, np.nan)
             values[name][tgt] = x
             bars[name][tgt] = absbar
-    return Map(outcome, source, values, bars, rough_node, cell_level)
+    return Map(outcome, source, values, bars, rough_node, cell_level, scales)
 
 
 def summarise(lat: Lattice, f: Fields) -> dict:
