@@ -65,7 +65,7 @@ def test_kernels_compile_without_refcounts_and_return_no_arrays(tmp_path):
     # NumPy's floating-point semantics: a division by zero gives inf or NaN, which the integrator
     # rejects or reports, never a ZeroDivisionError that loses the scene
     assert {k["error_model"] for k in kernels.values()} == {"numpy"}
-    for name in ("contact.eval_rhs", "integrate.try_step", "integrate.run", "ensemble.solve_index"):
+    for name in ("contact_rhs.eval_rhs", "accept.try_step", "integrate.run", "ensemble.solve_index"):
         assert kernels[name]["returns"], name
     assert kernels["model.rhs"]["inline"] == "always" and not kernels["model.rhs"]["returns"]
     assert sum(1 for k in kernels.values() if k["returns"]) > 60
