@@ -65,9 +65,10 @@ DIR_NOISE = 64.0 * EPS
 DCROSS_DNU = 1e-7   # rad: forward-difference step of d cross/d nu
 
 
-# tau: central-difference step of d cross/d tau along the motion at a fixed direction (the lag):
-# truncation O(FLOW_DTAU^2) relative, round-off ~EPS |a_P| / FLOW_DTAU; the second order differences
-# the lag again over DRIFT_DTAU, which takes that round-off times 1 / DRIFT_DTAU
+# tau x (1 + |theta'|): central-difference step of d cross/d tau along the motion at a fixed
+# direction (the lag): truncation O(FLOW_DTAU^2) relative, round-off ~EPS |a_P| / FLOW_DTAU; the
+# second order differences the lag again over DRIFT_DTAU, which takes that round-off times
+# 1 / DRIFT_DTAU
 FLOW_DTAU = 1e-5
 # tau x (1 + |theta'|): the step along the slaved motion over which the first-order manifold's
 # direction is differenced (second_order_lag): truncation O(DRIFT_DTAU) relative in a second-order
@@ -284,7 +285,10 @@ def direction_lag(nu, u, rates, t, y, sys, dy):
     if not (dcross < 0.0 and dcross - rad0 < 0.0 and u > 0.0):
         return 0.0
     # the step along the motion, short enough that the slip speed stays positive on it both ways
-    step = min(FLOW_DTAU, 0.5 * u / abs(rad0)) if rad0 != 0.0 else FLOW_DTAU
+    # (over FLOW_DTAU / (1 + |theta'|), the motion's rate: near flat theta' grows without bound)
+    step = FLOW_DTAU / (1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA])))
+    if rad0 != 0.0:
+        step = min(step, 0.5 * u / abs(rad0))
     wk = sys.wk
     yf = wk[W_YFLOW]
     for i in range(sys.n):
