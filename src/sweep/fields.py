@@ -270,7 +270,7 @@ FIELDS: list[Field] = [
     Field("solver.slave_tol", Range(0.0, 0.1, "relaxation time of a slow slip's direction times the rate of the "
                                     "motion (dimensionless) below which the direction is solved as its slow manifold "
                                     "instead of integrated (0: only where the relaxation time alone is below 1e-7; "
-                                    "results converge as it goes to 0: docs/model.md, 'Slow slip')"), 2.0e-2,
+                                    "results converge as it goes to 0: docs/model.md, 'Slow slip')"), 3.0e-3,
           sweep="solver.slave_tol", kernel=Param("P_SLAVE", "1")),
     Field("outputs.normal_force_frequency", default=True, kind="flag"),
     Field("outputs.kinematics", default=False, kind="flag"),
