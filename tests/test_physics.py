@@ -1,4 +1,5 @@
 """Whole-scene properties of the model and the hybrid integrator (issue #2, 'How it must be verified')."""
+import copy
 import math
 
 import numpy as np
@@ -237,19 +238,25 @@ def test_the_peer_brings_the_disk_without_k2_down_alike():
     """The SciPy peer (its own contact rules and event logic) at rtol 1e-11 against the kernel at
     the same rtol: no stick phase in either, the same transitions, the 0.01 rad level within 2e-5 s
     (well-conditioned: ~5e-6 s under a 1e-10 rad change of alpha0) and the landing within 0.02 s
-    (sensitive by the dynamics: ~3e-3 s under that change). Both at slave_tol 0: the transitions
-    close to the landing are as sensitive as its time (at the default slave_tol 3e-3 the kernel
-    counts 303 or 304 by a 1-ulp change of atol), and the comparison is of the contact rules."""
+    (sensitive by the dynamics: ~3e-3 s under that change). Both at slave_tol 0, so that the
+    comparison is of the contact rules. The transitions close to the landing are as sensitive as its
+    time (the kernel counts 306, 304 and 304 at alpha0 + 0, +1e-10, -1e-10 rad, 303 at +1e-12): the
+    peer's count must lie among the kernel's under those perturbations."""
     from conftest import peer_run
 
     cfg = _without_k2()
     cfg["solver"] = {"rtol": 1e-11, "atol": 1e-11 * 1e-2, "slave_tol": 0.0}
     s = sweep.simulate(cfg).summary
+    counts = {s["n_transitions"]}
+    for d in (1e-10, -1e-10):
+        c = copy.deepcopy(cfg)
+        c["initial"]["alpha"] += d
+        counts.add(sweep.simulate(c).summary["n_transitions"])
     peer, chi = peer_run(cfg, 1e-11)
-    print("peer", peer["outcome"], peer["t_end"] * chi, peer["n_transitions"], peer["n_stick"])
+    print("peer", peer["outcome"], peer["t_end"] * chi, peer["n_transitions"], peer["n_stick"], "kernel", counts)
     assert peer["outcome"] == s["outcome"] == "halted" and s["lay_flat"]
     assert peer["n_stick"] == s["n_stick"] == 0
-    assert peer["n_transitions"] == s["n_transitions"]
+    assert min(counts) <= peer["n_transitions"] <= max(counts), (peer["n_transitions"], counts)
     assert abs(peer["level_tau"][1] * chi - s["levels"][1]["t"]) < 2e-5
     assert abs(peer["t_end"] * chi - s["t_end"]) < 0.02
 

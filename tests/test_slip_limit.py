@@ -320,6 +320,15 @@ def _paper_edge(**contact):
     return cfg
 
 
+def _random_slow_slip(rng, lo, hi):
+    """A random state of the paper's disk (tilt 0.3-1.45 rad, spin about -e3 with random rates) and
+    a slip speed |u_hat| log-uniform in [10^lo, 10^hi] (the state's own slip left 0)."""
+    y = np.zeros(M.N_FULL)
+    y[M.Y_ALPHA] = rng.uniform(0.3, 1.45)
+    y[M.Y_W1:M.Y_W3 + 1] = rng.normal(0.0, 0.5, 3) + [0.0, 0.0, -1.0]
+    return y, 10.0 ** rng.uniform(lo, hi)
+
+
 def test_the_slaved_directions_lag_agrees_with_the_peers():
     """The lag of a slow slip's direction behind the quasi-static one (contact.root_lag: forward
     differences along the motion and in the direction) against the SciPy peer's own
@@ -338,10 +347,7 @@ def test_the_slaved_directions_lag_agrees_with_the_peers():
     ist = np.zeros(L.N_ISTATS, dtype=np.int64)
     checked = 0
     for _ in range(40):
-        y = np.zeros(M.N_FULL)
-        y[M.Y_ALPHA] = rng.uniform(0.3, 1.45)
-        y[M.Y_W1:M.Y_W3 + 1] = rng.normal(0.0, 0.5, 3) + [0.0, 0.0, -1.0]
-        u = 10.0 ** rng.uniform(-6, -3)
+        y, u = _random_slow_slip(rng, -6, -3)
         cs = np.zeros(L.N_CS)
         cs[L.CS_MODE], cs[L.CS_SIDE] = CN.SLIDE, 1.0
         cs[L.CS_SIG:L.CS_SIG + 3] = np.where(np.array(M.moment_axes_rates(y)) >= 0.0, 1.0, -1.0)
@@ -444,10 +450,7 @@ def test_the_second_order_lag_agrees_with_the_peers():
     rng = np.random.default_rng(7)
     checked = 0
     for _ in range(60):
-        y = np.zeros(M.N_FULL)
-        y[M.Y_ALPHA] = rng.uniform(0.3, 1.45)
-        y[M.Y_W1:M.Y_W3 + 1] = rng.normal(0.0, 0.5, 3) + [0.0, 0.0, -1.0]
-        u = 10.0 ** rng.uniform(-4, -2)
+        y, u = _random_slow_slip(rng, -4, -2)
         nu0 = rng.uniform(-math.pi, math.pi)
         y[M.Y_U1], y[M.Y_U2] = u * math.cos(nu0), u * math.sin(nu0)
         nu, lag1 = _manifold(0.0, y, p, False)
