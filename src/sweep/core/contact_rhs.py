@@ -353,9 +353,9 @@ def second_order(nu, lag, dcross, err, t, y, sys, dy, aux):
     """(lag, err) of the second-order slow manifold from the first-order one (lag, err:
     lag_and_error's at the quasi-static direction nu): the lag to second order (second_order_lag,
     with the right-hand side along nu + lag in dy, aux), and the error measure raised to the
-    series' own: the second-order term d2 over the first, |d2| / (|lag| + |d2|), estimates the
-    expansion's parameter (where the manifold moves faster than the motion's rate 1 + |theta'|
-    tells, it exceeds the first-order measure), and times |d2| the neglected third order; err
+    series' own: the second-order term d2 over the first, |d2| / |lag|, estimates the expansion's
+    parameter (where the manifold moves faster than the motion's rate 1 + |theta'| tells, it
+    exceeds the first-order measure), and times |d2| the neglected third order, d2^2 / |lag|; err
     becomes the larger of the first-order measure and the cube root of that third order, so that
     err <= slave_tol bounds the neglected terms by slave_tol^3 as it bounds the first-order
     manifold's by slave_tol^2 (docs/model.md, 'Slow slip'). Below that product's round-off
