@@ -2,7 +2,12 @@
 (event_dispatch.py) are generated from it, and neither the generator nor a dispatch has a default."""
 from __future__ import annotations
 
+import filecmp
+import json
 import math
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -86,3 +91,88 @@ def test_an_id_outside_the_table_raises_in_every_dispatch():
             ED.state_event_value(k, 0.0, y, sys, math.nan)
         with pytest.raises(ValueError, match="no discrete update"):
             ED.apply_event(k, 0.0, y, sys, np.zeros(L.N_FSTATS))
+
+
+# a new event, as a maintainer would add it: one row and its functions in event_rules.py, then the
+# generator. A timer of the state alone (tau reaches TAU_TIMER) that ends the scene as the face's update does (a halt at the event).
+TIMER_RULE = '''
+# === a timer: tau reaches 5 ============================================================================
+@kernel
+def timer_state_value(i, t, y, sys, lev):
+    """5 - tau."""
+    return 5.0 - t
+
+
+@kernel
+def timer_value(i, t, y, aux, sys, lev):
+    """timer_state_value."""
+    return timer_state_value(i, t, y, sys, lev)
+
+
+@kernel
+def timer_update(t, y, sys, fstats):
+    """The scene ends."""
+    return oc.FACE_CONTACT
+
+
+RULES.append(Rule("TIMER", C_FACE, 0, D_RATES, R_NONE, value=timer_value, state_value=timer_state_value,
+                  update=timer_update))
+
+'''
+
+TIMER_CHECKS = r'''
+import json, math, sys
+import numpy as np
+import yaml
+import sweep
+from sweep.core import event_dispatch as ED, event_ids as ID, layout as L, model as M
+cfg = yaml.safe_load(open(sys.argv[1]))
+cfg["stop"]["t_max"] = 1.0
+r = sweep.simulate(cfg)
+sys_ = L.System(np.zeros(M.N_PARAMS), np.zeros(L.N_CS), M.N_CORE, np.zeros((L.N_WORK, L.N_WCOLS)),
+                np.zeros(L.N_ISTATS, np.int64))
+y, aux, g = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(ID.N_EVENTS)
+ED.event_values(3.0, y, aux, sys_, math.nan, g)
+print(json.dumps({"ids": {k: getattr(ID, k) for k in dir(ID) if k.startswith("EV_")},
+                  "sizes": [ID.N_DYN_EVENTS, ID.N_EVENTS, ID.N_EVENT_IDS],
+                  "value": ED.event_value(ID.EV_TIMER, 3.0, y, aux, sys_, math.nan),
+                  "state_value": ED.state_event_value(ID.EV_TIMER, 3.0, y, sys_, math.nan),
+                  "values": g[ID.EV_TIMER],
+                  "outcome": r.summary["outcome"], "lay_flat": r.summary["lay_flat"], "t_end": r.summary["t_end"], "chi": r.scene.chi}))
+'''
+
+
+def test_a_new_event_is_one_row_and_its_functions(tmp_path):
+    """Add an event to a copy of the package as one Rule row with its value, state value and update
+    in event_rules.py, run the generator, and nothing else: the ids follow (the new id where its row
+    is, the level's and the update-only ids one later), every dispatch calls the new functions, and a
+    scene (the paper's, kernels run as Python) ends at the event, located at tau = 5."""
+    src = Path(ER.__file__).resolve().parents[2]
+    copy = tmp_path / "src"
+    shutil.copytree(src / "sweep", copy / "sweep", ignore=shutil.ignore_patterns("__pycache__"))
+    rules_py = copy / "sweep" / "core" / "event_rules.py"
+    text = rules_py.read_text()
+    anchor = "# === SLAVED: the slaved direction stops attracting"
+    assert text.count(anchor) == 1
+    rules_py.write_text(text.replace(anchor, TIMER_RULE.lstrip("\n") + anchor))
+    env = {"PYTHONPATH": str(copy), "PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "NUMBA_DISABLE_JIT": "1"}
+    gen = subprocess.run([sys.executable, "-m", "sweep.core.event_codegen"], capture_output=True, text=True,
+                         env=env, cwd=tmp_path, timeout=300)
+    assert gen.returncode == 0, gen.stderr
+    changed = sorted(p.relative_to(copy / "sweep").as_posix() for p in (copy / "sweep").rglob("*.py")
+                     if not filecmp.cmp(p, src / "sweep" / p.relative_to(copy / "sweep"), shallow=False))
+    assert changed == ["core/event_dispatch.py", "core/event_ids.py", "core/event_rules.py"], changed
+
+    paper = Path(__file__).resolve().parents[1] / "config" / "scenes" / "kessler2002.yaml"
+    run = subprocess.run([sys.executable, "-c", TIMER_CHECKS, str(paper)], capture_output=True, text=True,
+                         env=env, cwd=tmp_path, timeout=600)
+    assert run.returncode == 0, run.stderr
+    out = json.loads(run.stdout.splitlines()[-1])
+    face = ID.EV_FACE
+    want = {f"EV_{r.name}": k + (k > face) for k, r in enumerate(ER.RULES)}
+    want["EV_TIMER"] = face + 1
+    assert out["ids"] == want
+    assert out["sizes"] == [ID.N_DYN_EVENTS + 1, ID.N_EVENTS + 1, ID.N_EVENT_IDS + 1]
+    assert out["value"] == out["state_value"] == out["values"] == 2.0
+    assert out["outcome"] == "halted" and out["lay_flat"] is True     # the face's update: a halt at the event
+    assert out["t_end"] == pytest.approx(5.0 * out["chi"], rel=1e-12)
