@@ -115,13 +115,13 @@ def sweep_dir(tmp_path_factory, name: str, cfg: dict, src: Path) -> Path:
 
 def plan_of(cfg: dict, src: Path) -> dict[str, chunking.Chunk]:
     """The chunk plan as the snapshot's Snakemake sees it (chunk ids include the fingerprint
-    of the core's source files next to sweep/grid.py)."""
-    saved = grid.__file__
-    grid.__file__ = str(src / "sweep" / "grid.py")
+    of the core's source files next to sweep/chunking.py)."""
+    saved = chunking.__file__
+    chunking.__file__ = str(src / "sweep" / "chunking.py")
     try:
         return chunking.plan_chunks(settings_of(cfg))
     finally:
-        grid.__file__ = saved
+        chunking.__file__ = saved
 
 
 def run_sweep(wd: Path, *args: str) -> str:

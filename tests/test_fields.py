@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sweep import axes, fields, scene, validation
+from sweep import axes, fields, figures, scene, validation
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 
@@ -55,7 +55,7 @@ def test_the_axes_come_from_the_registry():
     assert axes.AXES == ("mu_d", "k1", "k2", "k3", "alpha0", "omega0")
     assert axes.OUTER_AXES == ("mu_d", "k1", "k2", "k3") and axes.INNER_AXES == ("alpha0", "omega0")
     assert axes.AXIS_UNITS == {"mu_d": "1", "k1": "m", "k2": "m", "k3": "m", "alpha0": "rad", "omega0": "rad s-1"}
-    assert set(axes.AXIS_LABELS) == set(axes.AXES) | {"level"}
+    assert set(figures.AXIS_LABELS) == set(axes.AXES) | {"level"}
     assert {a: fields.SWEEP_KEYS[f"grid.{a}"] for a in axes.AXES} == {
         "mu_d": "contact.mu_d", "k1": "contact.k1", "k2": "contact.k2", "k3": "contact.k3",
         "alpha0": "initial.alpha", "omega0": "initial.spin"}

@@ -57,12 +57,12 @@ def snapshot(tmp_path_factory) -> Path:
 
 def plan_of(settings: dict) -> dict[str, chunking.Chunk]:
     """The chunk plan as the snapshot's Snakemake sees it (ids include its core fingerprint)."""
-    saved = grid.__file__
-    grid.__file__ = str(SNAPSHOT / "sweep" / "grid.py")
+    saved = chunking.__file__
+    chunking.__file__ = str(SNAPSHOT / "sweep" / "chunking.py")
     try:
         return chunking.plan_chunks(settings)
     finally:
-        grid.__file__ = saved
+        chunking.__file__ = saved
 
 
 def simulate_in_snapshot(settings: dict, points) -> list[dict]:

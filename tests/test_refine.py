@@ -224,7 +224,7 @@ def test_bars_are_calibrated_on_the_maps_own_surpluses():
     cal = errorbars.bar_factors(lat, f, st, "t", sur, {"t": sur})
     nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
     r = sweep_lattice.node_round(lat, nodes)
-    tests = {errorbars.SMOOTH: [], refine.ROUGH: [], refine.MIXED: []}
+    tests = {errorbars.SMOOTH: [], errorbars.ROUGH: [], errorbars.MIXED: []}
     for i in np.nonzero(f.computed & (r >= 1))[0]:
         j = r[i]
         low = sweep_lattice.cell_lower(lat, nodes[i:i + 1], lat.stride(j - 1))

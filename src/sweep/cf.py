@@ -16,19 +16,17 @@ import numpy as np
 
 from . import axes as _axes
 from . import chunking as _chunking
-from . import numerical_error as _numerical_error
 from . import outcomes, reasons
-from .numerical_error import ERROR_VARIABLES
-from .outputs import VARIABLES
+from .numerical_error import ERROR_VARIABLES, error_reference
+from .outputs import VARIABLES, Var
 
 
 INT_FILL = -1          # _FillValue of the count variables: counts are >= 0, so -1 is never data
 COMPLEVEL = 4          # zlib level: the summary data compress ~3x by level 4; higher levels gain <5%
-
-
 # Target elements per netCDF chunk of the cube: 2^15 float64 = 256 KiB, so several chunks fit in
 # the default 1 MiB HDF5 chunk cache and a 1-D read along any axis touches few chunks.
 CUBE_CHUNK_ELEMENTS = 2 ** 15
+
 VARIABLE_NAMES = tuple(v.name for v in VARIABLES)
 LEVEL_ATTRS = {"units": "rad", "long_name": "inclination level"}
 
@@ -39,6 +37,8 @@ def variables(error_estimate: bool = False) -> tuple[Var, ...]:
 
 
 def var_attrs(var: Var) -> dict:
+    """A variable's CF attributes: units and long_name (a flag: its flag values and meanings;
+    an outcome: the outcome codes'), and the flag variable that says why a value is missing."""
     if var.kind == "flag":
         return reasons.flag_attrs(var.name)
     attrs = {"units": var.units, "long_name": var.long_name}
@@ -52,6 +52,7 @@ def var_attrs(var: Var) -> dict:
 
 
 def coord_attrs(axis: str) -> dict:
+    """A sweep axis' CF attributes: units and long_name (sweep.axes)."""
     return {"units": _axes.AXIS_UNITS[axis], "long_name": _axes.AXIS_LONG_NAMES[axis]}
 
 
@@ -127,7 +128,7 @@ def cube_attrs(settings: Mapping, name: str | None, history: str, repo_path: str
         "created": created,
     }
     if settings.get("outputs", {}).get("error_estimate", False):  # the rerun's settings behind *_numerical_error
-        ref = _numerical_error.error_reference(_chunking.scene_settings(settings))
+        ref = error_reference(_chunking.scene_settings(settings))
         attrs["error_estimate_solver"] = _chunking.canonical_json(ref["solver"])
         attrs["error_estimate_stop"] = _chunking.canonical_json(ref["stop"])
     return attrs

@@ -16,11 +16,10 @@ import numpy as np
 
 from . import axes as _axes
 from . import chunking as _chunking
-from . import outputs as _outputs
 from . import reasons
 from .atomic import write_file_atomic, write_text_atomic
 from .cf import INT_FILL, LEVEL_ATTRS, VARIABLE_NAMES, coord_attrs, var_attrs, variables
-from .outputs import VARIABLES
+from .outputs import CHUNK_FORMAT, VARIABLES, Var
 
 
 def value_of(var: Var, summary: Mapping):
@@ -83,7 +82,7 @@ def chunk_content(chunk: _chunking.Chunk, summaries: Sequence[Mapping]) -> tuple
     from . import __version__
     attrs = {"Conventions": "CF-1.10", "title": "Euler's disk sweep chunk",
              "sweep_chunk_id": chunk.id, "sweep_chunk_spec": chunk.spec_json,
-             "sweep_chunk_format": _outputs.CHUNK_FORMAT, "sweep_version": __version__}
+             "sweep_chunk_format": CHUNK_FORMAT, "sweep_version": __version__}
     return coords, data, attrs
 
 

@@ -23,7 +23,7 @@ from .cf import INT_FILL, cube_attrs, cube_chunksizes, cube_coords, var_attrs, v
 from .verify import quarantine, read_chunk_file
 
 
-log = logging.getLogger("sweep.io")
+log = logging.getLogger("sweep.gather")
 
 
 # The gather writes its memory-mapped arrays back and drops their pages from its memory every

@@ -27,7 +27,7 @@ from .errors import MISSING, ConfigError, quoted_number
 SCHEMA_TEMPLATE = ("schema", "config.template.yaml")
 SCHEMA_RESOURCE = ("schema", "config.schema.yaml")
 SCHEMA_HEADER = ("# The sweep config's JSON schema, generated from config.template.yaml and the registry of\n"
-                 "# inputs (sweep.fields): do not edit. Regenerate: .venv/bin/python -c 'from sweep import grid; "
+                 "# inputs (sweep.fields): do not edit. Regenerate: .venv/bin/python -c 'from sweep import validation; "
                  "validation.write_schema()'\n")
 
 
