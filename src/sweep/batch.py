@@ -77,10 +77,10 @@ def run_scene(scene: Mapping, n_levels: int, simulate: Callable | None = None,
               reference_scene: Mapping | None = None) -> dict:
     """The summary of one scene; an exception becomes outcome NUMERICAL_ERROR with NaNs.
 
-    `reference_scene`: the same scene with the tolerances of the error bars' rerun (settings
-    from `sweep.numerical_error.error_reference`); when given, it is run too and the summary gets `<name>_numerical_error`
-    and `reference_outcome` (`sweep.numerical_error.add_numerical_errors`). A failed rerun leaves the main
-    result as it is: its errors are NaN and reference_outcome says why.
+    `reference_scene`: the same scene with the tolerances of the error bars' rerun (settings from
+    `sweep.numerical_error.error_reference`); when given, it is run too and the summary gets
+    `<name>_numerical_error` and `reference_outcome` (`sweep.numerical_error.add_numerical_errors`).
+    A failed rerun leaves the main result as it is: its errors are NaN and reference_outcome says why.
     """
     simulate = simulate or simulate_function()
     t0 = time.perf_counter()
@@ -88,7 +88,8 @@ def run_scene(scene: Mapping, n_levels: int, simulate: Callable | None = None,
     if summary is None:
         summary = _outputs.empty_summary(n_levels, outcomes.NUMERICAL_ERROR, time.perf_counter() - t0)
     if reference_scene is not None:
-        _numerical_error.add_numerical_errors(summary, _summary_or_none(reference_scene, simulate, "error-estimate rerun"))
+        reference = _summary_or_none(reference_scene, simulate, "error-estimate rerun")
+        _numerical_error.add_numerical_errors(summary, reference)
     return summary
 
 

@@ -156,7 +156,8 @@ def checksum_of(arrays: Mapping[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def write_plan(path: str | Path, name: str, chunks: Mapping[str, _chunking.Chunk], adaptive: Mapping | None = None) -> Path:
+def write_plan(path: str | Path, name: str, chunks: Mapping[str, _chunking.Chunk],
+               adaptive: Mapping | None = None) -> Path:
     """Write the chunk plan of a run ({name, scenes, chunks: {id: number of scenes}}) as JSON,
     atomically; `sweep.frontdoor` reads it to show scenes done / total. An adaptive map has no
     chunks up front: `adaptive` (sweep.adaptive.plan_info) says where its rounds are, and

@@ -31,6 +31,10 @@
 `-h`/`--help` prints the front door's own help (HELP); `--help-snakemake` Snakemake's. Options
 that only inform or maintain (`-n`, `--unlock`, `--lint`, `--list...`, ...) run Snakemake with
 its own output, as does `--verbose`/`--debug` (after the same validation).
+
+Here: the run (`run`: validation, the lock, Snakemake in its own session, the closing line and exit
+status). Its parts: the command line as Snakemake reads it (sweep.snakemake_args), the numba
+warm-up (sweep.warmup), the progress line (sweep.progress) and the run's lock (sweep.runlock).
 """
 from __future__ import annotations
 
@@ -48,8 +52,10 @@ from pathlib import Path
 
 from . import grid, validation
 from .progress import Progress, StatusLine, clock
-from .runlock import already_running, note_snakemake, release_own_locks, release_run_lock, running_run, take_run_lock
-from .snakemake_args import (DEFAULT_JOBS, HELP_OPTIONS, PROJECT_ROOT, absolute_paths, command_prefix, config_files, is_raw, parsed_args, shown_path, snakemake_argv)
+from .runlock import (already_running, note_snakemake, release_own_locks, release_run_lock, running_run,
+                      take_run_lock)
+from .snakemake_args import (DEFAULT_JOBS, HELP_OPTIONS, PROJECT_ROOT, absolute_paths, command_prefix, config_files,
+                             is_raw, parsed_args, shown_path, snakemake_argv)
 from .warmup import warm_numba
 
 

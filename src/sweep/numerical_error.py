@@ -25,7 +25,7 @@ ERROR_STEPS_FACTOR = 2
 
 
 def error_reference(settings_part: Mapping) -> dict:
-    """The scene settings (as `scene_settings` returns them) of the rerun behind the error bars:
+    """The scene settings (as sweep.chunking.scene_settings returns them) of the rerun behind the error bars:
     rtol/100 (>= 1e-14), atol/100 (>= 1e-16), twice the step budget (<= 1e9); the rest alike."""
     ref = copy.deepcopy(dict(settings_part))
     so, stop = dict(ref["solver"]), dict(ref["stop"])
@@ -36,11 +36,8 @@ def error_reference(settings_part: Mapping) -> dict:
     return ref
 
 
-# ---- error bars (outputs.error_estimate): every scene is rerun with the tolerances of
-# sweep.numerical_error.error_reference; each variable marked numerical_error=True gets <name>_numerical_error.
+# the suffix of the error variable of each output marked numerical_error=True
 ERROR_SUFFIX = "_numerical_error"
-
-
 # Reference outcomes that mean the rerun could not get where the main run got (not a physical end):
 # a value the main run has but such a rerun lacks has an unknown error (NaN), not an infinite one.
 REFERENCE_FAILURES = frozenset({outcomes.STEP_LIMIT, outcomes.STEP_SIZE_UNDERFLOW, outcomes.NUMERICAL_ERROR,

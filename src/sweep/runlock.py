@@ -1,7 +1,7 @@
-"""One run per config at a time: the lock `results/<name>/RUN_LOCK` (the run's pid, host, start time
-and command, the pid of its Snakemake), taken atomically, taken over when its process is gone, and
-the one line that refuses a second run; and the Snakemake locks a stopped run of this front door
-left behind.
+"""One run per config at a time: the lock `results/<name>/.running` (RUN_LOCK: the run's pid, host,
+start time and command, the pid of its Snakemake), taken atomically, taken over when its process
+is gone, and the one line that refuses a second run; and the Snakemake locks a stopped run of this
+front door left behind.
 """
 from __future__ import annotations
 

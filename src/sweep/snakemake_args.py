@@ -14,7 +14,7 @@ from pathlib import Path
 from . import configfiles
 
 
-# the project root: the Snakefile, config/, workflow/ (src/sweep/frontdoor.py -> ../..)
+# the project root: the Snakefile, config/, workflow/ (src/sweep/snakemake_args.py -> ../..)
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_JOBS = "2"
 

@@ -22,7 +22,7 @@ from .errors import MISSING, ConfigError, quoted_number
 # pyproject.toml), from which load_schema builds it with the registry of inputs (sweep.fields), and
 # the schema so built (config.schema.yaml, written by write_schema, checked against the build by
 # tests/test_grid.py) for tools that want a file, e.g. snakemake.utils.validate. The front door and
-# the Snakemake workflow validate with load_schema (load_sweep, called by sweep.frontdoor and
+# the Snakemake workflow validate with load_schema (sweep.grid.load_sweep, called by sweep.frontdoor and
 # workflow/rules/common.smk).
 SCHEMA_TEMPLATE = ("schema", "config.template.yaml")
 SCHEMA_RESOURCE = ("schema", "config.schema.yaml")
@@ -174,7 +174,8 @@ def schema_errors(config: Mapping, schema: dict) -> list[ConfigError]:
                 if isinstance(value, Mapping) and k not in value:
                     add(ConfigError(dotted_key(path + [k]), MISSING, _allowed(schema, path + [k])))
         elif err.validator == "type" and err.validator_value == "object":
-            add(ConfigError(dotted_key(path), value, "a mapping of the keys " + ", ".join(sorted(node.get("properties", {}))),
+            add(ConfigError(dotted_key(path), value,
+                            "a mapping of the keys " + ", ".join(sorted(node.get("properties", {}))),
                             problem="not a mapping"))
         elif err.validator == "type" and err.validator_value == "array":
             add(ConfigError(dotted_key(path), value, "a list: " + _allowed(schema, path), problem="not a list"))
