@@ -33,7 +33,7 @@ FAILED = frozenset({outcomes.STEP_LIMIT, outcomes.STEP_SIZE_UNDERFLOW, outcomes.
 
 # The planning estimate of a cell's error: its corners' |surplus| (the error at twice its side)
 # times KAPPA: second-order interpolation errs 1/4 of the surplus at most in the limit, KAPPA =
-# 1/2 is that with a factor 2 of margin. (The map's error bars are calibrated: bar_factors.)
+# 1/2 is that with a factor 2 of margin. (The map's error bars are calibrated: sweep.errorbars.)
 KAPPA = 0.5
 
 
