@@ -50,7 +50,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from sweep import adaptive, grid, outcomes, refine  # noqa: E402
+from sweep import adaptive, grid, lattice, outcomes, reconstruct, refine
+from sweep import axes as sweep_axes  # noqa: E402
 
 PAPER_K = {"k1": [3.755e-6], "k2": [3.004e-5], "k3": [3.004e-4]}
 PLANES = {
@@ -96,8 +97,8 @@ def dense(settings: dict, out: Path, jobs: int) -> adaptive.MapState:
     return state
 
 
-def subset(lat, truth: adaptive.MapState, computed: np.ndarray, rnd: np.ndarray) -> refine.Fields:
-    f = refine.Fields.empty(lat, {k: v.shape[1] for k, v in truth.fields.values.items()}, truth.fields.log)
+def subset(lat, truth: adaptive.MapState, computed: np.ndarray, rnd: np.ndarray) -> lattice.Fields:
+    f = lattice.Fields.empty(lat, {k: v.shape[1] for k, v in truth.fields.values.items()}, truth.fields.log)
     idx = np.nonzero(computed)[0]
     nodes = np.array(np.unravel_index(idx, lat.shape)).T
     f.set(lat, nodes, 0, truth.fields.outcome[idx], {k: v[idx] for k, v in truth.fields.values.items()})
@@ -105,21 +106,21 @@ def subset(lat, truth: adaptive.MapState, computed: np.ndarray, rnd: np.ndarray)
     return f
 
 
-def adaptive_fields(lat, st, truth: adaptive.MapState) -> refine.Fields:
+def adaptive_fields(lat, st, truth: adaptive.MapState) -> lattice.Fields:
     """The rounds the pipeline runs, every computed node's values taken from the dense lattice."""
-    f = refine.Fields.empty(lat, {k: v.shape[1] for k, v in truth.fields.values.items()}, truth.fields.log)
+    f = lattice.Fields.empty(lat, {k: v.shape[1] for k, v in truth.fields.values.items()}, truth.fields.log)
     for k in range(lat.rounds + 1):
         plan = refine.plan_round(lat, f, st, k)
         print(f"    round {k}: {len(plan.nodes)} scenes; cells flagged {plan.flagged}, refined {plan.refined}, "
               f"left for the budget {plan.skipped}, rough {plan.rough}")
         if not len(plan.nodes):
             continue
-        idx = refine._flat(lat, plan.nodes)
+        idx = lattice.flat_index(lat, plan.nodes)
         f.set(lat, plan.nodes, k, truth.fields.outcome[idx], {n: v[idx] for n, v in truth.fields.values.items()})
     return f
 
 
-def uniform_fields(lat, truth: adaptive.MapState) -> refine.Fields:
+def uniform_fields(lat, truth: adaptive.MapState) -> lattice.Fields:
     nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
     on = (nodes % 2 == 0).all(axis=1)
     return subset(lat, truth, on, np.where(on, 0, -1))
@@ -202,7 +203,7 @@ def sensitivity(settings: dict, lat, truth: adaptive.MapState, smooth: np.ndarra
                 full = dict(outer, **dict(zip(lat.axes, lat.point(node))))
                 if not isinstance(change, dict):
                     full[ax0] += change
-                sc = grid.scene(settings, tuple(float(full[a]) for a in grid.AXES))
+                sc = grid.scene(settings, tuple(float(full[a]) for a in sweep_axes.AXES))
                 for sec, kv in (change.items() if isinstance(change, dict) else ()):
                     sc = dict(sc, **{sec: dict(copy.deepcopy(sc[sec]), **kv)})
                 worst[k] = max(worst[k], abs(math.log(simulate(sc).summary["t_halt"]) - g[i]))
@@ -218,7 +219,7 @@ def sensitivity(settings: dict, lat, truth: adaptive.MapState, smooth: np.ndarra
         other = int(np.argmax(np.moveaxis(sm, a, 0).sum(axis=0)))
         line = np.nonzero(np.moveaxis(sm, a, 0)[:, other])[0]
         nodes = [tuple(i if b == a else other for b in range(lat.ndim)) for i in range(line.min(), line.max() + 1)]
-        pts = [tuple(float(dict(outer, **dict(zip(lat.axes, lat.point(n))))[x]) for x in grid.AXES) for n in nodes]
+        pts = [tuple(float(dict(outer, **dict(zip(lat.axes, lat.point(n))))[x]) for x in sweep_axes.AXES) for n in nodes]
         scenes = [dict(sc, solver=dict(sc["solver"], **tight)) for sc in (grid.scene(settings, p) for p in pts)]
         with concurrent.futures.ProcessPoolExecutor(2) as pool:
             got = np.log([r.summary["t_halt"] for r in pool.map(simulate, scenes)])
@@ -268,8 +269,8 @@ def displacement(lat, truth_oc: np.ndarray, got: np.ndarray) -> tuple[float, flo
     return float(np.mean(d)), float(np.max(d))
 
 
-def metrics(lat, st, truth: adaptive.MapState, f: refine.Fields, smooth: np.ndarray) -> dict:
-    m = refine.reconstruct(lat, f, st)
+def metrics(lat, st, truth: adaptive.MapState, f: lattice.Fields, smooth: np.ndarray) -> dict:
+    m = reconstruct.reconstruct(lat, f, st)
     oc = truth.fields.outcome
     rec = ~f.computed
     t_true = truth.fields.values["t_halt"][:, 0]

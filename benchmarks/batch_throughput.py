@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 import sweep  # noqa: E402
-from sweep import grid  # noqa: E402
+from sweep import axes, chunking, grid  # noqa: E402
 from sweep.ensemble import summaries_equal  # noqa: E402
 from sweep.scene import load_scene  # noqa: E402
 from sweep.yamlio import load  # noqa: E402
@@ -39,10 +39,10 @@ def scenes(n: int, seed: int) -> list[dict]:
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(n):
-        point = {a: g[a][0] for a in grid.AXES}
+        point = {a: g[a][0] for a in axes.AXES}
         for a in RANDOM_AXES:
             point[a] = float(rng.uniform(min(g[a]), max(g[a])))
-        out.append(grid.scene(grid.scene_settings(settings), tuple(point[a] for a in grid.AXES)))
+        out.append(grid.scene(chunking.scene_settings(settings), tuple(point[a] for a in axes.AXES)))
     return out
 
 

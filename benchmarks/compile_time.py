@@ -13,7 +13,7 @@ Each measurement runs in a fresh Python process (the numba cache is per process 
   project's cache, src/sweep/core/__pycache__/numba-<digest>/, is neither read nor touched; core.jit
   honours NUMBA_CACHE_DIR). The process times `import sweep`, then the first `sweep.simulate` of a
   tiny scene (the defaults with t_max = 0.01 s: what `python3 run.py sweep` compiles before its first
-  job, frontdoor.warm_numba -> batch.warm_up -> sweep.simulate), then the first
+  job, warmup.warm_numba -> batch.warm_up -> sweep.simulate), then the first
   `sweep.simulate_batch([scene], workers=1)` (its entry point core.ensemble.solve_index is another
   top-level kernel: what it adds), then a second simulate (in-process, warm).
 * **warm**: the same in a new process over the cache the cold run filled: the cost of loading the

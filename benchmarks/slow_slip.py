@@ -256,12 +256,13 @@ def grid_scenes(config_text: str) -> list[dict]:
     import itertools
 
     from sweep import grid
+    from sweep import axes as sweep_axes
 
     with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as fh:
         fh.write(config_text)
     sw = grid.load_sweep([(fh.name, "config")])
     Path(fh.name).unlink()
-    axes = [sw.settings["grid"][a] for a in grid.AXES]
+    axes = [sw.settings["grid"][a] for a in sweep_axes.AXES]
     return [grid.scene(sw.settings, point) for point in itertools.product(*axes)]
 
 

@@ -9,7 +9,7 @@ PYTHONPATH at one tree's src/, this tree's and the base's alternately.
 
 * figures: the four figure notebooks of the default sweep against one cube (results/tiny/cube.nc,
   made first if missing): the base runs each in its own Jupyter kernel (sweep.io.run_notebook, the
-  rule `notebook` there), this tree all in one process (sweep.io.run_notebooks). Wall time of the
+  rule `notebook` there), this tree all in one process (sweep.notebooks.run_notebooks). Wall time of the
   process, imports included.
 * gather: config/million.yaml's grid (2e4 chunk files of 41 or 59 scenes) and sub-grids of it
   (its first mu_d value: 2000 files; its first mu_d and k1 values: 200); this tree's gather reads with
@@ -97,11 +97,11 @@ for nb in ("halt_time", "frequency_ramps", "roll_slip", "cost"):
 FIG_NEW = """
 import sys
 from pathlib import Path
-from sweep import io
+from sweep import notebooks
 out = Path(sys.argv[2])
 nbs = ("halt_time", "frequency_ramps", "roll_slip", "cost")
-io.run_notebooks([Path(sys.argv[3]) / f"{nb}.ipynb" for nb in nbs], sys.argv[1], [out / f"{nb}.png" for nb in nbs],
-                 [out / f"{nb}.ipynb" for nb in nbs])
+notebooks.run_notebooks([Path(sys.argv[3]) / f"{nb}.ipynb" for nb in nbs], sys.argv[1],
+                        [out / f"{nb}.png" for nb in nbs], [out / f"{nb}.ipynb" for nb in nbs])
 """
 
 
@@ -143,9 +143,9 @@ def synthetic_chunks(settings: dict) -> list[Path]:
     import netCDF4
     import numpy as np
 
-    from sweep import grid, io, outcomes
+    from sweep import axes, chunkfiles, chunking, outcomes, outputs
 
-    plan = grid.plan_chunks(settings)
+    plan = chunking.plan_chunks(settings)
     cdir = OUT / "chunks"
     cdir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(52)
@@ -162,7 +162,7 @@ def synthetic_chunks(settings: dict) -> list[Path]:
         if k not in templates:
             summaries = []
             for _ in range(k):
-                s = io.error_summary(n_levels, outcomes.HALTED, float(rng.uniform(0.01, 1)))
+                s = outputs.empty_summary(n_levels, outcomes.HALTED, float(rng.uniform(0.01, 1)))
                 for key, v in list(s.items()):
                     if isinstance(v, float):
                         s[key] = float(rng.uniform(0, 10))
@@ -177,7 +177,7 @@ def synthetic_chunks(settings: dict) -> list[Path]:
                         s[key] = int(rng.integers(0, 10 ** 6))
                 summaries.append(s)
             templates[k] = OUT / f"template-{k}.nc"
-            io.write_chunk(chunk, summaries, templates[k])
+            chunkfiles.write_chunk(chunk, summaries, templates[k])
         if k not in raw:   # the template's values, read once: a file's checksum is computed, not read back
             with netCDF4.Dataset(templates[k], "r") as nc:
                 nc.set_auto_maskandscale(False)
@@ -185,13 +185,13 @@ def synthetic_chunks(settings: dict) -> list[Path]:
         tmp = path.with_suffix(".tmp")
         shutil.copyfile(templates[k], tmp)
         pts = np.array(chunk.points, dtype=np.float64)
-        arrays = dict(raw[k], **{a: pts[:, i] for i, a in enumerate(grid.AXES)})
+        arrays = dict(raw[k], **{a: pts[:, i] for i, a in enumerate(axes.AXES)})
         with netCDF4.Dataset(tmp, "a") as nc:
-            for i, a in enumerate(grid.AXES):
+            for i, a in enumerate(axes.AXES):
                 nc.variables[a][:] = pts[:, i]
             nc.setncattr("sweep_chunk_id", chunk.id)
             nc.setncattr("sweep_chunk_spec", chunk.spec_json)
-            nc.setncattr("sweep_checksum", io._checksum_of(arrays))
+            nc.setncattr("sweep_checksum", chunkfiles.checksum_of(arrays))
         os.replace(tmp, path)
         made += 1
         if made % 2000 == 0:
@@ -201,12 +201,15 @@ def synthetic_chunks(settings: dict) -> list[Path]:
 
 GATHER = """
 import json, sys, time
-from sweep import io
+try:                                  # this tree
+    from sweep.gather import gather
+except ImportError:                   # the base (before the gather had a module of its own)
+    from sweep.io import gather
 settings = json.loads(open(sys.argv[1]).read())
 paths = open(sys.argv[2]).read().split()
 t0 = time.perf_counter()
 kw = {"workers": int(sys.argv[4])} if sys.argv[4] != "-" else {}
-io.gather(paths, settings, sys.argv[3], **kw)
+gather(paths, settings, sys.argv[3], **kw)
 hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM")][0].split()[1]
 print(int(hwm) / 1024, time.perf_counter() - t0)
 """

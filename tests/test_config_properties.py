@@ -1,7 +1,7 @@
 """Sweep configs, property-based (issue #5): random valid configs validate and yield a plan;
 random invalid ones (one key corrupted) fail naming the key and the allowed range, before any job.
 
-Validation here is `sweep.grid.check_config` / `normalize` (what workflow/rules/common.smk runs
+Validation here is `sweep.validation.check_config` / `normalize` (what workflow/rules/common.smk runs
 when Snakemake parses the workflow) and `snakemake.utils.validate` against the same schema. No
 integration is run, except in the last tests, which call `snakemake -n` on a copy of the
 workflow and check that it stops with a readable message before any job.
@@ -22,14 +22,14 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sweep import fields, grid
+from sweep import chunking, fields, grid, validation
 from conftest import copy_workflow
 from sweep.errors import ConfigError
 from sweep.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA_PATH = grid.SCHEMA_PATH
-SCHEMA = grid.load_schema(SCHEMA_PATH)
+SCHEMA_PATH = validation.SCHEMA_PATH
+SCHEMA = validation.load_schema(SCHEMA_PATH)
 HALF_PI = math.pi / 2
 FINITE = dict(allow_nan=False, allow_infinity=False)
 HSETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -131,14 +131,14 @@ def valid_configs(draw, levels_max: float = HALF_PI, ordinary_disk: bool = False
 def test_valid_config_validates_and_yields_a_plan(cfg):
     from snakemake.utils import validate
 
-    filled = grid.check_config(cfg, SCHEMA)
+    filled = validation.check_config(cfg, SCHEMA)
     theirs = copy.deepcopy(cfg)
     validate(theirs, str(SCHEMA_PATH))  # Snakemake's own validation accepts it and fills the same defaults
     assert theirs == filled
     settings_ = grid.normalize(cfg, SCHEMA, check_scenes=False)
     # Bounded work: every scene of every valid config has a finite time limit and step budget.
     assert 0 < settings_["stop"]["t_max"] <= 1e5 and 1 <= settings_["stop"]["max_steps"] <= 10**9
-    plan = grid.plan_chunks(settings_)
+    plan = chunking.plan_chunks(settings_)
     points = [p for c in plan.values() for p in c.points]
     assert len(points) == len(set(points)) == math.prod(grid.grid_shape(settings_))
     cap = 2 * settings_["chunk_size"]
@@ -154,7 +154,7 @@ def test_core_checks_raise_only_readable_config_errors(cfg):
     # or reject it with a SweepConfigError naming a key, never with another exception.
     try:
         grid.normalize(cfg, SCHEMA)
-    except grid.SweepConfigError as err:
+    except validation.SweepConfigError as err:
         for line in str(err).splitlines():   # one line per field: `key = value is invalid: ... allowed ...`
             assert re.match(r"^[\w.\[\], ]+ (= .+ is invalid: |is missing: )", line) and "allowed" in line, line
 
@@ -333,7 +333,7 @@ def _lines_naming(msg: str, key: str) -> list[str]:
 @given(invalid_configs())
 def test_invalid_config_fails_naming_the_key_and_range(case):
     cfg, key, fragments = case
-    with pytest.raises(grid.SweepConfigError) as exc:
+    with pytest.raises(validation.SweepConfigError) as exc:
         grid.normalize(cfg, SCHEMA, check_scenes=False)
     msg = str(exc.value)
     lines = _lines_naming(msg, key)
@@ -347,7 +347,7 @@ def test_level_below_the_core_minimum_names_levels_and_the_range():
     # rejected by the sweep's own check, in the words a scene file gets.
     cfg = base()
     cfg["levels"] = [0.3, 1e-8]
-    with pytest.raises(grid.SweepConfigError) as exc:
+    with pytest.raises(validation.SweepConfigError) as exc:
         grid.normalize(cfg, SCHEMA)
     lines = _lines_naming(str(exc.value), "levels[1]")
     assert lines and "1e-08" in lines[0] and "allowed [1e-7, pi/2) each" in lines[0], str(exc.value)
@@ -362,7 +362,7 @@ def test_a_subnormal_disk_is_a_config_error_not_a_crash():
     cfg = base()
     cfg["disk"].update(radius=5e-324, thickness=5e-324)
     cfg["grid"].update(k1=[0.0], k2=[0.0], k3=[0.0])
-    with pytest.raises(grid.SweepConfigError) as exc:
+    with pytest.raises(validation.SweepConfigError) as exc:
         grid.normalize(cfg, SCHEMA)
     msg = str(exc.value)
     assert "disk.radius = 5e-324 is invalid: allowed [1e-6, 10] (disk radius R in m)" in msg, msg
@@ -395,7 +395,7 @@ def test_a_scene_and_a_sweep_reject_a_value_alike(key):
         _set(cfg, tuple(path), [bad])
     else:
         _set(cfg, tuple(path), bad)
-    with pytest.raises(grid.SweepConfigError) as exc:
+    with pytest.raises(validation.SweepConfigError) as exc:
         grid.normalize(cfg, SCHEMA, check_scenes=False)
     sweep_lines = str(exc.value).splitlines()
     want = f"{rng.text()}"

@@ -36,12 +36,12 @@ import xarray as xr
 import yaml
 
 import sweep
-from sweep import batch, grid, io, outcomes, reasons
+from sweep import axes, batch, chunkfiles, chunking, grid, outcomes, outputs, reasons, validation, verify
 from conftest import copy_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA_PATH = grid.SCHEMA_PATH
-SCHEMA = grid.load_schema(SCHEMA_PATH)
+SCHEMA_PATH = validation.SCHEMA_PATH
+SCHEMA = validation.load_schema(SCHEMA_PATH)
 TIMEOUT_S = 600  # a hang, not slowness (a run here takes ~15 s)
 
 # 2 x 1 x 1 x 1 x 3 x 4 = 24 scenes: halted, face-contact and contact-lost (omega0 = 1000 rad/s)
@@ -113,15 +113,15 @@ def sweep_dir(tmp_path_factory, name: str, cfg: dict, src: Path) -> Path:
     return wd
 
 
-def plan_of(cfg: dict, src: Path) -> dict[str, grid.Chunk]:
+def plan_of(cfg: dict, src: Path) -> dict[str, chunking.Chunk]:
     """The chunk plan as the snapshot's Snakemake sees it (chunk ids include the fingerprint
-    of the core's source files next to sweep/grid.py)."""
-    saved = grid.__file__
-    grid.__file__ = str(src / "sweep" / "grid.py")
+    of the core's source files next to sweep/chunking.py)."""
+    saved = chunking.__file__
+    chunking.__file__ = str(src / "sweep" / "chunking.py")
     try:
-        return grid.plan_chunks(settings_of(cfg))
+        return chunking.plan_chunks(settings_of(cfg))
     finally:
-        grid.__file__ = saved
+        chunking.__file__ = saved
 
 
 def run_sweep(wd: Path, *args: str) -> str:
@@ -169,7 +169,7 @@ def warm_numba_cache():
     # Fill the numba cache (cache=True) first, so the chunk jobs load the kernels (~1 s) rather
     # than each compile them (~40 s) on a fresh checkout (as tests/test_pipeline.py does).
     s = settings_of(fault_config())
-    sweep.simulate(grid.scene(s, tuple(s["grid"][a][0] for a in grid.AXES)))
+    sweep.simulate(grid.scene(s, tuple(s["grid"][a][0] for a in axes.AXES)))
 
 
 # ------------------------------------------------------------------------------- failing points
@@ -224,18 +224,18 @@ def faulty_kernel(monkeypatch):
 
 def test_failing_points_never_fail_their_chunk(tmp_path, faulty_kernel, caplog):
     settings = settings_of(fault_config())
-    outer = tuple(settings["grid"][a][0] for a in grid.OUTER_AXES)
+    outer = tuple(settings["grid"][a][0] for a in axes.OUTER_AXES)
     inners = [OK[0], LOST, STEPS, TMAX, RAISES, NAN, OK[1], OK[2]]
     points = [outer + inner for inner in inners]
-    cid, spec = grid.chunk_id_of(grid.scene_settings(settings), points)
-    chunk = grid.Chunk(cid, tuple(points), spec)
+    cid, spec = chunking.chunk_id_of(chunking.scene_settings(settings), points)
+    chunk = chunking.Chunk(cid, tuple(points), spec)
     real_simulate = batch.simulate_function()
     caplog.set_level("INFO", logger="sweep.batch")
 
     stats = batch.run_chunk(chunk, tmp_path / f"{cid}.nc", simulate=lambda sc: real_simulate(injected_stop(sc)))
 
     assert stats["n"] == len(points)
-    assert io.verify_chunk(tmp_path / f"{cid}.nc", chunk) is None
+    assert verify.verify_chunk(tmp_path / f"{cid}.nc", chunk) is None
     assert "injected kernel failure" in caplog.text  # the traceback is in the chunk's log
     want_outcome = {OK[0]: outcomes.HALTED, LOST: outcomes.CONTACT_LOST, STEPS: outcomes.STEP_LIMIT,
                     TMAX: outcomes.T_MAX, RAISES: outcomes.NUMERICAL_ERROR, NAN: outcomes.NUMERICAL_ERROR}
@@ -247,7 +247,7 @@ def test_failing_points_never_fail_their_chunk(tmp_path, faulty_kernel, caplog):
         if inner in want_outcome:
             assert int(row.outcome) == want_outcome[inner], (inner, outcomes.NAMES[int(row.outcome)])
         if inner == RAISES:  # nothing was computed: NaN everywhere, counts missing, flags say why
-            for var in io.VARIABLES:
+            for var in outputs.VARIABLES:
                 if var.kind == "flag":
                     assert (row[var.name].values == reasons.NO_RESULT).all(), var.name
                 elif var.name not in ("outcome", "halt_finite", "wall_time"):
@@ -257,10 +257,10 @@ def test_failing_points_never_fail_their_chunk(tmp_path, faulty_kernel, caplog):
         # every other point: exactly what the same scene gives when run alone (the kernel patch
         # passes it through; NAN is compared with the same patch in place)
         alone = real_simulate(injected_stop(grid.scene(settings, points[i]))).summary
-        for var in io.VARIABLES:
+        for var in outputs.VARIABLES:
             if var.name == "wall_time":
                 continue
-            want = io.value_of(var, alone)
+            want = chunkfiles.value_of(var, alone)
             np.testing.assert_array_equal(np.asarray(row[var.name].values, dtype=float),
                                           np.asarray(want, dtype=float), err_msg=f"{var.name} at {inner}")
         # NaN only where the scene could not compute: what it always computes is finite ...
@@ -292,16 +292,16 @@ def test_failing_points_never_fail_their_chunk(tmp_path, faulty_kernel, caplog):
 KILL_WHILE_WRITING = """
 import os, signal, sys
 from types import SimpleNamespace
-from sweep import batch, io
+from sweep import atomic, batch, outputs
 chunk = batch.chunk_from_spec(sys.argv[1])
 n_levels = len(chunk.spec["settings"]["levels"])
-real_fsync = io._fsync_path
+real_fsync = atomic._fsync_path
 def fsync_then_die(path):
     if ".tmp-" in str(path):  # the temporary file is fully written: die before the rename
         os.kill(os.getpid(), signal.SIGKILL)
     return real_fsync(path)
-io._fsync_path = fsync_then_die
-batch.run_chunk(chunk, sys.argv[2], simulate=lambda sc: SimpleNamespace(summary=io.error_summary(n_levels)))
+atomic._fsync_path = fsync_then_die
+batch.run_chunk(chunk, sys.argv[2], simulate=lambda sc: SimpleNamespace(summary=outputs.empty_summary(n_levels)))
 """
 
 
@@ -310,7 +310,7 @@ def test_kill_9_while_writing_a_chunk_leaves_no_file_under_its_name(tmp_path, mo
     # A deterministic SIGKILL inside the chunk write (after the netCDF data and its checksum, before
     # the fsync and the rename): only a temporary file remains, which no check or gather ever reads.
     settings = settings_of(fault_config())
-    chunk = next(iter(grid.plan_chunks(settings).values()))
+    chunk = next(iter(chunking.plan_chunks(settings).values()))
     final = tmp_path / f"{chunk.id}.nc"
     p = subprocess.run([sys.executable, "-c", KILL_WHILE_WRITING, chunk.spec_json, str(final)],
                        capture_output=True, text=True, timeout=TIMEOUT_S)
@@ -318,10 +318,10 @@ def test_kill_9_while_writing_a_chunk_leaves_no_file_under_its_name(tmp_path, mo
     assert not final.exists()
     leftovers = [q.name for q in tmp_path.iterdir()]
     assert len(leftovers) == 1 and re.fullmatch(rf"\.{chunk.id}\.nc\.tmp-\d+-[0-9a-f]{{8}}", leftovers[0]), leftovers
-    assert io.check_existing_chunks(tmp_path, {chunk.id: chunk}) == {}  # nothing under a final name
+    assert verify.check_existing_chunks(tmp_path, {chunk.id: chunk}) == {}  # nothing under a final name
     monkeypatch.setattr(batch, "_warmed_up", True)  # the fake core below needs no warm-up
-    batch.run_chunk(chunk, final, simulate=lambda sc: type("R", (), {"summary": io.error_summary(len(settings["levels"]))}))
-    assert io.verify_chunk(final, chunk) is None
+    batch.run_chunk(chunk, final, simulate=lambda sc: type("R", (), {"summary": outputs.empty_summary(len(settings["levels"]))}))
+    assert verify.verify_chunk(final, chunk) is None
 
 
 # ------------------------------------------------------------------------------- bounded work
@@ -336,7 +336,7 @@ def test_every_scene_has_a_step_budget_and_a_time_limit():
     del cfg["stop"]
     s = settings_of(cfg)
     assert s["stop"] == {"t_max": 120.0, "max_steps": 5_000_000}
-    sc = grid.scene(s, tuple(s["grid"][a][0] for a in grid.AXES))
+    sc = grid.scene(s, tuple(s["grid"][a][0] for a in axes.AXES))
     assert sc["stop"]["t_max"] == 120.0 and sc["stop"]["max_steps"] == 5_000_000
 
 
@@ -347,7 +347,7 @@ def test_a_costly_scene_stops_at_its_budget(solver):
     # budget (steps + rejected steps) ends the scene, with outcome step_limit.
     cfg = fault_config(solver=solver, stop={"t_max": 1e5, "max_steps": 3000})
     s = settings_of(cfg)
-    r = sweep.simulate(grid.scene(s, tuple(s["grid"][a][0] for a in grid.AXES))).summary
+    r = sweep.simulate(grid.scene(s, tuple(s["grid"][a][0] for a in axes.AXES))).summary
     assert r["outcome"] == "step_limit" and r["n_steps"] + r["n_rejected"] == 3000
 
 
@@ -360,9 +360,9 @@ def src(tmp_path_factory) -> Path:
     dest = tmp_path_factory.mktemp("src")
     shutil.copytree(Path(sweep.__file__).parent, dest / "sweep", copy_function=shutil.copy2,
                     ignore=shutil.ignore_patterns("*.pyc"))
-    warm = ("import sweep, yaml; from sweep import grid; "
-            f"s = grid.normalize(yaml.safe_load({FAULT_CONFIG!r}), grid.load_schema({str(SCHEMA_PATH)!r})); "
-            "sweep.simulate(grid.scene(s, tuple(s['grid'][a][0] for a in grid.AXES)))")
+    warm = ("import sweep, yaml; from sweep import axes, grid, validation; "
+            f"s = grid.normalize(yaml.safe_load({FAULT_CONFIG!r}), validation.load_schema({str(SCHEMA_PATH)!r})); "
+            "sweep.simulate(grid.scene(s, tuple(s['grid'][a][0] for a in axes.AXES)))")
     subprocess.run([sys.executable, "-c", warm], env=smk_env(dest), check=True, timeout=TIMEOUT_S)
     return dest
 
@@ -456,10 +456,10 @@ def test_kill_9_mid_run_then_documented_recovery(tmp_path_factory, src, referenc
     present = sorted(chunk_dir.glob("*.nc"))
     assert present and len(present) < len(plan)
     for p in present:
-        assert io.verify_chunk(p, plan[p.stem]) is None, p
+        assert verify.verify_chunk(p, plan[p.stem]) is None, p
     assert not (wd / "results" / "fault" / "cube.nc").exists()
     leftovers = [p.name for p in chunk_dir.iterdir() if p.is_file() and p.suffix != ".nc"
-                 and p.name != io.VERIFIED_CACHE]
+                 and p.name != verify.VERIFIED_CACHE]
     assert all(re.fullmatch(r"\.[0-9a-f]{16}\.nc\.tmp-\d+-[0-9a-f]{8}", n) for n in leftovers), leftovers
 
     # A chunk file that was complete before the kill is then damaged (a truncated copy).
@@ -474,11 +474,11 @@ def test_kill_9_mid_run_then_documented_recovery(tmp_path_factory, src, referenc
     #   python3 run.py sweep --unlock; python3 run.py sweep --rerun-incomplete
     smk(wd, "-j2", "--unlock", "--configfile", "config/fault.yaml")
     code, out = smk(wd, "-j2", "--rerun-incomplete", "--configfile", "config/fault.yaml")
-    assert not victim.exists() or io.verify_chunk(victim, plan[victim.stem]) is None
+    assert not victim.exists() or verify.verify_chunk(victim, plan[victim.stem]) is None
     assert list((chunk_dir / "quarantine").glob(victim.name + ".*")), "truncated chunk not quarantined"
     assert_same_cube(reference, wd / "results" / "fault" / "cube.nc")
     for p in chunk_dir.glob("*.nc"):
-        assert io.verify_chunk(p, plan[p.stem]) is None, p
+        assert verify.verify_chunk(p, plan[p.stem]) is None, p
     # Chunks Snakemake had recorded as finished (and left intact) were reused, not recomputed;
     # the others (running, or written but not yet recorded: --rerun-incomplete) were computed.
     reused = finished - {victim.stem}

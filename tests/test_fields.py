@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sweep import fields, grid, io, scene
+from sweep import axes, fields, figures, scene, validation
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 
@@ -21,11 +21,11 @@ DUMMY_ENTRY = '''    Field("contact.crr", Range(0.0, 0.5, "rolling-resistance co
 CHECKS = r'''
 import json, sys
 import yaml
-from sweep import grid, io, scene
+from sweep import axes, cf, chunking, figures, grid, scene, validation
 from sweep.errors import ConfigError
 
 out = {}
-schema = grid.load_schema()
+schema = validation.load_schema()
 out["grid_prop"] = schema["properties"]["grid"]["properties"]["crr"]
 out["grid_desc"] = schema["properties"]["grid"]["description"]
 out["refine_axes"] = sorted(schema["properties"]["refine"]["properties"]["axes"]["properties"])
@@ -37,26 +37,26 @@ except ConfigError as err:
 tiny = yaml.safe_load(open(sys.argv[1]))
 try:
     grid.normalize(dict(tiny, grid=dict(tiny["grid"], crr=[0.1, 0.9])), schema)
-except grid.SweepConfigError as err:
+except validation.SweepConfigError as err:
     out["sweep_error"] = str(err)
 settings = grid.normalize(tiny, schema)      # a config without the new axis: its default
-out["axes"] = [grid.AXES, grid.OUTER_AXES, grid.INNER_AXES]
+out["axes"] = [axes.AXES, axes.OUTER_AXES, axes.INNER_AXES]
 out["settings_crr"] = settings["grid"]["crr"]
-chunk = next(iter(grid.plan_chunks(settings).values()))
+chunk = next(iter(chunking.plan_chunks(settings).values()))
 out["point"] = chunk.points[0]
 out["scene_crr"] = grid.scene(settings, chunk.points[0])["contact"]["crr"]
-out["coord"] = io.cube_coords(settings)["crr"][2]
-out["label"] = io.AXIS_LABELS["crr"]
+out["coord"] = cf.cube_coords(settings)["crr"][2]
+out["label"] = figures.AXIS_LABELS["crr"]
 print(json.dumps(out))
 '''
 
 
 def test_the_axes_come_from_the_registry():
-    assert grid.AXES == ("mu_d", "k1", "k2", "k3", "alpha0", "omega0")
-    assert grid.OUTER_AXES == ("mu_d", "k1", "k2", "k3") and grid.INNER_AXES == ("alpha0", "omega0")
-    assert grid.AXIS_UNITS == {"mu_d": "1", "k1": "m", "k2": "m", "k3": "m", "alpha0": "rad", "omega0": "rad s-1"}
-    assert set(io.AXIS_LABELS) == set(grid.AXES) | {"level"}
-    assert {a: fields.SWEEP_KEYS[f"grid.{a}"] for a in grid.AXES} == {
+    assert axes.AXES == ("mu_d", "k1", "k2", "k3", "alpha0", "omega0")
+    assert axes.OUTER_AXES == ("mu_d", "k1", "k2", "k3") and axes.INNER_AXES == ("alpha0", "omega0")
+    assert axes.AXIS_UNITS == {"mu_d": "1", "k1": "m", "k2": "m", "k3": "m", "alpha0": "rad", "omega0": "rad s-1"}
+    assert set(figures.AXIS_LABELS) == set(axes.AXES) | {"level"}
+    assert {a: fields.SWEEP_KEYS[f"grid.{a}"] for a in axes.AXES} == {
         "mu_d": "contact.mu_d", "k1": "contact.k1", "k2": "contact.k2", "k3": "contact.k3",
         "alpha0": "initial.alpha", "omega0": "initial.spin"}
 
@@ -87,9 +87,9 @@ def test_the_registry_names_the_shapes_and_kernel_slots_the_model_has():
 
 def test_the_packaged_schema_file_is_the_one_the_registry_builds():
     """config.schema.yaml (for tools that read a file) equals what load_schema builds from the
-    template and the registry; regenerate it with grid.write_schema() after a registry change."""
-    assert grid.load_schema(grid.SCHEMA_PATH) == grid.load_schema(), \
-        "stale schema file: .venv/bin/python -c 'from sweep import grid; grid.write_schema()'"
+    template and the registry; regenerate it with validation.write_schema() after a registry change."""
+    assert validation.load_schema(validation.SCHEMA_PATH) == validation.load_schema(), \
+        "stale schema file: .venv/bin/python -c 'from sweep import validation; validation.write_schema()'"
 
 
 def test_a_new_sweepable_input_is_one_registry_entry(tmp_path):
@@ -126,10 +126,10 @@ def test_a_new_sweepable_input_is_one_registry_entry(tmp_path):
     assert out["label"] == "rolling resistance c_rr"
 
 
-@pytest.mark.parametrize("axis", grid.AXES)
+@pytest.mark.parametrize("axis", axes.AXES)
 def test_every_axis_is_documented(axis):
     """docs/pipeline.md lists every config key and every cube coordinate."""
     doc = (Path(__file__).resolve().parents[1] / "docs" / "pipeline.md").read_text()
     assert f"| `grid.{axis}` |" in doc
     coordinate_rows = [line for line in doc.splitlines() if line.startswith("| `") and f"`{axis}`" in line]
-    assert any(f"| {grid.AXIS_UNITS[axis]} |" in line for line in coordinate_rows), coordinate_rows
+    assert any(f"| {axes.AXIS_UNITS[axis]} |" in line for line in coordinate_rows), coordinate_rows

@@ -25,12 +25,12 @@ import xarray as xr
 import yaml
 
 import sweep
-from sweep import frontdoor, grid
+from sweep import axes, chunking, configfiles, frontdoor, grid, progress, runlock, snakemake_args, validation, warmup
 from sweep.scene import load_scene
 from conftest import copy_workflow
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema()
+SCHEMA = validation.load_schema()
 TIMEOUT_S = 600
 
 
@@ -46,37 +46,37 @@ def load_run_py():
 def test_sweep_keeps_the_profiles_job_limit():
     slurm = str(ROOT / "workflow" / "profiles" / "slurm")
     profile_jobs = yaml.safe_load((Path(slurm) / "config.yaml").read_text())["jobs"]
-    argv = frontdoor.snakemake_argv(["--profile", slurm], progress=True)
+    argv = snakemake_args.snakemake_argv(["--profile", slurm], progress=True)
     assert "-j" not in argv and "-j2" not in argv
     # Snakemake's own parse of the command `run.py sweep --profile ...` runs
-    assert frontdoor.parsed_args(argv).jobs == profile_jobs == 100
+    assert snakemake_args.parsed_args(argv).jobs == profile_jobs == 100
     # without a profile: two local jobs; an explicit -j wins over both
-    assert frontdoor.parsed_args(frontdoor.snakemake_argv([], progress=True)).jobs == 2
-    assert frontdoor.parsed_args(frontdoor.snakemake_argv(["--profile", slurm, "-j", "7"], True)).jobs == 7
-    assert frontdoor.parsed_args(frontdoor.snakemake_argv(["--cores", "3"], True)).cores == 3
+    assert snakemake_args.parsed_args(snakemake_args.snakemake_argv([], progress=True)).jobs == 2
+    assert snakemake_args.parsed_args(snakemake_args.snakemake_argv(["--profile", slurm, "-j", "7"], True)).jobs == 7
+    assert snakemake_args.parsed_args(snakemake_args.snakemake_argv(["--cores", "3"], True)).cores == 3
     # a run resumes what an interrupted run left: --rerun-incomplete is always there
-    assert "--rerun-incomplete" in frontdoor.snakemake_argv([], progress=True)
+    assert "--rerun-incomplete" in snakemake_args.snakemake_argv([], progress=True)
 
 
 def test_informational_options_show_snakemake_itself():
-    assert frontdoor.is_raw(["-n"]) and frontdoor.is_raw(["--unlock", "--configfile", "x.yaml"])
-    assert frontdoor.is_raw(["--dry-run"]) and not frontdoor.is_raw(["--configfile", "config/tiny.yaml"])
+    assert snakemake_args.is_raw(["-n"]) and snakemake_args.is_raw(["--unlock", "--configfile", "x.yaml"])
+    assert snakemake_args.is_raw(["--dry-run"]) and not snakemake_args.is_raw(["--configfile", "config/tiny.yaml"])
 
 
 # ------------------------------------------------------------------------------- results per config
 
 def test_results_folder_is_named_by_the_config(tmp_path):
-    assert grid.sweep_name(ROOT / "config" / "config.yaml") == "default"
-    assert grid.sweep_name(ROOT / "config" / "tiny.yaml") == "tiny"
+    assert configfiles.sweep_name(ROOT / "config" / "config.yaml") == "default"
+    assert configfiles.sweep_name(ROOT / "config" / "tiny.yaml") == "tiny"
     (tmp_path / "my_sweep.yaml").write_text("grid: {mu_d: [0.2]}\n")
-    assert grid.sweep_name(tmp_path / "my_sweep.yaml") == "my_sweep"   # no name: the file's stem
+    assert configfiles.sweep_name(tmp_path / "my_sweep.yaml") == "my_sweep"   # no name: the file's stem
     (tmp_path / "bad.yaml").write_text("name: ../elsewhere\n")
-    with pytest.raises(grid.SweepConfigError, match=r"^bad.yaml: name = '\.\./elsewhere' is invalid: allowed "):
-        grid.sweep_name(tmp_path / "bad.yaml", "bad.yaml")
+    with pytest.raises(validation.SweepConfigError, match=r"^bad.yaml: name = '\.\./elsewhere' is invalid: allowed "):
+        configfiles.sweep_name(tmp_path / "bad.yaml", "bad.yaml")
     # the front door's run: Snakemake's working directory, the config files in Snakemake's order
-    argv, given = frontdoor.absolute_paths(["--configfile", "my_sweep.yaml", "--directory", "."], tmp_path)
-    args = frontdoor.parsed_args(argv)
-    wd, files, overrides = frontdoor.config_files(args, given, tmp_path)
+    argv, given = snakemake_args.absolute_paths(["--configfile", "my_sweep.yaml", "--directory", "."], tmp_path)
+    args = snakemake_args.parsed_args(argv)
+    wd, files, overrides = snakemake_args.config_files(args, given, tmp_path)
     assert wd == tmp_path and overrides is None
     assert files == [(tmp_path / "config" / "config.yaml", "config/config.yaml"),
                      (tmp_path / "my_sweep.yaml", "my_sweep.yaml")]
@@ -128,7 +128,7 @@ def test_one_rule_for_numbers_in_configs_and_scene_files(tmp_path):
     assert sc["stop"]["levels"] == [0.1, 0.01] and sc["stop"]["max_steps"] == 200000
     # quoted: the same complaint from both
     (tmp_path / "quoted.yaml").write_text(EXPONENTS.replace("rtol: 1e-8", "rtol: '1e-8'"))
-    with pytest.raises(grid.SweepConfigError) as err:
+    with pytest.raises(validation.SweepConfigError) as err:
         grid.load_sweep([(tmp_path / "quoted.yaml", "quoted.yaml")])
     (line,) = str(err.value).splitlines()
     scene.write_text("solver: {rtol: '1e-8'}\n")
@@ -143,7 +143,7 @@ def test_one_rule_for_numbers_in_configs_and_scene_files(tmp_path):
 def test_one_invalid_value_gives_one_message(section, key, value):
     cfg = yaml.safe_load((ROOT / "config" / "tiny.yaml").read_text())
     (cfg[section] if section else cfg)[key] = value
-    with pytest.raises(grid.SweepConfigError) as err:
+    with pytest.raises(validation.SweepConfigError) as err:
         grid.normalize(cfg, SCHEMA)
     lines = str(err.value).splitlines()
     assert len(lines) == 1, str(err.value)
@@ -165,17 +165,17 @@ def test_first_run_says_what_it_installs():
 def test_cold_numba_cache_is_detected_and_old_caches_pruned(tmp_path):
     cache = tmp_path / "__pycache__" / "numba-0123456789abcdef"
     cache.mkdir(parents=True)
-    assert frontdoor.numba_cache_cold(cache)                            # never compiled
+    assert warmup.numba_cache_cold(cache)                            # never compiled
     (cache / "contact_rhs.eval_rhs-150.py311.nbi").write_bytes(b"")
-    assert frontdoor.numba_cache_cold(cache)                            # the main loop is not there yet
+    assert warmup.numba_cache_cold(cache)                            # the main loop is not there yet
     (cache / "integrate.run-400.py311.nbi").write_bytes(b"")
-    assert not frontdoor.numba_cache_cold(cache)                        # cached
+    assert not warmup.numba_cache_cold(cache)                        # cached
     old = tmp_path / "__pycache__" / "numba-fedcba9876543210"
     old.mkdir()
     (old / "integrate.run-390.py311.nbi").write_bytes(b"")
     other = tmp_path / "__pycache__" / "model.cpython-311.pyc"
     other.write_bytes(b"")
-    assert frontdoor.prune_numba_caches(cache) == [old]
+    assert warmup.prune_numba_caches(cache) == [old]
     assert cache.is_dir() and not old.exists() and other.exists()
 
 
@@ -270,11 +270,11 @@ def test_an_interrupted_run_releases_only_the_lock_it_wrote(tmp_path):
     ours = [locks / "1.input.lock", locks / "1.output.lock"]
     for lock in ours:
         lock.write_text("results/tiny/cube.nc\n")
-    assert frontdoor.release_own_locks(tmp_path, started - 1.0) == ours
+    assert runlock.release_own_locks(tmp_path, started - 1.0) == ours
     assert sorted(locks.iterdir()) == [older]
-    assert frontdoor.release_own_locks(tmp_path, started - 60.0) == [older]
+    assert runlock.release_own_locks(tmp_path, started - 60.0) == [older]
     assert not locks.exists()
-    assert frontdoor.release_own_locks(tmp_path, started) == []     # nothing there: nothing to do
+    assert runlock.release_own_locks(tmp_path, started) == []     # nothing there: nothing to do
 
 
 @pytest.mark.slow
@@ -285,13 +285,13 @@ def test_ctrl_c_and_sigterm_then_resume(tmp_path, src):
     (wd / "config" / "tiny.yaml").write_text(yaml.safe_dump(cfg))
     argv = ["--snakefile", str(wd / "Snakefile"), "--directory", str(wd), "--configfile", str(wd / "config" / "tiny.yaml")]
     results = wd / "results" / "tiny"
-    plan = grid.plan_chunks(grid.normalize(cfg, SCHEMA))
+    plan = chunking.plan_chunks(grid.normalize(cfg, SCHEMA))
     n_chunks = len(plan)
     present = lambda: sorted(p.stem for p in (results / "chunks").glob("*.nc"))  # noqa: E731
     # chunk files not marked incomplete (a job stopped after writing its file but before
     # Snakemake recorded it is computed again on resume)
     recorded = lambda: [c for c in present() if (results / "chunks" / f"{c}.nc").resolve()  # noqa: E731
-                        not in frontdoor.incomplete_outputs(wd)]
+                        not in progress.incomplete_outputs(wd)]
 
     # 1. Ctrl-C (SIGINT to the terminal's foreground group) once some, not all, chunks exist
     run = Run(argv, src)
@@ -344,13 +344,13 @@ def test_ctrl_c_and_sigterm_then_resume(tmp_path, src):
     script = ("import json, sys, sweep; from sweep import grid; s = json.loads(sys.argv[1]); "
               "print(json.dumps([(r['t_end'], r['n_steps'], [lv['t'] for lv in r['levels']]) for r in "
               "(sweep.simulate(grid.scene(s, tuple(p))).summary for p in json.loads(sys.argv[2]))]))")
-    one_by_one = subprocess.run([sys.executable, "-c", script, grid.canonical_json(settings),
-                                 grid.canonical_json([list(p) for p in points])],
+    one_by_one = subprocess.run([sys.executable, "-c", script, chunking.canonical_json(settings),
+                                 chunking.canonical_json([list(p) for p in points])],
                                 env=dict(os.environ, PYTHONPATH=str(src)), capture_output=True, text=True,
                                 check=True, timeout=TIMEOUT_S).stdout
     with xr.open_dataset(results / "cube.nc") as cube:
         for point, (t_end, n_steps, t_levels) in zip(points, json.loads(one_by_one)):
-            at = cube.sel(dict(zip(grid.AXES, point)))
+            at = cube.sel(dict(zip(axes.AXES, point)))
             assert float(at.t_end) == t_end and int(at.n_steps) == n_steps, point
             np.testing.assert_array_equal(at.t_level.values, np.array(t_levels, dtype=float))
 
@@ -481,7 +481,7 @@ def test_progress_names_its_phase_and_its_eta_covers_gather_and_figures(tmp_path
     t0 = time.time()
     plan = {"a" * 16: 3, "b" * 16: 1}
     (results / "plan.json").write_text(json.dumps({"name": "tiny", "scenes": 4, "chunks": plan}))
-    p = frontdoor.Progress(results, t0 - 1, jobs=2, t_origin=t0 - 100)
+    p = progress.Progress(results, t0 - 1, jobs=2, t_origin=t0 - 100)
     for line in SNAKEMAKE_LINES.splitlines(True):
         p.feed(line, now=t0)
     assert p.counts == {"simulate_chunk": 4, "gather": 1, "notebook": 4, "all": 1}
@@ -496,8 +496,8 @@ def test_progress_names_its_phase_and_its_eta_covers_gather_and_figures(tmp_path
     log.write_text(f"x INFO chunk {'a' * 16}: 2/3 ...\n")
     line = p.line("tiny", t0 + 20)
     # (before a chunk job has finished: a lower bound, the jobs' start-up and writing left out)
-    eta = 2 * 10 + frontdoor.GATHER_S + 2 * frontdoor.GATHER_S_PER_CHUNK + 4 * frontdoor.NOTEBOOK_S / 2
-    assert f"0.10 scenes/s | ETA at least {frontdoor._clock(eta)}" in line, line
+    eta = 2 * 10 + progress.GATHER_S + 2 * progress.GATHER_S_PER_CHUNK + 4 * progress.NOTEBOOK_S / 2
+    assert f"0.10 scenes/s | ETA at least {progress.clock(eta)}" in line, line
     # every scene done: the gather runs, then the figures; a finished job's time replaces the estimate
     for cid in plan:
         (results / "chunks" / f"{cid}.nc").write_bytes(b"")
@@ -525,7 +525,7 @@ def test_the_eta_is_a_lower_bound_until_a_chunk_job_has_finished(tmp_path):
     t0 = time.time()
     plan = {c * 16: 4 for c in "abcd"}          # 16 scenes in 4 chunks of 4
     (results / "plan.json").write_text(json.dumps({"name": "s", "scenes": 16, "chunks": plan}))
-    p = frontdoor.Progress(results, t0 - 1, jobs=2, t_origin=t0)
+    p = progress.Progress(results, t0 - 1, jobs=2, t_origin=t0)
     for line in ("Job stats:", "job count", "simulate_chunk 4", "gather 1", "notebook 4", "total 9", ""):
         p.feed(line + "\n", now=t0)
     for jid in ("1", "2"):
@@ -536,12 +536,12 @@ def test_the_eta_is_a_lower_bound_until_a_chunk_job_has_finished(tmp_path):
     p.line("s", t0 + 6)
     log.write_text(f"x INFO chunk {'a' * 16}: 4/4 ...\n")
     line = p.line("s", t0 + 9)             # 3 scenes in 3 s: 12 left, 12 s at least
-    after = frontdoor.GATHER_S + 4 * frontdoor.GATHER_S_PER_CHUNK + 4 * frontdoor.NOTEBOOK_S / 2
-    assert f"| ETA at least {frontdoor._clock(12 + after)} |" in line, line
+    after = progress.GATHER_S + 4 * progress.GATHER_S_PER_CHUNK + 4 * progress.NOTEBOOK_S / 2
+    assert f"| ETA at least {progress.clock(12 + after)} |" in line, line
     (results / "chunks" / f"{'a' * 16}.nc").write_bytes(b"")
     p.feed("Finished jobid: 1 (Rule: simulate_chunk)\n", now=t0 + 14)
     line = p.line("s", t0 + 14)
-    assert f"| ETA {frontdoor._clock(12 + after)} |" in line, line
+    assert f"| ETA {progress.clock(12 + after)} |" in line, line
 
 
 def test_adaptive_progress_shows_rounds_and_one_line_per_finished_round(tmp_path):
@@ -551,7 +551,7 @@ def test_adaptive_progress_shows_rounds_and_one_line_per_finished_round(tmp_path
     t0 = time.time()
     info = {"maps": {"map-a": "mu_d 0.3"}, "rounds": 2, "lattice": 81, "budget": 36, "rounds_dir": str(rounds)}
     (results / "plan.json").write_text(json.dumps({"name": "amap", "scenes": 36, "chunks": {}, "adaptive": info}))
-    p = frontdoor.Progress(results, t0 - 1, jobs=2, t_origin=t0 - 5)
+    p = progress.Progress(results, t0 - 1, jobs=2, t_origin=t0 - 5)
     assert p.line("amap", t0).startswith("sweep amap: rounds 0 scenes computed (budget 36), 3 of 3 map rounds to go")
     assert p.round_lines() == []
     (rounds / "map-a" / "round0.json").write_text(json.dumps({"computed": 9, "line": "round 0 line"}))
@@ -571,14 +571,14 @@ def test_compile_shows_a_ticking_elapsed_time_and_the_estimate(monkeypatch, caps
     elapsed time while it compiles, then how long it took (here a stand-in that takes 2.3 s)."""
     from sweep import batch
 
-    monkeypatch.setattr(frontdoor, "numba_cache_cold", lambda cache=None: True)
-    monkeypatch.setattr(frontdoor, "prune_numba_caches", lambda cache=None: [])
+    monkeypatch.setattr(warmup, "numba_cache_cold", lambda cache=None: True)
+    monkeypatch.setattr(warmup, "prune_numba_caches", lambda cache=None: [])
     monkeypatch.setattr(batch, "warm_up", lambda scene, simulate=None: time.sleep(2.3))
-    took = frontdoor.warm_numba(frontdoor.StatusLine(sys.stdout, every_tty=0.0, every_log=0.0, heartbeat=0.9),
-                                label="sweep tiny: compile")
+    took = warmup.warm_numba(progress.StatusLine(sys.stdout, every_tty=0.0, every_log=0.0, heartbeat=0.9),
+                             label="sweep tiny: compile")
     out = capsys.readouterr().out.splitlines()
     assert took >= 2.3              # the time it measured covers the stand-in's
-    assert out[0] == frontdoor.COMPILE_LINE and frontdoor.COMPILE_ESTIMATE in out[0]
+    assert out[0] == warmup.COMPILE_LINE and warmup.COMPILE_ESTIMATE in out[0]
     ticks = [line for line in out if line.startswith("sweep tiny: compile | ")]
     assert ticks[:3] == ["sweep tiny: compile | 0:00", "sweep tiny: compile | 0:01", "sweep tiny: compile | 0:02"]
     assert re.fullmatch(r"numba: kernels compiled and cached in 0:0[23]", out[-1]), out
@@ -702,26 +702,26 @@ def test_a_second_run_of_a_running_config_is_refused_in_one_line(tmp_path, capsy
         results.mkdir(parents=True)
         lock = {"pid": holder.pid, "host": __import__("socket").gethostname(), "started": time.time() - 75,
                 "command": "python3 run.py sweep --configfile config/tiny.yaml",
-                "process_start": frontdoor._process_start(holder.pid)}
-        (results / frontdoor.RUN_LOCK).write_text(json.dumps(lock))
+                "process_start": runlock._process_start(holder.pid)}
+        (results / runlock.RUN_LOCK).write_text(json.dumps(lock))
         for extra in ([], ["--unlock"]):
             assert frontdoor.run(argv + extra) == 2
             err = capsys.readouterr().err
             assert err.count("\n") == 1 and err.startswith("sweep tiny: already running since "), err
             assert re.search(rf"\(1:[12]\d ago; pid {holder.pid} on ", err) and "python3 run.py sweep --configfile config/tiny.yaml" in err
             assert ("--unlock now would let two runs write the same files: not done" in err) == bool(extra)
-            assert sorted(p.name for p in results.iterdir()) == [frontdoor.RUN_LOCK]
+            assert sorted(p.name for p in results.iterdir()) == [runlock.RUN_LOCK]
         assert not (wd / ".snakemake").exists()
     finally:
         holder.kill()
         holder.wait()
     # its process gone: the lock is stale, taken over by this process and released by it
-    assert frontdoor.running_run(results) is None
-    assert frontdoor.take_run_lock(results, "python3 run.py sweep") is None
-    assert json.loads((results / frontdoor.RUN_LOCK).read_text())["pid"] == os.getpid()
-    assert frontdoor.running_run(results)["command"] == "python3 run.py sweep"
-    frontdoor.release_run_lock(results)
-    assert not (results / frontdoor.RUN_LOCK).exists()
+    assert runlock.running_run(results) is None
+    assert runlock.take_run_lock(results, "python3 run.py sweep") is None
+    assert json.loads((results / runlock.RUN_LOCK).read_text())["pid"] == os.getpid()
+    assert runlock.running_run(results)["command"] == "python3 run.py sweep"
+    runlock.release_run_lock(results)
+    assert not (results / runlock.RUN_LOCK).exists()
 
 
 def test_help_is_the_front_doors_own(capsys):

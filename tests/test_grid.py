@@ -11,10 +11,10 @@ import pytest
 import yaml
 from hypothesis import assume, given, settings as hsettings, strategies as st
 
-from sweep import grid
+from sweep import axes, chunking, grid, validation
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema()
+SCHEMA = validation.load_schema()
 
 
 def load(name: str) -> dict:
@@ -39,7 +39,7 @@ def norm(cfg: dict) -> dict:
 def test_shipped_configs_are_valid(name):
     settings = grid.normalize(load(name), SCHEMA)
     cfg = load(name)
-    for a in grid.AXES:
+    for a in axes.AXES:
         assert settings["grid"][a] == sorted(float(v) for v in cfg["grid"][a])
 
 
@@ -47,19 +47,19 @@ def test_defaults_match_snakemake_validate():
     from snakemake.utils import validate
 
     cfg = {"grid": load("tiny.yaml")["grid"]}
-    ours = grid.fill_defaults(cfg, SCHEMA)
+    ours = validation.fill_defaults(cfg, SCHEMA)
     theirs = copy.deepcopy(cfg)
-    validate(theirs, str(grid.SCHEMA_PATH))
+    validate(theirs, str(validation.SCHEMA_PATH))
     assert ours == theirs
     # every default the schema declares is filled in (`name` has none: it defaults to the
-    # config file's stem, see sweep.grid.sweep_name; `refine`, an adaptive map, is there only if given)
+    # config file's stem, see sweep.configfiles.sweep_name; `refine`, an adaptive map, is there only if given)
     assert set(ours) == set(SCHEMA["properties"]) - {"name", "refine"}
 
 
 def _bad(mutate) -> str:
     cfg = load("tiny.yaml")
     mutate(cfg)
-    with pytest.raises(grid.SweepConfigError) as exc:
+    with pytest.raises(validation.SweepConfigError) as exc:
         grid.normalize(cfg, SCHEMA)
     return str(exc.value)
 
@@ -103,7 +103,7 @@ def test_core_checks_reach_the_config_key():
 
     cfg = load("tiny.yaml")
     settings = norm(cfg)
-    sc = core_scene.load_scene(grid.scene(settings, tuple(settings["grid"][a][0] for a in grid.AXES)))
+    sc = core_scene.load_scene(grid.scene(settings, tuple(settings["grid"][a][0] for a in axes.AXES)))
     too_high = core_scene.max_level(sc.params) + 0.1
     assert too_high < math.pi / 2  # inside the schema's range, so only the core can reject it
     cfg["levels"] = [too_high, 0.1]
@@ -139,7 +139,7 @@ def test_scene_of_a_point_is_a_rolling_start_accepted_by_the_core():
     from sweep import scene as core_scene
 
     settings = norm(load("tiny.yaml"))
-    point = tuple(settings["grid"][a][-1] for a in grid.AXES)
+    point = tuple(settings["grid"][a][-1] for a in axes.AXES)
     sc = grid.scene(settings, point)
     assert sc["initial"]["omega"] == [0.0, 0.0, -point[5]]
     assert sc["initial"]["slip"] == [0.0, 0.0]
@@ -152,7 +152,7 @@ def test_scene_of_a_point_is_a_rolling_start_accepted_by_the_core():
 # ------------------------------------------------------------------------------- chunking
 
 def _all_points(settings):
-    return set(itertools.product(*(settings["grid"][a] for a in grid.AXES)))
+    return set(itertools.product(*(settings["grid"][a] for a in axes.AXES)))
 
 
 @pytest.mark.parametrize("chunk_size", [1, 2, 3, 7])
@@ -160,14 +160,14 @@ def test_plan_covers_grid_once_without_mixing_outer_values(chunk_size):
     cfg = small(mu_d=[0.1, 0.3], k3=[1e-4, 2e-4, 3e-4], alpha0=[0.5, 0.7, 0.9, 1.1], omega0=[5.0, 10.0, 15.0])
     cfg["chunk_size"] = chunk_size
     settings = norm(cfg)
-    plan = grid.plan_chunks(settings)
+    plan = chunking.plan_chunks(settings)
     pts = [p for c in plan.values() for p in c.points]
     assert len(pts) == len(set(pts)) == len(_all_points(settings))
     assert set(pts) == _all_points(settings)
     for c in plan.values():
         assert 1 <= len(c.points) <= 2 * chunk_size
         assert len({p[:4] for p in c.points}) == 1
-        assert c.id == grid.sha256_hex(c.spec_json)[:grid.CHUNK_ID_HEX]
+        assert c.id == chunking.sha256_hex(c.spec_json)[:chunking.CHUNK_ID_HEX]
 
 
 def test_chunk_ids_follow_values_not_spelling_or_order():
@@ -178,7 +178,7 @@ def test_chunk_ids_follow_values_not_spelling_or_order():
     c = copy.deepcopy(a)
     c["grid"]["omega0"] = [14.457]
     c["stop"]["t_max"] = 30  # int spelling of 30.0
-    assert grid.plan_chunks(norm(a)).keys() == grid.plan_chunks(norm(b)).keys() == grid.plan_chunks(norm(c)).keys()
+    assert chunking.plan_chunks(norm(a)).keys() == chunking.plan_chunks(norm(b)).keys() == chunking.plan_chunks(norm(c)).keys()
 
 
 @pytest.mark.parametrize("change", [
@@ -190,18 +190,18 @@ def test_chunk_ids_follow_values_not_spelling_or_order():
 ])
 def test_changing_a_setting_changes_every_chunk(change):
     cfg = load("tiny.yaml")
-    old = grid.plan_chunks(norm(cfg))
+    old = chunking.plan_chunks(norm(cfg))
     change(cfg)
-    new = grid.plan_chunks(norm(cfg))
+    new = chunking.plan_chunks(norm(cfg))
     assert len(new) == len(old) and not set(new) & set(old)
 
 
 def test_changing_the_physics_core_changes_every_chunk(monkeypatch):
     cfg = load("tiny.yaml")
-    old = grid.plan_chunks(norm(cfg))
-    assert all(json_core(c) == grid.core_fingerprint() for c in old.values())
-    monkeypatch.setattr(grid, "core_fingerprint", lambda: "0" * 64)
-    new = grid.plan_chunks(norm(cfg))
+    old = chunking.plan_chunks(norm(cfg))
+    assert all(json_core(c) == chunking.core_fingerprint() for c in old.values())
+    monkeypatch.setattr(chunking, "core_fingerprint", lambda: "0" * 64)
+    new = chunking.plan_chunks(norm(cfg))
     assert len(new) == len(old) and not set(new) & set(old)
 
 
@@ -212,41 +212,41 @@ def json_core(chunk) -> str:
 def test_core_fingerprint_covers_physics_not_pipeline(tmp_path, monkeypatch):
     import shutil
 
-    src = Path(grid.__file__).parent
+    src = Path(chunking.__file__).parent
     pkg = tmp_path / "sweep"
     shutil.copytree(src, pkg, ignore=shutil.ignore_patterns("__pycache__"))
-    monkeypatch.setattr(grid, "__file__", str(pkg / "grid.py"))
-    base = grid.core_fingerprint()
-    assert base == grid.core_fingerprint()
-    (pkg / "io.py").write_text((pkg / "io.py").read_text() + "\n# pipeline edit\n")
-    assert grid.core_fingerprint() == base
+    monkeypatch.setattr(chunking, "__file__", str(pkg / "chunking.py"))
+    base = chunking.core_fingerprint()
+    assert base == chunking.core_fingerprint()
+    (pkg / "gather.py").write_text((pkg / "gather.py").read_text() + "\n# pipeline edit\n")
+    assert chunking.core_fingerprint() == base
     (pkg / "plots.py").write_text((pkg / "plots.py").read_text() + "\n# figure edit\n")
-    assert grid.core_fingerprint() == base
+    assert chunking.core_fingerprint() == base
     (pkg / "core" / "contact_rhs.py").write_text((pkg / "core" / "contact_rhs.py").read_text() + "\n# physics edit\n")
-    assert grid.core_fingerprint() != base
+    assert chunking.core_fingerprint() != base
 
 
 def test_output_choice_does_not_change_chunks():
     cfg = load("tiny.yaml")
-    old = grid.plan_chunks(norm(cfg))
+    old = chunking.plan_chunks(norm(cfg))
     cfg["outputs"]["notebooks"] = ["cost"]
-    assert grid.plan_chunks(norm(cfg)).keys() == old.keys()
+    assert chunking.plan_chunks(norm(cfg)).keys() == old.keys()
 
 
 @pytest.mark.parametrize("axis, value", [("mu_d", 0.25), ("mu_d", 0.05), ("k3", 4.5e-4), ("k1", 1e-6), ("k2", 1e-4)])
 def test_new_outer_value_adds_only_new_chunks(axis, value):
     cfg = load("tiny.yaml")
-    old = grid.plan_chunks(norm(cfg))
+    old = chunking.plan_chunks(norm(cfg))
     cfg["grid"][axis] = cfg["grid"][axis] + [value]
-    new = grid.plan_chunks(norm(cfg))
+    new = chunking.plan_chunks(norm(cfg))
     assert set(old) <= set(new)
     added = [new[k] for k in set(new) - set(old)]
-    idx = grid.AXES.index(axis)
+    idx = axes.AXES.index(axis)
     assert added and all(p[idx] == value for c in added for p in c.points)
 
 
 def _natural_cuts(inner, chunk_size):
-    return {i for i, p in enumerate(inner) if grid._inner_hash(p) % chunk_size == 0}
+    return {i for i, p in enumerate(inner) if chunking._inner_hash(p) % chunk_size == 0}
 
 
 @hsettings(max_examples=40, deadline=None)
@@ -260,7 +260,7 @@ def test_inner_insertion_keeps_chunks_away_from_it(n_alpha, n_omega, chunk_size,
     cfg = small(mu_d=[0.3], k3=[3e-4], alpha0=alphas, omega0=omegas)
     cfg["chunk_size"] = chunk_size
     old_s = norm(cfg)
-    old = grid.plan_chunks(old_s)
+    old = chunking.plan_chunks(old_s)
     vals = cfg["grid"][axis]
     lo, hi = vals[0] - 0.05, vals[-1] + 0.05
     new_value = round(lo + where * (hi - lo), 6)
@@ -268,9 +268,9 @@ def test_inner_insertion_keeps_chunks_away_from_it(n_alpha, n_omega, chunk_size,
     assume(new_value not in vals and (axis != "alpha0" or 0 < new_value < 1.5))
     cfg["grid"][axis] = vals + [new_value]
     new_s = norm(cfg)
-    new = grid.plan_chunks(new_s)
-    inner = list(itertools.product(*(new_s["grid"][a] for a in grid.INNER_AXES)))
-    k = grid.INNER_AXES.index(axis)
+    new = chunking.plan_chunks(new_s)
+    inner = list(itertools.product(*(new_s["grid"][a] for a in axes.INNER_AXES)))
+    k = axes.INNER_AXES.index(axis)
     new_pos = [i for i, p in enumerate(inner) if p[k] == new_value]
     first, last = min(new_pos), max(new_pos)
     # the first natural cut at an old point after the last new point: from there on the old
@@ -278,7 +278,7 @@ def test_inner_insertion_keeps_chunks_away_from_it(n_alpha, n_omega, chunk_size,
     later_cuts = [i for i in sorted(_natural_cuts(inner, chunk_size)) if i > last]
     resync = later_cuts[0] if later_cuts else len(inner)
     position = {p: i for i, p in enumerate(inner)}
-    old_end = max(itertools.product(*(old_s["grid"][a] for a in grid.INNER_AXES)))
+    old_end = max(itertools.product(*(old_s["grid"][a] for a in axes.INNER_AXES)))
     for cid, c in old.items():
         pos = [position[p[4:]] for p in c.points]
         closed = c.points[-1][4:] != old_end  # the old final block was ended by the sequence end only
@@ -295,9 +295,9 @@ def test_inner_insertion_reruns_less_than_a_positional_split():
     omegas = [5.0 + 0.5 * i for i in range(64)]
     cfg = small(mu_d=[0.3], k3=[3e-4], alpha0=[1.0], omega0=omegas)
     cfg["chunk_size"] = 4
-    old = grid.plan_chunks(norm(cfg))
+    old = chunking.plan_chunks(norm(cfg))
     cfg["grid"]["omega0"] = omegas + [5.0 + 0.5 * 20 + 0.25]   # inserted after the 21st value
-    new = grid.plan_chunks(norm(cfg))
+    new = chunking.plan_chunks(norm(cfg))
     rerun_points = sum(len(c.points) for k, c in new.items() if k not in old)
     # a positional split into blocks of 4 would rerun every block from the insertion on
     positional = len(omegas) + 1 - (21 // 4) * 4
@@ -307,7 +307,7 @@ def test_inner_insertion_reruns_less_than_a_positional_split():
 def test_split_inner_caps_block_length():
     inner = [(0.5, float(i)) for i in range(200)]
     for size in (1, 3, 10):
-        blocks = grid.split_inner(inner, size)
+        blocks = chunking.split_inner(inner, size)
         assert [p for b in blocks for p in b] == inner
         assert max(map(len, blocks)) <= 2 * size
         cuts = _natural_cuts(inner, size)
@@ -323,7 +323,7 @@ def test_schema_ships_as_package_data_and_loads_from_an_installed_package(tmp_pa
     setuptools' `build_py` fills the build directory that a wheel packs as its purelib (the
     venv's setuptools has no `bdist_wheel` without the `wheel` package, so the test stops one step
     before zipping); that directory, put first on sys.path, is the installed package: the schema
-    is in its file list and `grid.load_schema()` / `grid.SCHEMA_PATH` find it there."""
+    is in its file list and `validation.load_schema()` / `validation.SCHEMA_PATH` find it there."""
     import json
     import shutil
     import subprocess
@@ -341,8 +341,8 @@ def test_schema_ships_as_package_data_and_loads_from_an_installed_package(tmp_pa
     assert res.returncode == 0, res.stderr[-3000:]
     files = sorted(p.relative_to(site).as_posix() for p in site.rglob("*") if p.is_file())
     assert "sweep/schema/config.schema.yaml" in files, files
-    assert "sweep/grid.py" in files and "sweep/core/integrate.py" in files
-    probe = ("import json, sys; sys.path.insert(0, sys.argv[1]); import sweep.grid as g; "
+    assert "sweep/validation.py" in files and "sweep/core/integrate.py" in files
+    probe = ("import json, sys; sys.path.insert(0, sys.argv[1]); import sweep.validation as g; "
              "print(json.dumps({'file': g.__file__, 'path': str(g.SCHEMA_PATH), "
              "'exists': g.SCHEMA_PATH.is_file(), 'schema': g.load_schema()}))")
     res = subprocess.run([sys.executable, "-c", probe, str(site)], capture_output=True, text=True,
@@ -361,7 +361,7 @@ def test_workflow_validates_against_the_packaged_schema():
     smk = (ROOT / "workflow" / "rules" / "common.smk").read_text()
     assert "sweep_grid.load_sweep(" in smk
     assert "grid.load_sweep(" in (ROOT / "src" / "sweep" / "frontdoor.py").read_text()
-    assert grid.SCHEMA_PATH.is_file() and grid.SCHEMA_PATH.parent.parent == Path(grid.__file__).parent
+    assert validation.SCHEMA_PATH.is_file() and validation.SCHEMA_PATH.parent.parent == Path(grid.__file__).parent
 
 
 def test_the_config_table_in_docs_states_the_ranges_that_are_enforced():

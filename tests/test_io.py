@@ -17,10 +17,11 @@ import pytest
 import xarray as xr
 import yaml
 
-from sweep import batch, grid, io, outcomes
+from sweep import (atomic, axes, batch, cf, chunkfiles, chunking, figures, gather, grid, notebooks, numerical_error, outcomes,
+                   outputs, validation, verify)
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema()
+SCHEMA = validation.load_schema()
 
 
 def settings_for(**grid_axes) -> dict:
@@ -52,9 +53,9 @@ def fake_summary(point, levels) -> dict:
 
 def write_all(settings, d: Path, summarise=fake_summary) -> list[Path]:
     paths = []
-    for cid, c in grid.plan_chunks(settings).items():
+    for cid, c in chunking.plan_chunks(settings).items():
         sums = [summarise(p, settings["levels"]) for p in c.points]
-        paths.append(io.write_chunk(c, sums, d / f"{cid}.nc"))
+        paths.append(chunkfiles.write_chunk(c, sums, d / f"{cid}.nc"))
     return paths
 
 
@@ -66,19 +67,19 @@ def tiny():
 # ------------------------------------------------------------------------------- chunk files
 
 def test_chunk_round_trip(tmp_path, tiny):
-    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    chunk = next(iter(chunking.plan_chunks(tiny).values()))
     sums = [fake_summary(p, tiny["levels"]) for p in chunk.points]
-    sums[0] = io.error_summary(len(tiny["levels"]))  # a scene that raised
-    path = io.write_chunk(chunk, sums, tmp_path / f"{chunk.id}.nc")
-    assert io.verify_chunk(path, chunk) is None
+    sums[0] = outputs.empty_summary(len(tiny["levels"]))  # a scene that raised
+    path = chunkfiles.write_chunk(chunk, sums, tmp_path / f"{chunk.id}.nc")
+    assert verify.verify_chunk(path, chunk) is None
     with xr.open_dataset(path) as ds:
         assert ds.sizes == {"point": len(chunk.points), "level": len(tiny["levels"])}
-        for i, a in enumerate(grid.AXES):
+        for i, a in enumerate(axes.AXES):
             np.testing.assert_array_equal(ds[a].values, [p[i] for p in chunk.points])
-        for var in io.VARIABLES:
+        for var in outputs.VARIABLES:
             got = ds[var.name].values
             for j, s in enumerate(sums):
-                want = io.value_of(var, s)
+                want = chunkfiles.value_of(var, s)
                 want = np.array(np.nan if want is None else want, dtype=float)
                 np.testing.assert_array_equal(np.asarray(got[j], dtype=float), want, err_msg=var.name)
         assert ds.outcome.values[0] == outcomes.NUMERICAL_ERROR
@@ -86,15 +87,15 @@ def test_chunk_round_trip(tmp_path, tiny):
 
 
 def test_summary_levels_must_match_the_level_coordinate(tiny):
-    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    chunk = next(iter(chunking.plan_chunks(tiny).values()))
     sums = [fake_summary(p, list(reversed(tiny["levels"]))) for p in chunk.points]
     with pytest.raises(ValueError, match="do not match"):
-        io.chunk_dataset(chunk, sums)
+        chunkfiles.chunk_dataset(chunk, sums)
 
 
 def test_every_variable_and_coordinate_has_cf_attributes(tmp_path, tiny):
     paths = write_all(tiny, tmp_path)
-    io.gather(paths, tiny, tmp_path / "cube.nc")
+    gather.gather(paths, tiny, tmp_path / "cube.nc")
     for path in [paths[0], tmp_path / "cube.nc"]:
         with xr.open_dataset(path) as ds:
             assert ds.attrs["Conventions"] == "CF-1.10"
@@ -109,7 +110,7 @@ def _fail_midway(monkeypatch):
     def broken(path, *args, **kwargs):
         Path(path).write_bytes(b"\x89HDF\r\n partial")
         raise OSError("disk full")
-    monkeypatch.setattr(io, "_write_chunk_nc", broken)
+    monkeypatch.setattr(chunkfiles, "_write_chunk_nc", broken)
 
 
 def _raw(path):
@@ -130,14 +131,14 @@ def _raw(path):
 def test_chunk_file_is_what_xarray_writes(tmp_path, tiny):
     """write_chunk writes with netCDF4 alone (no xarray import in a chunk job): the file must
     hold what xarray's writer makes of chunk_dataset with the chunk fills."""
-    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    chunk = next(iter(chunking.plan_chunks(tiny).values()))
     sums = [fake_summary(p, tiny["levels"]) for p in chunk.points]
-    sums[0] = io.error_summary(len(tiny["levels"]))
-    new = io.write_chunk(chunk, sums, tmp_path / "new.nc")
-    ds = io.chunk_dataset(chunk, sums)
-    enc = {name: {"_FillValue": io._fill_of(name, np.asarray(ds[name].values))} for name in ds.variables}
-    ref = io.write_atomic(ds, tmp_path / "ref.nc", enc,
-                          finish=lambda tmp: _rechecksum(tmp))
+    sums[0] = outputs.empty_summary(len(tiny["levels"]))
+    new = chunkfiles.write_chunk(chunk, sums, tmp_path / "new.nc")
+    ds = chunkfiles.chunk_dataset(chunk, sums)
+    enc = {name: {"_FillValue": chunkfiles._fill_of(name, np.asarray(ds[name].values))} for name in ds.variables}
+    ref = atomic.write_atomic(ds, tmp_path / "ref.nc", enc,
+                              finish=lambda tmp: _rechecksum(tmp))
     d_new, g_new, v_new = _raw(new)
     d_ref, g_ref, v_ref = _raw(ref)
     assert d_new == d_ref
@@ -151,23 +152,23 @@ def test_chunk_file_is_what_xarray_writes(tmp_path, tiny):
         np.testing.assert_array_equal(vals, v_ref[name][3], err_msg=name)
     with xr.open_dataset(new) as a, xr.open_dataset(ref) as b:
         xr.testing.assert_identical(a, b)
-    assert io.verify_chunk(new, chunk) is None
+    assert verify.verify_chunk(new, chunk) is None
 
 
 def test_atomic_write_leaves_no_partial_file(tmp_path, tiny, monkeypatch):
-    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    chunk = next(iter(chunking.plan_chunks(tiny).values()))
     sums = [fake_summary(p, tiny["levels"]) for p in chunk.points]
     target = tmp_path / f"{chunk.id}.nc"
-    io.write_chunk(chunk, sums, target)
+    chunkfiles.write_chunk(chunk, sums, target)
     before = target.read_bytes()
     _fail_midway(monkeypatch)
     with pytest.raises(OSError, match="disk full"):
-        io.write_chunk(chunk, sums, target)
+        chunkfiles.write_chunk(chunk, sums, target)
     assert target.read_bytes() == before  # the old complete file is untouched
     assert sorted(os.listdir(tmp_path)) == [target.name]  # and no temporary file is left
     fresh = tmp_path / "fresh.nc"
     with pytest.raises(OSError):
-        io.write_chunk(chunk, sums, fresh)
+        chunkfiles.write_chunk(chunk, sums, fresh)
     assert not fresh.exists()
 
 
@@ -193,24 +194,24 @@ def _damage(path: Path, how: str) -> None:
     pytest.param("truncate", "unreadable", marks=pytest.mark.slow), pytest.param("empty", "empty", marks=pytest.mark.slow),
     ("values", "checksum mismatch"), pytest.param("no_checksum", "sweep_checksum", marks=pytest.mark.slow)])
 def test_damaged_chunk_is_detected_and_quarantined(tmp_path, tiny, how, reason):
-    plan = grid.plan_chunks(tiny)
+    plan = chunking.plan_chunks(tiny)
     paths = write_all(tiny, tmp_path)
     victim = paths[1]
     _damage(victim, how)
-    assert reason in io.verify_chunk(victim, plan[victim.stem])
-    bad = io.check_existing_chunks(tmp_path, plan, act=False)
+    assert reason in verify.verify_chunk(victim, plan[victim.stem])
+    bad = verify.check_existing_chunks(tmp_path, plan, act=False)
     assert list(bad) == [victim.stem] and victim.exists()  # a dry run only reports
-    bad = io.check_existing_chunks(tmp_path, plan, act=True)
+    bad = verify.check_existing_chunks(tmp_path, plan, act=True)
     assert list(bad) == [victim.stem] and not victim.exists()
     quarantined = list((tmp_path / "quarantine").glob(victim.name + ".*"))
     assert any(p.suffix != ".reason" for p in quarantined)
 
 
 def test_chunk_of_another_plan_is_rejected(tmp_path, tiny):
-    plan = grid.plan_chunks(tiny)
+    plan = chunking.plan_chunks(tiny)
     a, b = list(plan.values())[:2]
-    path = io.write_chunk(a, [fake_summary(p, tiny["levels"]) for p in a.points], tmp_path / f"{b.id}.nc")
-    assert "chunk id" in io.verify_chunk(path, b)
+    path = chunkfiles.write_chunk(a, [fake_summary(p, tiny["levels"]) for p in a.points], tmp_path / f"{b.id}.nc")
+    assert "chunk id" in verify.verify_chunk(path, b)
 
 
 @pytest.mark.slow
@@ -218,7 +219,7 @@ def test_gather_refuses_a_damaged_chunk(tmp_path, tiny):
     paths = write_all(tiny, tmp_path)
     _damage(paths[0], "values")
     with pytest.raises(RuntimeError, match="damaged"):
-        io.gather(paths, tiny, tmp_path / "cube.nc")
+        gather.gather(paths, tiny, tmp_path / "cube.nc")
     assert not (tmp_path / "cube.nc").exists() and not paths[0].exists()
 
 
@@ -229,18 +230,18 @@ def test_cube_places_every_value_at_its_grid_point(tmp_path, tiny, shuffle):
     paths = write_all(tiny, tmp_path)
     if shuffle:  # the gather must not rely on the order of its inputs
         random.Random(1).shuffle(paths)
-    out = io.gather(paths, tiny, tmp_path / "cube.nc", repo_path=ROOT, history="test")
+    out = gather.gather(paths, tiny, tmp_path / "cube.nc", repo_path=ROOT, history="test")
     with xr.open_dataset(out) as cube:
-        assert tuple(cube.outcome.dims) == grid.AXES
-        assert tuple(cube.t_level.dims) == grid.AXES + ("level",)
-        for a in grid.AXES:
+        assert tuple(cube.outcome.dims) == axes.AXES
+        assert tuple(cube.t_level.dims) == axes.AXES + ("level",)
+        for a in axes.AXES:
             np.testing.assert_array_equal(cube[a].values, tiny["grid"][a])
         np.testing.assert_array_equal(cube.level.values, tiny["levels"])
-        for point in grid.plan_chunks(tiny)[paths[0].stem].points + grid.plan_chunks(tiny)[paths[-1].stem].points:
+        for point in chunking.plan_chunks(tiny)[paths[0].stem].points + chunking.plan_chunks(tiny)[paths[-1].stem].points:
             s = fake_summary(point, tiny["levels"])
-            at = cube.sel(dict(zip(grid.AXES, point)))
-            for var in io.VARIABLES:
-                want = io.value_of(var, s)
+            at = cube.sel(dict(zip(axes.AXES, point)))
+            for var in outputs.VARIABLES:
+                want = chunkfiles.value_of(var, s)
                 np.testing.assert_array_equal(np.asarray(at[var.name].values, dtype=float),
                                               np.asarray(want, dtype=float), err_msg=var.name)
         cfg = cube.attrs["config_json"]
@@ -250,32 +251,32 @@ def test_cube_places_every_value_at_its_grid_point(tmp_path, tiny, shuffle):
         for key in ("title", "history", "source", "sweep_version", "git_commit", "created"):
             assert cube.attrs[key]
         enc = cube.t_level.encoding
-        assert enc["zlib"] and enc["chunksizes"] == io.cube_chunksizes(
-            tuple(len(tiny["grid"][a]) for a in grid.AXES) + (len(tiny["levels"]),))
+        assert enc["zlib"] and enc["chunksizes"] == cf.cube_chunksizes(
+            tuple(len(tiny["grid"][a]) for a in axes.AXES) + (len(tiny["levels"]),))
 
 
 @pytest.mark.slow
 def test_gather_requires_every_grid_point(tmp_path, tiny):
     paths = write_all(tiny, tmp_path)
     with pytest.raises(RuntimeError, match="grid has"):
-        io.gather(paths[:-1], tiny, tmp_path / "cube.nc")
+        gather.gather(paths[:-1], tiny, tmp_path / "cube.nc")
 
 
 @pytest.mark.parametrize("shape", [(1,), (3, 1, 1, 5, 7, 2, 4), (200, 1, 1, 300, 20, 20, 4), (2 ** 16,)])
 def test_cube_chunksizes(shape):
-    c = io.cube_chunksizes(shape)
+    c = cf.cube_chunksizes(shape)
     assert len(c) == len(shape)
     assert all(1 <= ci <= max(1, n) for ci, n in zip(c, shape))
-    assert math.prod(c) <= max(io.CUBE_CHUNK_ELEMENTS, 1)
-    if math.prod(shape) <= io.CUBE_CHUNK_ELEMENTS:
+    assert math.prod(c) <= max(cf.CUBE_CHUNK_ELEMENTS, 1)
+    if math.prod(shape) <= cf.CUBE_CHUNK_ELEMENTS:
         assert c == shape  # small cubes are one chunk
     else:  # balanced: no dimension was halved while a longer one stayed whole
         assert max(c) <= 2 * min(ci for ci, n in zip(c, shape) if ci < n)
 
 
 def test_git_commit_outside_a_repository(tmp_path):
-    assert io.git_commit(tmp_path) == "unknown"
-    assert len(io.git_commit(ROOT).split("-")[0]) == 40
+    assert cf.git_commit(tmp_path) == "unknown"
+    assert len(cf.git_commit(ROOT).split("-")[0]) == 40
 
 
 # ------------------------------------------------------------------------------- batch
@@ -301,7 +302,7 @@ class FakeCore:
 
 def test_run_chunk_records_exceptions_and_completes(tmp_path, tiny, monkeypatch, caplog):
     monkeypatch.setattr(batch, "_warmed_up", False)
-    chunk = max(grid.plan_chunks(tiny).values(), key=lambda c: len({p[4] for p in c.points}))
+    chunk = max(chunking.plan_chunks(tiny).values(), key=lambda c: len({p[4] for p in c.points}))
     bad = chunk.points[0][4]
     core = FakeCore(bad)
     caplog.set_level("INFO", logger="sweep.batch")
@@ -317,14 +318,14 @@ def test_run_chunk_records_exceptions_and_completes(tmp_path, tiny, monkeypatch,
     assert len(warm) == 1 and len(core.calls) == len(chunk.points) + 1
     assert "scenes/s" in caplog.text and "numerical_error" in caplog.text
     # a second chunk in the same process does not warm up again
-    other = next(c for c in grid.plan_chunks(tiny).values() if c.id != chunk.id)
+    other = next(c for c in chunking.plan_chunks(tiny).values() if c.id != chunk.id)
     core.calls.clear()
     batch.run_chunk(other, tmp_path / f"{other.id}.nc", simulate=core)
     assert len(core.calls) == len(other.points)
 
 
 def test_chunk_job_checks_its_id(tmp_path, tiny):
-    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    chunk = next(iter(chunking.plan_chunks(tiny).values()))
     assert batch.chunk_from_spec(chunk.spec_json) == chunk
     with pytest.raises(ValueError, match="hashes to"):
         batch.run_chunk_job(chunk.spec_json, "0" * 16, tmp_path / "x.nc")
@@ -332,36 +333,36 @@ def test_chunk_job_checks_its_id(tmp_path, tiny):
 
 @pytest.mark.slow
 def test_verification_cache_skips_unchanged_files_only(tmp_path, tiny, monkeypatch):
-    plan = grid.plan_chunks(tiny)
+    plan = chunking.plan_chunks(tiny)
     paths = write_all(tiny, tmp_path)
-    assert io.check_existing_chunks(tmp_path, plan) == {}
+    assert verify.check_existing_chunks(tmp_path, plan) == {}
     calls = []
-    real = io.verify_chunk
-    monkeypatch.setattr(io, "verify_chunk", lambda p, c=None: calls.append(Path(p).stem) or real(p, c))
-    assert io.check_existing_chunks(tmp_path, plan) == {}
+    real = verify.verify_chunk
+    monkeypatch.setattr(verify, "verify_chunk", lambda p, c=None: calls.append(Path(p).stem) or real(p, c))
+    assert verify.check_existing_chunks(tmp_path, plan) == {}
     assert calls == []  # every file verified before and unchanged since
     _damage(paths[2], "truncate")  # changes size and mtime
-    assert list(io.check_existing_chunks(tmp_path, plan)) == [paths[2].stem]
+    assert list(verify.check_existing_chunks(tmp_path, plan)) == [paths[2].stem]
     assert calls == [paths[2].stem]
 
 
 # ------------------------------------------------------------------------------- error bars
 
 def test_every_time_and_frequency_variable_gets_an_error_variable():
-    marked = {v.name for v in io.VARIABLES if v.numerical_error}
+    marked = {v.name for v in outputs.VARIABLES if v.numerical_error}
     assert {"t_halt", "t_level", "precession_hz", "ringing_hz", "normal_force_hz",
             "n_transitions", "n_stick", "n_impacts", "slip_fraction"} <= marked
-    assert {v.name for v in io.VARIABLES if v.whole_run} == {"n_transitions", "n_stick", "n_impacts", "slip_fraction"}
-    names = {v.name: v for v in io.ERROR_VARIABLES}
-    for v in io.VARIABLES:
+    assert {v.name for v in outputs.VARIABLES if v.whole_run} == {"n_transitions", "n_stick", "n_impacts", "slip_fraction"}
+    names = {v.name: v for v in numerical_error.ERROR_VARIABLES}
+    for v in outputs.VARIABLES:
         e = names.get(v.name + "_numerical_error")
         assert (e is not None) == v.numerical_error, v.name
         if e is not None:
             assert e.units == v.units and e.per_level == v.per_level and e.kind == "float"
             assert "absolute difference to a rerun at rtol/100" in e.long_name
     assert names["reference_outcome"].kind == "outcome"
-    assert io.variables(False) == io.VARIABLES
-    assert io.variables(True) == io.VARIABLES + io.ERROR_VARIABLES
+    assert cf.variables(False) == outputs.VARIABLES
+    assert cf.variables(True) == outputs.VARIABLES + numerical_error.ERROR_VARIABLES
 
 
 def _perturbed(s: dict, dt: float) -> dict:
@@ -380,7 +381,7 @@ def test_numerical_errors_are_absolute_differences_with_nan_and_inf_rules(tiny):
     levels = tiny["levels"]
     main = fake_summary(point, levels)
     ref = _perturbed(main, 0.25)
-    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref)
+    s = numerical_error.add_numerical_errors(json.loads(json.dumps(main)), ref)
     assert s["reference_outcome"] == ref["outcome_code"]
     assert s["t_halt_numerical_error"] == pytest.approx(0.25, abs=1e-12)
     for j, lv in enumerate(s["levels"]):
@@ -399,13 +400,13 @@ def test_numerical_errors_are_absolute_differences_with_nan_and_inf_rules(tiny):
     ref_c = json.loads(json.dumps(ref))
     ref_c["n_transitions"] += 2
     ref_c["slip_fraction"] += 0.01
-    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref_c)
+    s = numerical_error.add_numerical_errors(json.loads(json.dumps(main)), ref_c)
     assert s["n_transitions_numerical_error"] == 2.0
     assert s["slip_fraction_numerical_error"] == pytest.approx(0.01, abs=1e-12)
     # ... but a rerun cut by a numerical failure has partial totals: no error bar (NaN), while a
     # level it reached before the cut keeps its own
     ref_c["outcome"], ref_c["outcome_code"] = "step_limit", outcomes.STEP_LIMIT
-    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref_c)
+    s = numerical_error.add_numerical_errors(json.loads(json.dumps(main)), ref_c)
     for k in ("n_transitions", "n_stick", "n_impacts", "slip_fraction"):
         assert math.isnan(s[k + "_numerical_error"]), k
     assert s["levels"][0]["t_level_numerical_error"] == pytest.approx(0.25, abs=1e-12)
@@ -413,16 +414,16 @@ def test_numerical_errors_are_absolute_differences_with_nan_and_inf_rules(tiny):
     ref2 = _perturbed(main, 0.25)
     ref2["levels"][-1]["t"] = math.nan
     ref2["outcome"], ref2["outcome_code"] = "t_max", outcomes.T_MAX
-    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref2)
+    s = numerical_error.add_numerical_errors(json.loads(json.dumps(main)), ref2)
     assert math.isinf(s["levels"][-1]["t_level_numerical_error"])
     assert s["levels"][0]["t_level_numerical_error"] == pytest.approx(0.25, abs=1e-12)
     # ... the same after a numerical failure of the rerun (step limit): unknown (NaN), not inf
     ref2["outcome"], ref2["outcome_code"] = "step_limit", outcomes.STEP_LIMIT
-    s = io.add_numerical_errors(json.loads(json.dumps(main)), ref2)
+    s = numerical_error.add_numerical_errors(json.loads(json.dumps(main)), ref2)
     assert math.isnan(s["levels"][-1]["t_level_numerical_error"])
     assert s["reference_outcome"] == outcomes.STEP_LIMIT
     # a rerun that raised: NaN errors, flagged as numerical_error, main result kept
-    s = io.add_numerical_errors(json.loads(json.dumps(main)), None)
+    s = numerical_error.add_numerical_errors(json.loads(json.dumps(main)), None)
     assert s["reference_outcome"] == outcomes.NUMERICAL_ERROR and s["t_halt"] == main["t_halt"]
     assert math.isnan(s["t_halt_numerical_error"])
     assert all(math.isnan(lv[k]) for lv in s["levels"] for k in lv if k.endswith("_numerical_error"))
@@ -459,19 +460,19 @@ def test_error_estimate_chunk_and_cube(tmp_path, tiny, monkeypatch):
     cfg["outputs"]["error_estimate"] = True
     settings = grid.normalize(cfg, SCHEMA, check_scenes=False)
     rtol = settings["solver"]["rtol"]
-    plan = grid.plan_chunks(settings)
+    plan = chunking.plan_chunks(settings)
     core = TolCore(bad_alpha0=1.2)
     paths = []
     for cid, chunk in plan.items():
         batch.run_chunk(chunk, tmp_path / f"{cid}.nc", simulate=core)
         paths.append(tmp_path / f"{cid}.nc")
-        assert io.verify_chunk(paths[-1], chunk) is None
+        assert verify.verify_chunk(paths[-1], chunk) is None
     assert sorted(set(core.rtols)) == [rtol / 100, rtol]   # every scene once at each tolerance
     assert len(core.rtols) == 2 * sum(len(c.points) for c in plan.values())
-    cube_path = io.gather(paths, settings, tmp_path / "cube.nc")
+    cube_path = gather.gather(paths, settings, tmp_path / "cube.nc")
     dt = 1e6 * (rtol - rtol / 100)
     with xr.open_dataset(cube_path) as cube:
-        for v in io.ERROR_VARIABLES:
+        for v in numerical_error.ERROR_VARIABLES:
             assert cube[v.name].attrs["long_name"] == v.long_name and cube[v.name].attrs["units"]
         assert cube.t_level_numerical_error.attrs["units"] == "s"
         assert cube.precession_hz_numerical_error.attrs["units"] == "Hz"
@@ -490,10 +491,10 @@ def test_error_estimate_chunk_and_cube(tmp_path, tiny, monkeypatch):
     cfg["outputs"]["error_estimate"] = False
     off = grid.normalize(cfg, SCHEMA, check_scenes=False)
     del cfg["outputs"]["error_estimate"]
-    assert grid.plan_chunks(off).keys() == grid.plan_chunks(grid.normalize(cfg, SCHEMA, check_scenes=False)).keys()
-    assert not set(grid.plan_chunks(off)) & set(plan)
+    assert chunking.plan_chunks(off).keys() == chunking.plan_chunks(grid.normalize(cfg, SCHEMA, check_scenes=False)).keys()
+    assert not set(chunking.plan_chunks(off)) & set(plan)
     other = write_all(off, tmp_path / "off")
-    with xr.open_dataset(io.gather(other, off, tmp_path / "off.nc")) as cube:
+    with xr.open_dataset(gather.gather(other, off, tmp_path / "off.nc")) as cube:
         assert not any(n.endswith("_numerical_error") for n in cube.variables)
         assert "reference_outcome" not in cube.variables and "error_estimate_solver" not in cube.attrs
 
@@ -502,22 +503,22 @@ def test_chunk_without_its_error_variables_is_damaged(tmp_path, tiny):
     cfg = yaml.safe_load((ROOT / "config" / "tiny.yaml").read_text())
     cfg["outputs"]["error_estimate"] = True
     settings = grid.normalize(cfg, SCHEMA, check_scenes=False)
-    chunk = next(iter(grid.plan_chunks(settings).values()))
-    sums = [io.add_numerical_errors(fake_summary(p, settings["levels"]), fake_summary(p, settings["levels"]))
+    chunk = next(iter(chunking.plan_chunks(settings).values()))
+    sums = [numerical_error.add_numerical_errors(fake_summary(p, settings["levels"]), fake_summary(p, settings["levels"]))
             for p in chunk.points]
-    path = io.write_chunk(chunk, sums, tmp_path / f"{chunk.id}.nc")
-    assert io.verify_chunk(path, chunk) is None
+    path = chunkfiles.write_chunk(chunk, sums, tmp_path / f"{chunk.id}.nc")
+    assert verify.verify_chunk(path, chunk) is None
     with xr.open_dataset(path) as ds:
         assert (ds.t_halt_numerical_error.values == 0).all()
         stripped = ds.drop_vars(["t_level_numerical_error"]).load()
-    io.write_atomic(stripped, path, finish=lambda tmp: _rechecksum(tmp))
-    assert "missing variables ['t_level_numerical_error']" in io.verify_chunk(path, chunk)
+    atomic.write_atomic(stripped, path, finish=lambda tmp: _rechecksum(tmp))
+    assert "missing variables ['t_level_numerical_error']" in verify.verify_chunk(path, chunk)
 
 
 def _rechecksum(tmp: Path) -> None:
     import netCDF4
 
-    digest = io.file_checksum(tmp)
+    digest = chunkfiles.file_checksum(tmp)
     with netCDF4.Dataset(tmp, "a") as nc:
         nc.setncattr("sweep_checksum", digest)
 
@@ -532,7 +533,7 @@ def test_notebooks_cope_with_length_one_axes_and_nans(tmp_path):
 
     def half_failed(point, levels):
         if point[0] == 0.3:
-            return io.error_summary(len(levels))
+            return outputs.empty_summary(len(levels))
         s = fake_summary(point, levels)
         s["ramp_exponent"] = math.nan
         for lv in s["levels"]:
@@ -540,16 +541,16 @@ def test_notebooks_cope_with_length_one_axes_and_nans(tmp_path):
         return s
 
     paths = write_all(settings, tmp_path / "chunks", half_failed)
-    cube = io.gather(paths, settings, tmp_path / "cube.nc")
+    cube = gather.gather(paths, settings, tmp_path / "cube.nc")
     for nb in grid.NOTEBOOKS:
-        fig = io.run_notebook(ROOT / "workflow" / "notebooks" / f"{nb}.ipynb", cube,
-                              tmp_path / "figures" / f"{nb}.png", tmp_path / "executed" / f"{nb}.ipynb")
+        fig = notebooks.run_notebook(ROOT / "workflow" / "notebooks" / f"{nb}.ipynb", cube,
+                                     tmp_path / "figures" / f"{nb}.png", tmp_path / "executed" / f"{nb}.ipynb")
         assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 
 def test_a_notebook_kernel_talks_over_unix_sockets_in_a_folder_of_its_own(tmp_path):
-    """io.run_notebook starts the kernel with the IPC transport: no TCP port is picked and bound
+    """notebooks.run_notebook starts the kernel with the IPC transport: no TCP port is picked and bound
     later, so two figure jobs starting at once (snakemake -j2) cannot collide on one ("Address
     already in use": the kernel died and the sweep failed). The kernel reads its own connection
     file; the socket folder is gone afterwards, and its path fits a Unix socket's limit."""
@@ -563,12 +564,12 @@ def test_a_notebook_kernel_talks_over_unix_sockets_in_a_folder_of_its_own(tmp_pa
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(cell)])
     path = tmp_path / "probe.ipynb"
     nbformat.write(nb, str(path))
-    fig = io.run_notebook(path, tmp_path / "cube.nc", tmp_path / "probe.png", tmp_path / "probe-run.ipynb")
+    fig = notebooks.run_notebook(path, tmp_path / "cube.nc", tmp_path / "probe.png", tmp_path / "probe-run.ipynb")
     assert fig.read_bytes() == b"\x89PNG"
     info = json.loads(seen.read_text())
     folder = Path(info["ip"]).parent
     assert info["transport"] == "ipc", info
-    assert folder.name.startswith("sweep-kernel-") and len(str(folder)) <= io.UNIX_SOCKET_DIR_MAX, info
+    assert folder.name.startswith("sweep-kernel-") and len(str(folder)) <= notebooks.UNIX_SOCKET_DIR_MAX, info
     assert not folder.exists()
 
 
@@ -579,14 +580,14 @@ def test_figure_helpers_name_the_sweep_fix_fraction_scales_and_keep_numbers_legi
     import matplotlib.pyplot as plt
 
     settings = settings_for(mu_d=[0.2, 0.3], k3=[3e-4], alpha0=[0.9, 1.1], omega0=[14.0])
-    cube = io.gather(write_all(settings, tmp_path / "chunks"), settings, tmp_path / "cube.nc", name="tiny")
+    cube = gather.gather(write_all(settings, tmp_path / "chunks"), settings, tmp_path / "cube.nc", name="tiny")
     with xr.open_dataset(cube) as ds:
         assert ds.attrs["sweep_name"] == "tiny" and "'tiny'" in ds.attrs["title"]
-        assert io.figure_caption(ds, "") == "sweep 'tiny': 4 scenes (mu_d 2 × k1 1 × k2 1 × k3 1 × alpha0 2 × omega0 1)"
+        assert figures.figure_caption(ds, "") == "sweep 'tiny': 4 scenes (mu_d 2 × k1 1 × k2 1 × k3 1 × alpha0 2 × omega0 1)"
         frac = xr.DataArray([[0.96, 0.98], [1.0, 0.99]], dims=("alpha0", "mu_d"),
                             coords={"alpha0": [0.9, 1.1], "mu_d": [0.2, 0.3]})
         fig, ax = plt.subplots()
-        mesh = io.plot_map(ax, frac, "fraction halted", vmin=0.0, vmax=1.0)
+        mesh = figures.plot_map(ax, frac, "fraction halted", vmin=0.0, vmax=1.0)
         assert (mesh.norm.vmin, mesh.norm.vmax) == (0.0, 1.0)       # 0.96 is not drawn as the bottom
         assert ax.get_xlabel() == "dynamic friction coefficient μ_d" and ax.get_ylabel() == "initial tilt α0 (rad)"
         # near the top of viridis (yellow) the numbers are black, near the bottom white
@@ -594,11 +595,11 @@ def test_figure_helpers_name_the_sweep_fix_fraction_scales_and_keep_numbers_legi
         assert colours["0.96"] == colours["1"] == "k"
         plt.close(fig)
         fig, ax = plt.subplots()
-        io.plot_map(ax, frac * 0 + [[0.0, 0.05], [0.9, 1.0]], "x", vmin=0.0, vmax=1.0)
+        figures.plot_map(ax, frac * 0 + [[0.0, 0.05], [0.9, 1.0]], "x", vmin=0.0, vmax=1.0)
         assert {t.get_text(): t.get_color() for t in ax.texts}["0"] == "w"
         plt.close(fig)
     for nb in grid.NOTEBOOKS:   # every sweep figure has the caption on its top line
-        assert "sio.figure_caption(ds" in (ROOT / "workflow" / "notebooks" / f"{nb}.ipynb").read_text()
+        assert "figures.figure_caption(ds" in (ROOT / "workflow" / "notebooks" / f"{nb}.ipynb").read_text()
 
 
 def test_the_output_registry_generates_the_summary_its_template_the_cube_and_the_chunk_format():
@@ -622,7 +623,7 @@ def test_the_output_registry_generates_the_summary_its_template_the_cube_and_the
         else:
             assert o.key in got and o.key in empty, o.key
     assert set(got) == set(empty) and set(got["levels"][0]) == set(empty["levels"][0])
-    cube = {v.name: v for v in io.VARIABLES}
+    cube = {v.name: v for v in outputs.VARIABLES}
     for o in outputs.OUTPUTS:
         if o.cube_name is not None:
             v = cube[o.cube_name]
@@ -656,56 +657,56 @@ def _other_levels(settings: dict) -> dict:
 
 
 def test_a_chunk_file_with_the_right_id_but_another_spec_is_rejected(tmp_path, tiny):
-    chunk = next(iter(grid.plan_chunks(tiny).values()))
-    path = io.write_chunk(chunk, [fake_summary(p, tiny["levels"]) for p in chunk.points], tmp_path / f"{chunk.id}.nc")
+    chunk = next(iter(chunking.plan_chunks(tiny).values()))
+    path = chunkfiles.write_chunk(chunk, [fake_summary(p, tiny["levels"]) for p in chunk.points], tmp_path / f"{chunk.id}.nc")
     import netCDF4
     with netCDF4.Dataset(path, "a") as nc:
         nc.setncattr("sweep_chunk_spec", chunk.spec_json.replace('"points"', '"points" ', 1))
-    assert io.verify_chunk(path, chunk) == "chunk spec differs from the expected one"
+    assert verify.verify_chunk(path, chunk) == "chunk spec differs from the expected one"
     # without the plan's spec text: the spec attribute must hash to the id
-    assert io.read_chunk_file(path, expect_id=chunk.id)[0] == "chunk spec differs from the expected one"
+    assert verify.read_chunk_file(path, expect_id=chunk.id)[0] == "chunk spec differs from the expected one"
     _retag(path, chunk)
-    assert io.verify_chunk(path, chunk) is None and io.read_chunk_file(path, expect_id=chunk.id)[0] is None
+    assert verify.verify_chunk(path, chunk) is None and verify.read_chunk_file(path, expect_id=chunk.id)[0] is None
 
 
 def test_a_chunk_file_with_too_few_points_is_rejected(tmp_path, tiny):
-    chunk = max(grid.plan_chunks(tiny).values(), key=lambda c: len(c.points))
+    chunk = max(chunking.plan_chunks(tiny).values(), key=lambda c: len(c.points))
     assert len(chunk.points) >= 2
-    short = grid.Chunk(chunk.id, chunk.points[:-1], chunk.spec_json)
-    path = io.write_chunk(short, [fake_summary(p, tiny["levels"]) for p in short.points], tmp_path / f"{chunk.id}.nc")
+    short = chunking.Chunk(chunk.id, chunk.points[:-1], chunk.spec_json)
+    path = chunkfiles.write_chunk(short, [fake_summary(p, tiny["levels"]) for p in short.points], tmp_path / f"{chunk.id}.nc")
     want = f"{len(chunk.points) - 1} points, expected {len(chunk.points)}"
-    assert io.verify_chunk(path, chunk) == want
-    assert io.read_chunk_file(path, expect_id=chunk.id)[0] == want
+    assert verify.verify_chunk(path, chunk) == want
+    assert verify.read_chunk_file(path, expect_id=chunk.id)[0] == want
 
 
 def test_a_chunk_file_with_another_number_of_levels_is_rejected(tmp_path, tiny):
-    chunk = next(iter(grid.plan_chunks(tiny).values()))
+    chunk = next(iter(chunking.plan_chunks(tiny).values()))
     more = _other_levels(tiny)
-    twin = next(c for c in grid.plan_chunks(more).values() if c.points == chunk.points)
-    path = io.write_chunk(twin, [fake_summary(p, more["levels"]) for p in twin.points], tmp_path / f"{chunk.id}.nc")
+    twin = next(c for c in chunking.plan_chunks(more).values() if c.points == chunk.points)
+    path = chunkfiles.write_chunk(twin, [fake_summary(p, more["levels"]) for p in twin.points], tmp_path / f"{chunk.id}.nc")
     _retag(path, chunk)
-    assert io.verify_chunk(path, chunk) == "wrong number of levels"
+    assert verify.verify_chunk(path, chunk) == "wrong number of levels"
 
 
 def test_gather_refuses_a_point_off_the_grid_axes(tmp_path, tiny):
     paths = write_all(tiny, tmp_path)
     shifted = settings_for(mu_d=[0.1, 0.3], k3=[1e-4, 3e-4, 5e-4], alpha0=[0.6, 1.2], omega0=[10.0, 20.0, 31.0])
     stray = write_all(shifted, tmp_path / "stray")
-    off = next(p for p in stray if any(pt[grid.AXES.index("omega0")] == 31.0
-                                       for pt in grid.plan_chunks(shifted)[p.stem].points))
+    off = next(p for p in stray if any(pt[axes.AXES.index("omega0")] == 31.0
+                                       for pt in chunking.plan_chunks(shifted)[p.stem].points))
     with pytest.raises(RuntimeError, match=r"a chunk holds omega0 = 31\.0, not on the grid axis"):
-        io.gather(paths + [off], tiny, tmp_path / "cube.nc")
+        gather.gather(paths + [off], tiny, tmp_path / "cube.nc")
     assert not (tmp_path / "cube.nc").exists()
 
 
 def test_gather_refuses_a_point_held_twice(tmp_path, tiny):
     paths = write_all(tiny, tmp_path)
-    n = math.prod(len(tiny["grid"][a]) for a in grid.AXES)
-    dup = grid.plan_chunks(tiny)[paths[0].stem]
+    n = math.prod(len(tiny["grid"][a]) for a in axes.AXES)
+    dup = chunking.plan_chunks(tiny)[paths[0].stem]
     copy = tmp_path / "copy" / paths[0].name
     copy.parent.mkdir()
     copy.write_bytes(paths[0].read_bytes())
     with pytest.raises(RuntimeError, match=rf"chunks hold {n + len(dup.points)} points with {n} distinct grid "
                                            rf"positions; the grid has {n}"):
-        io.gather(paths + [copy], tiny, tmp_path / "cube.nc")
+        gather.gather(paths + [copy], tiny, tmp_path / "cube.nc")
     assert not (tmp_path / "cube.nc").exists()

@@ -25,13 +25,14 @@ import xarray as xr
 import yaml
 
 import sweep
-from sweep import grid, io, outcomes
+from sweep import axes, cf, chunkfiles, chunking, grid, numerical_error, outcomes, validation, verify
+from sweep import outputs as sweep_outputs
 from conftest import copy_workflow
 
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema()
+SCHEMA = validation.load_schema()
 # A Snakemake call here takes ~3 s to parse and, for a run, ~3 s per job on a busy 2-core
 # machine; 10 min flags a hang (e.g. a notebook kernel that never starts), not slowness.
 TIMEOUT_S = 600
@@ -54,14 +55,14 @@ def snapshot(tmp_path_factory) -> Path:
     SNAPSHOT = None
 
 
-def plan_of(settings: dict) -> dict[str, grid.Chunk]:
+def plan_of(settings: dict) -> dict[str, chunking.Chunk]:
     """The chunk plan as the snapshot's Snakemake sees it (ids include its core fingerprint)."""
-    saved = grid.__file__
-    grid.__file__ = str(SNAPSHOT / "sweep" / "grid.py")
+    saved = chunking.__file__
+    chunking.__file__ = str(SNAPSHOT / "sweep" / "chunking.py")
     try:
-        return grid.plan_chunks(settings)
+        return chunking.plan_chunks(settings)
     finally:
-        grid.__file__ = saved
+        chunking.__file__ = saved
 
 
 def simulate_in_snapshot(settings: dict, points) -> list[dict]:
@@ -72,8 +73,8 @@ def simulate_in_snapshot(settings: dict, points) -> list[dict]:
               "not math.isfinite(x) else x); "
               "print(json.dumps([clean(dict(sweep.simulate(grid.scene(s, tuple(p))).summary)) "
               "for p in json.loads(sys.argv[2])]))")
-    out = subprocess.run([sys.executable, "-c", script, grid.canonical_json(settings),
-                          grid.canonical_json([list(p) for p in points])],
+    out = subprocess.run([sys.executable, "-c", script, chunking.canonical_json(settings),
+                          chunking.canonical_json([list(p) for p in points])],
                          env=dict(os.environ, PYTHONPATH=str(SNAPSHOT)), capture_output=True, text=True,
                          timeout=TIMEOUT_S)
     assert out.returncode == 0, out.stderr[-3000:]
@@ -127,7 +128,7 @@ def first_run(wd):
     # Fill the numba cache (cache=True) first, as any earlier use of the package does, so the
     # jobs below load the kernels rather than each compile them (~40 s) on a fresh checkout.
     settings = settings_of(tiny_config())
-    simulate_in_snapshot(settings, [tuple(settings["grid"][a][0] for a in grid.AXES)])
+    simulate_in_snapshot(settings, [tuple(settings["grid"][a][0] for a in axes.AXES)])
     t0 = time.perf_counter()
     out = smk(wd, "-j2", "--configfile", "config/tiny.yaml")
     return out, time.perf_counter() - t0
@@ -200,10 +201,10 @@ def test_tiny_run_produces_cube_figures_and_progress_logs(wd, first_run):
 def test_cube_contents(wd, first_run):
     settings = settings_of(tiny_config())
     with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as cube:
-        assert tuple(cube.outcome.dims) == grid.AXES
-        assert dict(cube.sizes) == {**{a: len(settings["grid"][a]) for a in grid.AXES},
+        assert tuple(cube.outcome.dims) == axes.AXES
+        assert dict(cube.sizes) == {**{a: len(settings["grid"][a]) for a in axes.AXES},
                                     "level": len(settings["levels"])}
-        for a in grid.AXES:
+        for a in axes.AXES:
             np.testing.assert_array_equal(cube[a].values, sorted(tiny_config()["grid"][a]))
         np.testing.assert_array_equal(np.sort(cube.level.values), sorted(tiny_config()["levels"]))
         for name in cube.variables:
@@ -228,11 +229,11 @@ def test_cube_equals_scenes_run_one_by_one(wd, first_run):
     with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as cube:
         points = [p for chunk in plan_of(settings).values() for p in chunk.points]
         for point, s in zip(points, simulate_in_snapshot(settings, points)):
-            at = cube.sel(dict(zip(grid.AXES, point)))
-            for var in io.VARIABLES:
+            at = cube.sel(dict(zip(axes.AXES, point)))
+            for var in sweep_outputs.VARIABLES:
                 if var.name == "wall_time":  # a measurement, not a result
                     continue
-                want = io.value_of(var, s)
+                want = chunkfiles.value_of(var, s)
                 # same code, same machine, same inputs: the integration is deterministic
                 np.testing.assert_array_equal(np.asarray(at[var.name].values, dtype=float),
                                               np.asarray(want, dtype=float), err_msg=f"{var.name} at {point}")
@@ -309,10 +310,10 @@ def test_damaged_chunk_is_recomputed_not_gathered(wd, first_run):
     out = smk(wd, "results/tiny/cube.nc", "-j2", "--configfile", cfg)
     assert "moved to results/tiny/chunks/quarantine/" in out
     assert job_count(out, "simulate_chunk") == 1
-    assert io.verify_chunk(victim, plan[victim.stem]) is None
+    assert verify.verify_chunk(victim, plan[victim.stem]) is None
     assert list((wd / "results" / "tiny" / "chunks" / "quarantine").glob(victim.name + ".*"))
     with xr.open_dataset(wd / "results" / "tiny" / "cube.nc") as after:
-        for var in io.VARIABLE_NAMES:
+        for var in cf.VARIABLE_NAMES:
             if var != "wall_time":
                 np.testing.assert_array_equal(after[var].values, before[var].values, err_msg=var)
 
@@ -329,18 +330,18 @@ def test_error_estimate_puts_error_bars_in_the_cube(wd, first_run):
     smk(wd, "-j2", "--configfile", write_config(wd, "errbars.yaml", cfg))
     points = [p for chunk in plan_of(settings).values() for p in chunk.points]
     main = simulate_in_snapshot(settings, points)
-    ref_settings = grid.error_reference(grid.scene_settings(settings))
+    ref_settings = numerical_error.error_reference(chunking.scene_settings(settings))
     assert ref_settings["solver"]["rtol"] == settings["solver"]["rtol"] / 100
     ref = simulate_in_snapshot(ref_settings, points)
     nonzero = 0
     with xr.open_dataset(wd / "results" / "errbars" / "cube.nc") as cube:
         assert json.loads(cube.attrs["error_estimate_solver"]) == ref_settings["solver"]
         for point, m, r in zip(points, main, ref):
-            want = io.add_numerical_errors(m, r)
-            at = cube.sel(dict(zip(grid.AXES, point)))
+            want = numerical_error.add_numerical_errors(m, r)
+            at = cube.sel(dict(zip(axes.AXES, point)))
             assert int(at.reference_outcome) == r["outcome_code"] == m["outcome_code"] == outcomes.HALTED
-            for var in io.ERROR_VARIABLES:
-                w = io.value_of(var, want)
+            for var in numerical_error.ERROR_VARIABLES:
+                w = chunkfiles.value_of(var, want)
                 got = np.asarray(at[var.name].values, dtype=float)
                 np.testing.assert_array_equal(got, np.asarray(w, dtype=float), err_msg=f"{var.name} at {point}")
                 if var.name != "reference_outcome":
@@ -418,7 +419,7 @@ def test_adaptive_map_rounds_cube_and_figure(adaptive_run):
         # the CI map is too small for a hold-out (sweep.refine.holdout_size); the flag says so
         assert "flag_meanings" in c.holdout.attrs and int(c.holdout.sum()) == recs[-1]["holdout"] == 0
         # a computed node holds what the scene gives when run on its own
-        sub = c.where(c.computed == 1, drop=True).stack(p=grid.AXES).dropna("p", subset=["t_halt"])
+        sub = c.where(c.computed == 1, drop=True).stack(p=axes.AXES).dropna("p", subset=["t_halt"])
         p = sub.p.values[len(sub.p) // 2]
         (summary,) = simulate_in_snapshot(settings, [tuple(p)])
         assert float(sub.t_halt.sel(p=p)) == pytest.approx(summary["t_halt"], rel=1e-12)

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from sweep import grid, io, outcomes, reasons as R
+from sweep import chunkfiles, chunking, configfiles, grid, outcomes, outputs, verify
+from sweep import reasons as R
 from sweep.scene import load_scene
 
 simulate_module = importlib.import_module("sweep.simulate")
@@ -57,7 +58,7 @@ def test_each_level_reason():
     one = dict(s["levels"][2], precession_window=-1.0)
     assert R.level_flags(s, one)["precession_hz_flag"] == R.VALUE
     assert R.level_flags(s, one)["ringing_hz_flag"] == R.NO_WHOLE_CYCLE_WINDOW
-    failed = io.error_summary(3)
+    failed = outputs.empty_summary(3)
     assert {v for lv in failed["levels"] for v in R.level_flags(failed, lv).values()} == {R.NO_RESULT}
     assert set(R.fit_flags(failed).values()) == {R.NO_RESULT}
 
@@ -133,7 +134,7 @@ def kernel_state(scene: dict):
 
 
 def default_grid_scene(point):
-    src = grid.read_config([(Path(__file__).resolve().parents[1] / "config" / "config.yaml", "config.yaml")])
+    src = configfiles.read_config([(Path(__file__).resolve().parents[1] / "config" / "config.yaml", "config.yaml")])
     return grid.scene(grid.normalize(src.config, check_scenes=False), point)
 
 
@@ -194,14 +195,14 @@ def test_chunk_and_cube_carry_the_flags(tmp_path):
     """A chunk of real scenes: each flag variable is int8 with CF flag attributes, the variables
     it explains name it in `ancillary_variables`, and a flag is 0 exactly where its variables
     have values."""
-    settings = grid.normalize(grid.read_config([(Path(__file__).resolve().parents[1] / "config" / "config.yaml",
-                                                 "config.yaml")]).config, check_scenes=False)
+    settings = grid.normalize(configfiles.read_config([(Path(__file__).resolve().parents[1] / "config" / "config.yaml",
+                                                        "config.yaml")]).config, check_scenes=False)
     points = [SCENES[k] for k in sorted(SCENES)]
-    cid, spec = grid.chunk_id_of(grid.scene_settings(settings), points)
-    chunk = grid.Chunk(cid, tuple(points), spec)
+    cid, spec = chunking.chunk_id_of(chunking.scene_settings(settings), points)
+    chunk = chunking.Chunk(cid, tuple(points), spec)
     sums = [simulate_module.simulate(grid.scene(settings, p)).summary for p in points]
-    path = io.write_chunk(chunk, sums, tmp_path / f"{cid}.nc")
-    assert io.verify_chunk(path, chunk) is None
+    path = chunkfiles.write_chunk(chunk, sums, tmp_path / f"{cid}.nc")
+    assert verify.verify_chunk(path, chunk) is None
     with xr.open_dataset(path) as ds:
         for flag, (explained, codes, _) in R.FLAGS.items():
             f = ds[flag]

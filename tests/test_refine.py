@@ -5,12 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sweep import grid, outcomes, refine
+from sweep import axes, errorbars, grid, outcomes, reconstruct, refine, surplus, validation
+from sweep import lattice as sweep_lattice
 
 
 def lattice(points=33, start=5):
-    return refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": points},
-                                "y": {"from": 0.0, "to": 1.0, "points": points}}, start)
+    return sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": points},
+                                       "y": {"from": 0.0, "to": 1.0, "points": points}}, start)
 
 
 def xy(lat):
@@ -31,24 +32,24 @@ def synthetic(lat, seed=1):
 
 
 def run_rounds(lat, oc, val, share=0.25, tol=0.01):
-    f = refine.Fields.empty(lat, {"t": 1}, {"t": True})
-    st = refine.Settings(("t",), tol, int(share * lat.size))
+    f = sweep_lattice.Fields.empty(lat, {"t": 1}, {"t": True})
+    st = sweep_lattice.Settings(("t",), tol, int(share * lat.size))
     plans = []
     for k in range(lat.rounds + 1):
         p = refine.plan_round(lat, f, st, k)
-        idx = refine._flat(lat, p.nodes)
+        idx = sweep_lattice.flat_index(lat, p.nodes)
         f.set(lat, p.nodes, k, oc[idx], {"t": val[idx]})
         plans.append(p)
     return f, st, plans
 
 
 def test_lattice_sizes_and_values():
-    assert [n for n in range(2, 70) if refine.is_lattice_size(n)] == [3, 5, 9, 17, 33, 65]
-    v = refine.axis_values(2.0, 200.0, 65, "log")
+    assert [n for n in range(2, 70) if sweep_lattice.is_lattice_size(n)] == [3, 5, 9, 17, 33, 65]
+    v = sweep_lattice.axis_values(2.0, 200.0, 65, "log")
     assert v[0] == 2.0 and v[-1] == 200.0 and v[32] == pytest.approx(20.0, rel=1e-12)
     np.testing.assert_allclose(np.diff(np.log(v)), np.log(100.0) / 64, rtol=1e-9)
-    lat = refine.make_lattice({"a": {"from": 0.0, "to": 1.0, "points": 65},
-                               "b": {"from": 0.0, "to": 1.0, "points": 33}}, 9)
+    lat = sweep_lattice.make_lattice({"a": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "b": {"from": 0.0, "to": 1.0, "points": 33}}, 9)
     # R = log2(32) - log2(8) = 2 rounds after round 0; round 0 has 9 points on b, 17 on a
     assert lat.rounds == 2 and len(lat.round0_nodes()) == 17 * 9
     assert lat.stride(0) == 4 and lat.stride(lat.rounds) == 1
@@ -60,17 +61,17 @@ def test_surplus_of_a_quadratic_is_its_second_difference():
     # a bilinear function has none.
     lat = lattice(17, 3)                    # strides 8 (round 0), 4, 2, 1
     i, j = np.unravel_index(np.arange(lat.size), lat.shape)
-    f = refine.Fields.empty(lat, {"q": 1, "b": 1}, {"q": False, "b": False})
+    f = sweep_lattice.Fields.empty(lat, {"q": 1, "b": 1}, {"q": False, "b": False})
     nodes = np.stack([i, j], axis=1)
     f.set(lat, nodes, 0, np.zeros(lat.size, int), {"q": i.astype(float) ** 2, "b": (1.0 + i) * (2.0 + 3 * j)})
-    sq = refine.surpluses(lat, f, "q")[:, 0].reshape(lat.shape)
-    rounds = refine.node_round(lat, nodes).reshape(lat.shape)
+    sq = surplus.surpluses(lat, f, "q")[:, 0].reshape(lat.shape)
+    rounds = sweep_lattice.node_round(lat, nodes).reshape(lat.shape)
     for k in range(1, lat.rounds + 1):
         on_edge = (rounds == k) & (np.arange(17)[:, None] % lat.stride(k - 1) != 0) & (
             np.arange(17)[None, :] % lat.stride(k - 1) == 0)
         np.testing.assert_allclose(sq[on_edge], lat.stride(k) ** 2)
     assert sq[4, 0] == 16.0 and sq[12, 8] == 16.0           # round 0's odd nodes: s = 4 against stride 8
-    assert np.nanmax(refine.surpluses(lat, f, "b")[:, 0][rounds.ravel() >= 0]) == pytest.approx(0.0, abs=1e-9)
+    assert np.nanmax(surplus.surpluses(lat, f, "b")[:, 0][rounds.ravel() >= 0]) == pytest.approx(0.0, abs=1e-9)
 
 
 def test_rounds_are_deterministic_and_within_budget():
@@ -92,11 +93,11 @@ def test_rounds_are_deterministic_and_within_budget():
 
 
 def test_error_bars_hold_and_the_rough_patch_is_recognised():
-    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
-                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
     oc, val, rough = synthetic(lat)
     f, st, plans = run_rounds(lat, oc, val)
-    m = refine.reconstruct(lat, f, st)
+    m = reconstruct.reconstruct(lat, f, st)
     rec = ~f.computed
     assert f.computed.sum() <= 0.25 * lat.size
     assert (m.outcome[rec] != oc[rec]).mean() < 0.01
@@ -122,7 +123,7 @@ def test_nodes_go_where_the_map_changes_and_bars_hold():
     f, st, _ = run_rounds(lat, np.zeros(lat.size, int), val)
     near = bump > 1e-3          # r < 0.34: the bump and its flanks
     assert f.computed[near].mean() > 3 * f.computed[~near].mean()
-    m = refine.reconstruct(lat, f, st)
+    m = reconstruct.reconstruct(lat, f, st)
     rec = ~f.computed
     err = np.abs(m.values["t"][:, 0] - val)
     assert (err[rec] <= m.bars["t"][rec, 0]).mean() >= 0.9
@@ -140,7 +141,7 @@ def test_failed_corners_and_outcome_boundaries_are_refined_first():
     # the finest round computes only around the boundary (x = 0.5 .. 0.5625) and the failed node
     last = plans[-1].nodes * (1.0 / 16)
     assert len(last) and all((0.4 <= n[0] <= 0.65) or (n[0] <= 0.125 and abs(n[1] - 0.5) <= 0.125) for n in last)
-    m = refine.reconstruct(lat, f, st)
+    m = reconstruct.reconstruct(lat, f, st)
     np.testing.assert_array_equal(m.outcome, oc)
 
 
@@ -157,7 +158,7 @@ def test_refine_config_errors_name_the_field():
         import copy
         cfg = copy.deepcopy(base)
         mutate(cfg)
-        with pytest.raises(grid.SweepConfigError) as exc:
+        with pytest.raises(validation.SweepConfigError) as exc:
             grid.normalize(cfg, check_scenes=False)
         return {e.field: str(e) for e in exc.value.errors}
 
@@ -176,8 +177,8 @@ def test_refine_config_errors_name_the_field():
     assert "refine.axes.alpha0" in fields_of(lambda c: c["refine"]["axes"]["alpha0"].update({"from": -0.5, "to": 0.5}))
     assert "refine.tolerance" in fields_of(lambda c: c["refine"].update(tolerance=0.0))
     assert "refine.outputs[0]" in fields_of(lambda c: c["refine"].update(outputs=["n_steps"]))
-    tensor = {"grid": {a: [1.0] for a in grid.AXES}, "outputs": {"notebooks": ["adaptive_map"]}}
-    with pytest.raises(grid.SweepConfigError, match="outputs.notebooks"):
+    tensor = {"grid": {a: [1.0] for a in axes.AXES}, "outputs": {"notebooks": ["adaptive_map"]}}
+    with pytest.raises(validation.SweepConfigError, match="outputs.notebooks"):
         grid.normalize(tensor, check_scenes=False)
 
 
@@ -196,14 +197,14 @@ def test_an_adaptive_overlay_replaces_the_default_grids_axes(tmp_path):
 
 
 def test_a_three_axis_map():
-    lat = refine.make_lattice({a: {"from": 0.0, "to": 1.0, "points": 17} for a in ("x", "y", "z")}, 5)
+    lat = sweep_lattice.make_lattice({a: {"from": 0.0, "to": 1.0, "points": 17} for a in ("x", "y", "z")}, 5)
     assert lat.rounds == 2 and lat.ndim == 3 and len(lat.round0_nodes()) == 125
     g = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T / 16.0
     oc = np.where(g[:, 0] + g[:, 1] + g[:, 2] > 1.6, outcomes.CONTACT_LOST, outcomes.HALTED)
     val = np.where(oc == outcomes.HALTED, np.exp(1 + g[:, 0] * g[:, 1] + np.sin(2 * g[:, 2])), np.nan)
     f, st, plans = run_rounds(lat, oc, val, share=0.5)    # a boundary surface needs more than a curve
     assert f.computed.sum() <= st.budget and all(len(p.nodes) for p in plans)
-    m = refine.reconstruct(lat, f, st)
+    m = reconstruct.reconstruct(lat, f, st)
     rec = ~f.computed
     assert (m.outcome[rec] != oc[rec]).mean() < 0.01
     ok = rec & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
@@ -214,33 +215,33 @@ def test_bars_are_calibrated_on_the_maps_own_surpluses():
     # every node computed at a round >= 1 tests the interpolation of the cell it was refined
     # from; per class and bin of the indicator the factor is the conformal 90 % quantile of
     # |surplus| / indicator: exactly ceil(0.9 (n + 1)) of the bin's n tests lie within it
-    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
-                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
     oc, val, rough = synthetic(lat)
     f, st, _ = run_rounds(lat, oc, val)
     f = f.subset(~refine.holdout_mask(lat, f, st))          # what the surplus calibration sees
-    sur = refine.surpluses(lat, f, "t")
-    cal = refine.bar_factors(lat, f, st, "t", sur, {"t": sur})
+    sur = surplus.surpluses(lat, f, "t")
+    cal = errorbars.bar_factors(lat, f, st, "t", sur, {"t": sur})
     nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
-    r = refine.node_round(lat, nodes)
-    tests = {refine.SMOOTH: [], refine.ROUGH: [], refine.MIXED: []}
+    r = sweep_lattice.node_round(lat, nodes)
+    tests = {errorbars.SMOOTH: [], errorbars.ROUGH: [], errorbars.MIXED: []}
     for i in np.nonzero(f.computed & (r >= 1))[0]:
         j = r[i]
-        low = refine.cell_lower(lat, nodes[i:i + 1], lat.stride(j - 1))
-        ind = refine.bar_indicator(lat, j - 1, low, sur)[0, 0]
-        cls = refine.cell_class(lat, f, st, j - 1, low, f.transformed("t"), {"t": sur})[0, 0]
+        low = sweep_lattice.cell_lower(lat, nodes[i:i + 1], lat.stride(j - 1))
+        ind = errorbars.bar_indicator(lat, j - 1, low, sur)[0, 0]
+        cls = errorbars.cell_class(lat, f, st, j - 1, low, f.transformed("t"), {"t": sur})[0, 0]
         if np.isfinite(sur[i, 0]) and ind > 0:
             tests[cls].append((ind, sur[i, 0] / ind))
     pooled = sum(tests.values(), [])
     checked = 0
     for cls, t in tests.items():
-        t = np.array(t if len(t) >= refine.MIN_CALIBRATION else pooled)
+        t = np.array(t if len(t) >= errorbars.MIN_CALIBRATION else pooled)
         edges, factors = cal.edges[cls, 0], cal.factors[cls, 0]
-        assert len(factors) == max(1, len(t) // refine.BIN_TESTS) == len(edges) + 1
+        assert len(factors) == max(1, len(t) // errorbars.BIN_TESTS) == len(edges) + 1
         b = np.searchsorted(edges, np.log10(t[:, 0]))
         for k, fac in enumerate(factors):
             x = t[b == k, 1]
-            assert len(x) >= refine.BIN_TESTS or len(factors) == 1
+            assert len(x) >= errorbars.BIN_TESTS or len(factors) == 1
             assert (x <= fac).sum() == min(len(x), int(np.ceil(0.9 * (len(x) + 1))))
             checked += 1
         # below the tested range the bar does not shrink with the indicator
@@ -248,7 +249,7 @@ def test_bars_are_calibrated_on_the_maps_own_surpluses():
         cl = np.full((2, 1), cls)
         np.testing.assert_array_equal(cal.bar(cl, np.array([[lo / 10], [lo]])), cal.bar(cl, np.array([[lo], [lo]])))
     assert checked >= 3
-    m = refine._interpolate(lat, f, st)                      # the bars of the surpluses alone
+    m = reconstruct._interpolate(lat, f, st)                      # the bars of the surpluses alone
     ok = ~f.computed & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
     err = np.abs(m.values["t"][:, 0] - val)
     bar = m.bars["t"][:, 0]
@@ -257,8 +258,8 @@ def test_bars_are_calibrated_on_the_maps_own_surpluses():
 
 
 def test_rough_leaves_count_the_finished_maps_rough_cells():
-    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
-                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
     oc, val, rough = synthetic(lat)
     f, st, plans = run_rounds(lat, oc, val)
     n = refine.rough_leaves(lat, f, st)
@@ -270,8 +271,8 @@ def test_rough_leaves_count_the_finished_maps_rough_cells():
 
 
 def test_the_last_round_computes_a_deterministic_holdout_outside_the_cells(monkeypatch):
-    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
-                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
     oc, val, _ = synthetic(lat)
     f, st, plans = run_rounds(lat, oc, val)
     n_hold = refine.holdout_size(lat, st)
@@ -279,57 +280,57 @@ def test_the_last_round_computes_a_deterministic_holdout_outside_the_cells(monke
     assert all(len(p.holdout) == 0 for p in plans[:-1]) and len(plans[-1].holdout) == n_hold
     assert f.computed.sum() <= st.budget
     hold = refine.holdout_mask(lat, f, st)                   # planned again: the same nodes
-    np.testing.assert_array_equal(np.nonzero(hold)[0], refine._flat(lat, plans[-1].holdout))
+    np.testing.assert_array_equal(np.nonzero(hold)[0], sweep_lattice.flat_index(lat, plans[-1].holdout))
     assert (f.round[hold] == lat.rounds).all()
     # a map whose hold-out another draw made (another seed, another numpy) keeps its own: the
     # last round's nodes that the plan does not refine with
     with monkeypatch.context() as mp:
         mp.setattr(refine, "HOLDOUT_SEED", refine.HOLDOUT_SEED + 1)
-        assert not np.array_equal(refine._flat(lat, refine.plan_round(lat, f.subset(f.round < lat.rounds), st,
-                                                                      lat.rounds).holdout), np.nonzero(hold)[0])
+        assert not np.array_equal(sweep_lattice.flat_index(lat, refine.plan_round(lat, f.subset(f.round < lat.rounds), st,
+                                                                                  lat.rounds).holdout), np.nonzero(hold)[0])
         np.testing.assert_array_equal(refine.holdout_mask(lat, f, st), hold)
     # the hold-out is not part of the map's cells: they are those of the refinement alone
     known = f.subset(~hold)
     refined = set(map(tuple, plans[-1].nodes)) - set(map(tuple, plans[-1].holdout))
     only = f.subset(f.round < lat.rounds)
-    only.set(lat, np.array(sorted(refined)), lat.rounds, oc[refine._flat(lat, np.array(sorted(refined)))],
-             {"t": val[refine._flat(lat, np.array(sorted(refined)))]})
-    for k, low in refine.cells(lat, only.computed).items():
-        np.testing.assert_array_equal(refine.cells(lat, known.computed)[k], low)
+    only.set(lat, np.array(sorted(refined)), lat.rounds, oc[sweep_lattice.flat_index(lat, np.array(sorted(refined)))],
+             {"t": val[sweep_lattice.flat_index(lat, np.array(sorted(refined)))]})
+    for k, low in sweep_lattice.cells(lat, only.computed).items():
+        np.testing.assert_array_equal(sweep_lattice.cells(lat, known.computed)[k], low)
     # the hold-out is a sample of the nodes the map reconstructs (no computed node, spread over it)
     nodes = plans[-1].holdout
-    assert len({tuple(n) for n in nodes}) == n_hold and not only.computed[refine._flat(lat, nodes)].any()
+    assert len({tuple(n) for n in nodes}) == n_hold and not only.computed[sweep_lattice.flat_index(lat, nodes)].any()
     assert (nodes[:, 0] < 32).mean() == pytest.approx(0.5, abs=0.15)
     # in the map the hold-out nodes are computed: their values, no bar
-    m = refine.reconstruct(lat, f, st)
+    m = reconstruct.reconstruct(lat, f, st)
     np.testing.assert_array_equal(m.holdout, hold)
     fin = hold & np.isfinite(val)
     np.testing.assert_array_equal(m.values["t"][fin, 0], val[fin])
     assert (m.bars["t"][fin, 0] == 0).all() and not m.rough[hold].any()
     # a small map (HOLDOUT_SHARE of its budget below HOLDOUT_MIN) has none: its bars are the surpluses'
-    small = refine.Settings(("t",), 0.01, int(refine.HOLDOUT_MIN / refine.HOLDOUT_SHARE) - 1)
+    small = sweep_lattice.Settings(("t",), 0.01, int(refine.HOLDOUT_MIN / refine.HOLDOUT_SHARE) - 1)
     assert refine.holdout_size(lat, small) == 0 and not refine.holdout_mask(lat, f, small).any()
 
 
 def test_holdout_bars_are_the_conformal_quantile_of_its_tests_per_bin():
-    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
-                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
     oc, val, rough = synthetic(lat)
     f, st, _ = run_rounds(lat, oc, val)
     hold = refine.holdout_mask(lat, f, st)
     known = f.subset(~hold)
-    m0 = refine._interpolate(lat, known, st)                 # the surpluses' bars, the hold-out reconstructed
-    m = refine.reconstruct(lat, f, st)
+    m0 = reconstruct._interpolate(lat, known, st)                 # the surpluses' bars, the hold-out reconstructed
+    m = reconstruct.reconstruct(lat, f, st)
     est = m0.values["t"][:, 0]
     err = np.abs(np.log(val) - np.log(est))
     scale = np.where(np.isfinite(m0.scale["t"][:, 0]), m0.scale["t"][:, 0], np.inf)
     pop = (m0.cell_level >= 0) & np.isfinite(est)
-    cut = np.quantile(scale[pop], refine.QUIET_SHARE, method="inverted_cdf")
+    cut = np.quantile(scale[pop], reconstruct.QUIET_SHARE, method="inverted_cdf")
     target = pop & ~hold
     for loud in (False, True):
         in_bin = (scale > cut) if loud else (scale <= cut)
         tests = np.sort(err[hold & in_bin & np.isfinite(err)])
-        assert len(tests) >= refine.MIN_CALIBRATION
+        assert len(tests) >= errorbars.MIN_CALIBRATION
         k = int(np.ceil(0.9 * (len(tests) + 1)))
         q = tests[k - 1]                                       # exactly k of the bin's tests within q
         assert (tests <= q).sum() == k
@@ -349,14 +350,14 @@ def test_holdout_bars_are_the_conformal_quantile_of_its_tests_per_bin():
 def test_holdout_bars_hold_over_draws(monkeypatch):
     # split-conformal: over the draws of the hold-out the bars hold at >= 90 % of the reconstructed
     # nodes on average (one draw scatters by a few %), in the rough patch and outside it
-    lat = refine.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
-                               "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
     oc, val, rough = synthetic(lat)
     cover, cover_rough, med = [], [], []
     for seed in range(8):
         monkeypatch.setattr(refine, "HOLDOUT_SEED", seed)
         f, st, _ = run_rounds(lat, oc, val)
-        m = refine.reconstruct(lat, f, st)
+        m = reconstruct.reconstruct(lat, f, st)
         ok = ~f.computed & np.isfinite(val) & np.isfinite(m.values["t"][:, 0])
         holds = np.abs(m.values["t"][:, 0] - val) <= m.bars["t"][:, 0]
         cover.append(holds[ok].mean())

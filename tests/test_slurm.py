@@ -23,7 +23,7 @@ import pytest
 import yaml
 
 import sweep
-from sweep import grid
+from sweep import chunking, grid, validation
 from conftest import copy_workflow
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "cluster"))
@@ -34,7 +34,7 @@ from test_faults import cube_content  # noqa: E402  (cube variables and attribut
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMA = grid.load_schema()
+SCHEMA = validation.load_schema()
 PROFILE = ROOT / "workflow" / "profiles" / "slurm"
 OVERLAY = ROOT / "tests" / "cluster" / "profile"
 TIMEOUT_S = 600
@@ -125,7 +125,7 @@ def local_cube(tmp_path_factory, src) -> Path:
 
 
 def plan() -> dict:
-    return grid.plan_chunks(grid.normalize(tiny(), SCHEMA))
+    return chunking.plan_chunks(grid.normalize(tiny(), SCHEMA))
 
 
 def test_tiny_sweep_through_slurm_equals_local_run(tmp_path, cluster, src, local_cube):

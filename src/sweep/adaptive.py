@@ -3,10 +3,10 @@ the map figure.
 
 A config with a `refine:` section is a set of *maps*: every combination of the `grid:` values of
 the other axes (the map's *outer point*) gets the lattice of `refine.axes`. Each map runs rounds
-0..R (R: sweep.refine.Lattice.rounds), one Snakemake job per (map, round), chained by their round
+0..R (R: sweep.lattice.Lattice.rounds), one Snakemake job per (map, round), chained by their round
 files `results/<name>/rounds/<map>/round<k>.json`. A round job plans its nodes from the chunk files
 of the earlier rounds (sweep.refine.plan_round, deterministic), cuts them into chunks as the tensor
-sweep does (content-addressed ids, sweep.grid.chunk_id_of), runs the chunks that are not on disk
+sweep does (content-addressed ids, sweep.chunking.chunk_id_of), runs the chunks that are not on disk
 yet with the tensor sweep's runner (sweep.batch.run_chunk, one process per thread) and writes its
 round file last, atomically. So a killed round resumes from its finished chunks, and a rerun of a
 finished map finds every round file and does nothing.
@@ -28,10 +28,17 @@ from pathlib import Path
 
 import numpy as np
 
+from . import atomic as _atomic
+from . import axes as _axes
+from . import cf as _cf
+from . import chunking as _chunking
+from . import figures as _figures
 from . import grid as _grid
-from . import io as _io
+from . import lattice as _lattice
 from . import outcomes
+from . import reconstruct as _reconstruct
 from . import refine as _refine
+from . import verify as _verify
 
 log = logging.getLogger("sweep.adaptive")
 
@@ -43,19 +50,19 @@ INTERP_SUFFIX = "_interpolation_error"
 
 # ------------------------------------------------------------------------------------------ maps
 
-def lattice(settings: Mapping) -> _refine.Lattice:
+def lattice(settings: Mapping) -> _lattice.Lattice:
     ref = settings["refine"]
-    return _refine.make_lattice(ref["axes"], ref["start_points"])
+    return _lattice.make_lattice(ref["axes"], ref["start_points"])
 
 
-def budget(settings: Mapping, lat: _refine.Lattice | None = None) -> int:
+def budget(settings: Mapping, lat: _lattice.Lattice | None = None) -> int:
     """Computed scenes at most per map: floor(max_share x lattice size)."""
     lat = lat or lattice(settings)
     return math.floor(settings["refine"]["max_share"] * lat.size)
 
 
 def outer_axes(settings: Mapping) -> tuple[str, ...]:
-    return tuple(a for a in _grid.AXES if a not in settings["refine"]["axes"])
+    return tuple(a for a in _axes.AXES if a not in settings["refine"]["axes"])
 
 
 def maps(settings: Mapping) -> dict[str, dict[str, float]]:
@@ -67,7 +74,7 @@ def maps(settings: Mapping) -> dict[str, dict[str, float]]:
     out = {}
     for vals in itertools.product(*(settings["grid"][a] for a in outer)):
         point = dict(zip(outer, vals))
-        digest = _grid.sha256_hex(_grid.canonical_json({"outer": point, "settings": key}))[:12]
+        digest = _chunking.sha256_hex(_chunking.canonical_json({"outer": point, "settings": key}))[:12]
         out[f"map-{digest}"] = point
     return out
 
@@ -94,16 +101,16 @@ def _components(settings: Mapping) -> tuple[dict[str, int], dict[str, bool]]:
     {name: interpolated in log}."""
     n_levels = len(settings["levels"])
     comps, logs = {}, {}
-    for var in _io.variables(bool(settings.get("outputs", {}).get("error_estimate", False))):
+    for var in _cf.variables(bool(settings.get("outputs", {}).get("error_estimate", False))):
         if var.kind == "float":
             comps[var.name] = n_levels if var.per_level else 1
             logs[var.name] = var.units in LOG_UNITS
     return comps, logs
 
 
-def refine_settings(settings: Mapping, lat: _refine.Lattice) -> _refine.Settings:
+def refine_settings(settings: Mapping, lat: _lattice.Lattice) -> _lattice.Settings:
     ref = settings["refine"]
-    return _refine.Settings(tuple(ref["outputs"]), float(ref["tolerance"]), budget(settings, lat))
+    return _lattice.Settings(tuple(ref["outputs"]), float(ref["tolerance"]), budget(settings, lat))
 
 
 # ----------------------------------------------------------------------------------- chunk files
@@ -115,17 +122,17 @@ def read_chunk(path: str | Path, names: Sequence[str]) -> tuple[np.ndarray, dict
 
     with netCDF4.Dataset(path, "r") as nc:
         nc.set_auto_mask(False)
-        pts = np.stack([np.asarray(nc.variables[a][:], dtype=np.float64) for a in _grid.AXES], axis=1)
+        pts = np.stack([np.asarray(nc.variables[a][:], dtype=np.float64) for a in _axes.AXES], axis=1)
         vals = {n: np.asarray(nc.variables[n][:]) for n in names}
     return pts, vals
 
 
-def _nodes_of(lat: _refine.Lattice, pts: np.ndarray) -> np.ndarray:
+def _nodes_of(lat: _lattice.Lattice, pts: np.ndarray) -> np.ndarray:
     """Lattice nodes of chunk points (exact values: the points were made from the lattice)."""
     out = np.zeros((len(pts), lat.ndim), np.int64)
     for i, a in enumerate(lat.axes):
         index = {float(v): j for j, v in enumerate(lat.values[i])}
-        col = pts[:, _grid.AXES.index(a)]
+        col = pts[:, _axes.AXES.index(a)]
         try:
             out[:, i] = [index[float(v)] for v in col]
         except KeyError as exc:
@@ -134,15 +141,15 @@ def _nodes_of(lat: _refine.Lattice, pts: np.ndarray) -> np.ndarray:
 
 
 class MapState:
-    """What is known of one map after some rounds: sweep.refine.Fields and every variable's raw
+    """What is known of one map after some rounds: sweep.lattice.Fields and every variable's raw
     values at the computed nodes (for the categorical ones of the cube)."""
 
     def __init__(self, settings: Mapping):
         self.settings = settings
         self.lat = lattice(settings)
         comps, logs = _components(settings)
-        self.fields = _refine.Fields.empty(self.lat, comps, logs)
-        self.vars = _io.variables(bool(settings.get("outputs", {}).get("error_estimate", False)))
+        self.fields = _lattice.Fields.empty(self.lat, comps, logs)
+        self.vars = _cf.variables(bool(settings.get("outputs", {}).get("error_estimate", False)))
         self.raw: dict[str, np.ndarray] = {}
 
     def add_chunks(self, paths: Sequence[str | Path], rnd: int) -> None:
@@ -150,7 +157,7 @@ class MapState:
         for p in paths:
             pts, vals = read_chunk(p, names)
             nodes = _nodes_of(self.lat, pts)
-            idx = _refine._flat(self.lat, nodes)
+            idx = _lattice.flat_index(self.lat, nodes)
             for name, v in vals.items():
                 if name not in self.raw:
                     self.raw[name] = np.zeros((self.lat.size,) + v.shape[1:], dtype=v.dtype)
@@ -159,21 +166,21 @@ class MapState:
                             {k: vals[k] for k in self.fields.values})
 
 
-def chunks_of_round(settings: Mapping, outer: Mapping[str, float], lat: _refine.Lattice,
-                    nodes: np.ndarray) -> list[_grid.Chunk]:
+def chunks_of_round(settings: Mapping, outer: Mapping[str, float], lat: _lattice.Lattice,
+                    nodes: np.ndarray) -> list[_chunking.Chunk]:
     """The chunks of a round's nodes: the points (AXES order) in lexicographic node order, cut by
-    the tensor sweep's content-defined rule (sweep.grid.split_inner) and named by their content."""
-    part = _grid.scene_settings(settings)
-    core = _grid.core_fingerprint()
+    the tensor sweep's content-defined rule (sweep.chunking.split_inner) and named by their content."""
+    part = _chunking.scene_settings(settings)
+    core = _chunking.core_fingerprint()
     inner = [lat.point(n) for n in nodes]
     chunks = []
-    for block in _grid.split_inner(inner, settings["chunk_size"]):
+    for block in _chunking.split_inner(inner, settings["chunk_size"]):
         points = []
         for p in block:
             full = dict(outer, **dict(zip(lat.axes, p)))
-            points.append(tuple(float(full[a]) for a in _grid.AXES))
-        cid, text = _grid.chunk_id_of(part, points, core)
-        chunks.append(_grid.Chunk(cid, tuple(points), text))
+            points.append(tuple(float(full[a]) for a in _axes.AXES))
+        cid, text = _chunking.chunk_id_of(part, points, core)
+        chunks.append(_chunking.Chunk(cid, tuple(points), text))
     return chunks
 
 
@@ -183,17 +190,17 @@ def _run_one(spec_json: str, out_path: str) -> dict:
     return batch.run_chunk(batch.chunk_from_spec(spec_json), out_path)
 
 
-def run_chunks(chunks: Sequence[_grid.Chunk], chunk_dir: Path, threads: int) -> int:
+def run_chunks(chunks: Sequence[_chunking.Chunk], chunk_dir: Path, threads: int) -> int:
     """Run the chunks whose file is missing or damaged (quarantined first), `threads` processes
     at a time (each loads the kernels once); returns how many ran."""
     todo = []
     for c in chunks:
         p = chunk_dir / f"{c.id}.nc"
         if p.exists():
-            reason = _io.verify_chunk(p, c)
+            reason = _verify.verify_chunk(p, c)
             if reason is None:
                 continue
-            _io.quarantine(p, reason)
+            _verify.quarantine(p, reason)
             log.warning("chunk %s is damaged (%s): quarantined, recomputed", c.id, reason)
         todo.append(c)
     chunk_dir.mkdir(parents=True, exist_ok=True)
@@ -216,7 +223,7 @@ def chunk_problem(path: Path, cid: str) -> str | None:
     chunk's), or None."""
     if not path.exists():
         return "missing"
-    return _io.read_chunk_file(path, expect_id=cid)[0]
+    return _verify.read_chunk_file(path, expect_id=cid)[0]
 
 
 def stale_chunks(settings: Mapping, results: str | Path) -> dict[str, str]:
@@ -308,7 +315,7 @@ def run_round(settings: Mapping, map_id: str, k: int, results: str | Path, out_p
         rec["rough_final"] = _refine.rough_leaves(lat, state.fields, st)
     rec["line"] = round_line(name, map_label(outer), rec)
     log.info("%s", rec["line"])
-    _io.write_text_atomic(out_path, json.dumps(rec, indent=1))
+    _atomic.write_text_atomic(out_path, json.dumps(rec, indent=1))
     return rec
 
 
@@ -324,7 +331,7 @@ def interpolation_error_attrs(var) -> dict:
 def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_path: str | Path | None = None,
            name: str | None = None) -> Path:
     """Every map's rounds -> the cube on the full lattice (atomic write): computed nodes with their
-    values, the others reconstructed (sweep.refine.reconstruct), with `computed`, `round`, `rough`
+    values, the others reconstructed (sweep.reconstruct.reconstruct), with `computed`, `round`, `rough`
     `holdout` and `<X>_interpolation_error` for every continuous output X."""
     import xarray as xr
 
@@ -333,7 +340,7 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
     n_levels = len(settings["levels"])
     n = math.prod(shape)
     index = _grid.grid_index(settings)
-    vars_ = _io.variables(bool(settings.get("outputs", {}).get("error_estimate", False)))
+    vars_ = _cf.variables(bool(settings.get("outputs", {}).get("error_estimate", False)))
     comps, _ = _components(settings)
     data = {v.name: None for v in vars_}
     bars = {k: np.full((n, m), np.nan) for k, m in comps.items()}
@@ -346,10 +353,10 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
     for map_id, outer in maps(settings).items():
         state, records = load_rounds(settings, results, map_id, lat.rounds + 1)
         n_files += sum(len(r["chunks"]) for r in records)
-        m = _refine.reconstruct(lat, state.fields, refine_settings(settings, lat))
+        m = _reconstruct.reconstruct(lat, state.fields, refine_settings(settings, lat))
         nodes = np.array(np.unravel_index(np.arange(lat.size), lat.shape)).T
         full = [np.full(lat.size, index[a][outer[a]]) if a in outer else nodes[:, lat.axes.index(a)]
-                for a in _grid.AXES]
+                for a in _axes.AXES]
         pos = np.ravel_multi_index(tuple(full), shape)
         for v in vars_:
             raw = state.raw[v.name]
@@ -372,20 +379,20 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
         rough[pos] = m.rough
         if m.holdout is not None:
             holdout[pos] = m.holdout
-    csizes = _io.cube_chunksizes(shape + (n_levels,))
-    axes = _grid.AXES
+    csizes = _cf.cube_chunksizes(shape + (n_levels,))
+    axes = _axes.AXES
     data_vars, encoding = {}, {}
     for v in vars_:
         per = v.per_level
         full_shape = shape + ((n_levels,) if per else ())
         dims = axes + (("level",) if per else ())
         cs = csizes if per else csizes[:-1]
-        data_vars[v.name] = (dims, data[v.name].reshape(full_shape), _io._var_attrs(v))
-        encoding[v.name] = _io.variable_encoding(v.kind, cs)
+        data_vars[v.name] = (dims, data[v.name].reshape(full_shape), _cf.var_attrs(v))
+        encoding[v.name] = _cf.variable_encoding(v.kind, cs)
         if v.kind == "float":
             key = v.name + INTERP_SUFFIX
             data_vars[key] = (dims, bars[v.name].reshape(full_shape), interpolation_error_attrs(v))
-            encoding[key] = _io.variable_encoding("float", cs)
+            encoding[key] = _cf.variable_encoding("float", cs)
     flag = {"flag_values": np.array([0, 1], np.int8)}
     data_vars["computed"] = (axes, computed.reshape(shape), {
         "units": "1", "long_name": "whether the node's scene was computed (1) or its values reconstructed (0)",
@@ -401,19 +408,19 @@ def gather(settings: Mapping, results: str | Path, out_path: str | Path, repo_pa
                                    "that calibrates the error bars, not interpolated from", **flag,
         "flag_meanings": "not_holdout holdout"})
     for key in ("computed", "rough", "holdout"):
-        encoding[key] = _io.variable_encoding("flag", csizes[:-1])
-    encoding["round"] = {"dtype": "int8", "_FillValue": None, "zlib": True, "complevel": _io.COMPLEVEL,
+        encoding[key] = _cf.variable_encoding("flag", csizes[:-1])
+    encoding["round"] = {"dtype": "int8", "_FillValue": None, "zlib": True, "complevel": _cf.COMPLEVEL,
                          "shuffle": True, "chunksizes": csizes[:-1]}
-    coords = _io.cube_coords(settings)
+    coords = _cf.cube_coords(settings)
     for c in coords:
         encoding[c] = {"_FillValue": None}
     n_maps = len(maps(settings))
-    attrs = _io.cube_attrs(settings, name, f"adaptive map: {n_maps} map(s) of {lat.size} nodes, "
+    attrs = _cf.cube_attrs(settings, name, f"adaptive map: {n_maps} map(s) of {lat.size} nodes, "
                            f"{int(computed.sum())} computed in {lat.rounds + 1} rounds ({n_files} chunk files), "
                            "the rest reconstructed", repo_path)
-    attrs["sweep_refine"] = _grid.canonical_json(settings["refine"])
+    attrs["sweep_refine"] = _chunking.canonical_json(settings["refine"])
     cube = xr.Dataset(data_vars, coords=coords, attrs=attrs)
-    return _io.write_atomic(cube, out_path, encoding)
+    return _atomic.write_atomic(cube, out_path, encoding)
 
 
 # ----------------------------------------------------------------------------------- the figure
@@ -432,7 +439,7 @@ def map_figure(cube_path: str | Path, figure: str | Path, max_maps: int = 4) -> 
         ref = json.loads(ds.attrs["sweep_refine"])
         axes = list(ref["axes"])
         xdim, ydim = axes[-1], axes[0]
-        outer = [a for a in _grid.AXES if a not in axes]
+        outer = [a for a in _axes.AXES if a not in axes]
         combos = list(itertools.product(*(range(ds.sizes[a]) for a in outer)))[:max_maps]
         fig, grid_axes = plt.subplots(len(combos), 2, figsize=(13, 5.2 * len(combos)), squeeze=False,
                                       constrained_layout=True)
@@ -483,8 +490,8 @@ def map_figure(cube_path: str | Path, figure: str | Path, max_maps: int = 4) -> 
                     a.contour(x, y, rough.astype(float), levels=[0.5], colors="r", linewidths=0.8)
                 a.set_xscale("log" if logx else "linear")
                 a.set_yscale("log" if logy else "linear")
-                a.set_xlabel(_io.AXIS_LABELS.get(xdim, xdim))
-                a.set_ylabel(_io.AXIS_LABELS.get(ydim, ydim))
+                a.set_xlabel(_figures.AXIS_LABELS.get(xdim, xdim))
+                a.set_ylabel(_figures.AXIS_LABELS.get(ydim, ydim))
         n_comp = int(ds.computed.sum())
         n_all = int(ds.computed.size)
         fig.suptitle(f"sweep '{ds.attrs.get('sweep_name', '?')}': adaptive map, {n_comp} of {n_all} nodes computed "

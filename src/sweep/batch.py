@@ -15,9 +15,13 @@ import traceback
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
+from . import axes as _axes
+from . import chunkfiles as _chunkfiles
+from . import chunking as _chunking
 from . import grid as _grid
-from . import io as _io
+from . import numerical_error as _numerical_error
 from . import outcomes
+from . import outputs as _outputs
 
 log = logging.getLogger("sweep.batch")
 
@@ -65,7 +69,7 @@ def _summary_or_none(scene: Mapping, simulate: Callable, what: str) -> dict | No
         return dict(simulate(scene).summary)
     except Exception:
         log.error("%s of scene %s raised; recorded as numerical_error:\n%s",
-                  what, _grid.canonical_json(scene), traceback.format_exc())
+                  what, _chunking.canonical_json(scene), traceback.format_exc())
         return None
 
 
@@ -73,31 +77,32 @@ def run_scene(scene: Mapping, n_levels: int, simulate: Callable | None = None,
               reference_scene: Mapping | None = None) -> dict:
     """The summary of one scene; an exception becomes outcome NUMERICAL_ERROR with NaNs.
 
-    `reference_scene`: the same scene with the tolerances of the error bars' rerun (settings
-    from `sweep.grid.error_reference`); when given, it is run too and the summary gets `<name>_numerical_error`
-    and `reference_outcome` (`sweep.io.add_numerical_errors`). A failed rerun leaves the main
-    result as it is: its errors are NaN and reference_outcome says why.
+    `reference_scene`: the same scene with the tolerances of the error bars' rerun (settings from
+    `sweep.numerical_error.error_reference`); when given, it is run too and the summary gets
+    `<name>_numerical_error` and `reference_outcome` (`sweep.numerical_error.add_numerical_errors`).
+    A failed rerun leaves the main result as it is: its errors are NaN and reference_outcome says why.
     """
     simulate = simulate or simulate_function()
     t0 = time.perf_counter()
     summary = _summary_or_none(scene, simulate, "run")
     if summary is None:
-        summary = _io.error_summary(n_levels, outcomes.NUMERICAL_ERROR, time.perf_counter() - t0)
+        summary = _outputs.empty_summary(n_levels, outcomes.NUMERICAL_ERROR, time.perf_counter() - t0)
     if reference_scene is not None:
-        _io.add_numerical_errors(summary, _summary_or_none(reference_scene, simulate, "error-estimate rerun"))
+        reference = _summary_or_none(reference_scene, simulate, "error-estimate rerun")
+        _numerical_error.add_numerical_errors(summary, reference)
     return summary
 
 
-def chunk_from_spec(spec_json: str) -> _grid.Chunk:
+def chunk_from_spec(spec_json: str) -> _chunking.Chunk:
     """Rebuild a Chunk from its canonical spec JSON (the id is the spec's hash)."""
     spec = json.loads(spec_json)
-    if _grid.canonical_json(spec) != spec_json:
+    if _chunking.canonical_json(spec) != spec_json:
         raise ValueError("chunk spec is not in canonical JSON form")
-    cid = _grid.sha256_hex(spec_json)[:_grid.CHUNK_ID_HEX]
-    return _grid.Chunk(cid, tuple(tuple(p) for p in spec["points"]), spec_json)
+    cid = _chunking.sha256_hex(spec_json)[:_chunking.CHUNK_ID_HEX]
+    return _chunking.Chunk(cid, tuple(tuple(p) for p in spec["points"]), spec_json)
 
 
-def run_chunk(chunk: _grid.Chunk, out_path: str | Path, simulate: Callable | None = None) -> dict:
+def run_chunk(chunk: _chunking.Chunk, out_path: str | Path, simulate: Callable | None = None) -> dict:
     """Integrate every scene of `chunk`, write the chunk file atomically, return run statistics.
 
     Logs one line per scene and a closing line with the rate in scenes/s.
@@ -107,7 +112,7 @@ def run_chunk(chunk: _grid.Chunk, out_path: str | Path, simulate: Callable | Non
     settings = spec["settings"]
     n_levels = len(settings["levels"])
     scenes = [_grid.scene(settings, p) for p in chunk.points]
-    refs = ([_grid.scene(_grid.error_reference(settings), p) for p in chunk.points]
+    refs = ([_grid.scene(_numerical_error.error_reference(settings), p) for p in chunk.points]
             if settings.get("error_estimate", False) else [None] * len(scenes))
     t_warm = warm_up(scenes[0], simulate)
     log.info("chunk %s: %d scenes; warm-up %.2f s", chunk.id, len(scenes), t_warm)
@@ -119,12 +124,12 @@ def run_chunk(chunk: _grid.Chunk, out_path: str | Path, simulate: Callable | Non
         counts[s["outcome"]] += 1
         elapsed = time.perf_counter() - t0
         log.info("chunk %s: %d/%d %s outcome=%s t_halt=%s s n_steps=%s wall=%.3f s (%.2f scenes/s)",
-                 chunk.id, i, len(scenes), dict(zip(_grid.AXES, chunk.points[i - 1])), s["outcome"],
+                 chunk.id, i, len(scenes), dict(zip(_axes.AXES, chunk.points[i - 1])), s["outcome"],
                  f"{s['t_halt']:.6g}" if isinstance(s["t_halt"], float) and math.isfinite(s["t_halt"]) else "nan",
                  s["n_steps"], s["wall_time"],
                  i / elapsed if elapsed > 0 else math.inf)
     elapsed = time.perf_counter() - t0
-    _io.write_chunk(chunk, summaries, out_path)
+    _chunkfiles.write_chunk(chunk, summaries, out_path)
     rate = len(scenes) / elapsed if elapsed > 0 else math.inf
     log.info("chunk %s done: %d scenes in %.2f s (%.2f scenes/s); outcomes %s",
              chunk.id, len(scenes), elapsed, rate, dict(counts))

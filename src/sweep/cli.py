@@ -316,7 +316,7 @@ def main(argv=None) -> int:
     sp.add_argument("--spectrogram", metavar="FILE.png", help="write the spectrogram of the ringing")
     args = ap.parse_args(argv)
 
-    from .frontdoor import compile_for_command
+    from .warmup import compile_for_command
     from .scene import check_start, load_scene
     from .simulate import simulate
 

@@ -171,14 +171,14 @@ def simulate_batch(scenes: Iterable, device: str = "cpu", workers: int | None = 
 
 
 def _simulate_or_error(sc: Scene) -> dict:
-    from . import io as _io
+    from . import outputs as _outputs
 
     t0 = time.perf_counter()
     try:
         return dict(simulate(sc).summary)
     except Exception:  # noqa: BLE001  (recorded as in the pipeline's batch.run_scene)
         log.exception("scene raised; recorded as numerical_error")
-        return _io.error_summary(len(sc.levels), outcomes.NUMERICAL_ERROR, time.perf_counter() - t0)
+        return _outputs.empty_summary(len(sc.levels), outcomes.NUMERICAL_ERROR, time.perf_counter() - t0)
 
 
 def summaries_equal(a: Mapping, b: Mapping, rtol: float = 1e-9) -> list[str]:

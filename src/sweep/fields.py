@@ -3,11 +3,11 @@ with its allowed range, its scene default, the sweep config key that sets it, an
 axis) the axis' name, units, long name and figure label. Everything else is generated from FIELDS:
 
 * scene files (sweep.scene): DEFAULTS, and the checks, in FIELDS' order;
-* the sweep config's JSON schema (sweep.grid.load_schema, `config_schema`): bounds, descriptions
+* the sweep config's JSON schema (sweep.validation.load_schema, `config_schema`): bounds, descriptions
   and defaults of the numbers, one property per axis under `grid` and `refine.axes`;
-* the sweep axes (sweep.grid.AXES, their chunk layout, units and long names) and a point's scene
+* the sweep axes (sweep.axes.AXES, their chunk layout, units and long names) and a point's scene
   (sweep.grid.scene);
-* the cube's coordinates and the figures' axis labels (sweep.io).
+* the cube's coordinates (sweep.cf) and the figures' axis labels (sweep.figures).
 
 So a scene and a sweep accept the same values and say so in the same words, and a new sweepable
 input is one Field (with an Axis) here plus its use in the model: a `kernel` slot of the model's

@@ -1,6 +1,6 @@
 """The one registry of a scene's outputs: every value of the summary, with its unit, long name and
 how it is taken from the kernel's outputs. The summary dict (`summary`), its template for a scene
-that produced no result (`empty_summary`), the cube's variables (`sweep.io.VARIABLES`: units,
+that produced no result (`empty_summary`), the cube's variables (`sweep.outputs.VARIABLES`: units,
 long names, error bars) and the chunk format that names them (`CHUNK_FORMAT`) are all generated
 from OUTPUTS, so a new output is one entry here.
 

@@ -2,8 +2,11 @@
 import os
 import sys
 
+from sweep import chunkfiles as sweep_chunkfiles
+from sweep import chunking as sweep_chunking
 from sweep import grid as sweep_grid
-from sweep import io as sweep_io
+from sweep import validation as sweep_validation
+from sweep import verify as sweep_verify
 
 
 # The config is read from its files by sweep.grid (the code `python3 run.py sweep` runs before
@@ -17,7 +20,7 @@ _CONFIGFILES = [] if workflow.config_settings.replace_workflow_config else [DEFA
 _CONFIGFILES += [str(f) for f in workflow.overwrite_configfiles if str(f) not in _CONFIGFILES]
 try:
     _SWEEP = sweep_grid.load_sweep([(f, f) for f in _CONFIGFILES], dict(workflow.config_settings.config) or None)
-except sweep_grid.SweepConfigError as err:
+except sweep_validation.SweepConfigError as err:
     raise WorkflowError("invalid sweep configuration:\n" + str(err)) from None
 SWEEP_NAME, SETTINGS = _SWEEP.name, _SWEEP.settings
 # the workflow's config is the validated one, defaults filled (what the rules see)
@@ -25,11 +28,11 @@ config.clear()
 config.update(_SWEEP.config, name=SWEEP_NAME)
 RESULTS = f"results/{SWEEP_NAME}"
 
-SETTINGS_JSON = sweep_grid.canonical_json(SETTINGS)
+SETTINGS_JSON = sweep_chunking.canonical_json(SETTINGS)
 # An adaptive map (refine:) plans its chunks round by round (workflow/rules/adaptive.smk): no
 # chunk plan up front; MAPS and the last round ROUNDS fix its jobs.
 ADAPTIVE = sweep_grid.is_adaptive(SETTINGS)
-PLAN = {} if ADAPTIVE else sweep_grid.plan_chunks(SETTINGS)
+PLAN = {} if ADAPTIVE else sweep_chunking.plan_chunks(SETTINGS)
 CHUNK_DIR = f"{RESULTS}/chunks"
 if ADAPTIVE:
     from sweep import adaptive as sweep_adaptive
@@ -50,7 +53,7 @@ if ADAPTIVE:
 # (The executor, hence workflow.dryrun, is chosen after parsing; output_settings knows -n.)
 DRYRUN = bool(getattr(workflow.output_settings, "dryrun", False) or workflow.dryrun)
 if workflow.is_main_process:
-    _damaged = sweep_io.check_existing_chunks(CHUNK_DIR, PLAN, act=not DRYRUN)
+    _damaged = sweep_verify.check_existing_chunks(CHUNK_DIR, PLAN, act=not DRYRUN)
     for _cid, _reason in _damaged.items():
         print(f"sweep: chunk {_cid} is damaged ({_reason}); "
               + ("a real run will quarantine and recompute it" if DRYRUN
@@ -68,5 +71,5 @@ if workflow.is_main_process:
             os.remove(f"{RESULTS}/cube.nc")
     if not DRYRUN:
         # what this run will compute, for the progress line of `python3 run.py sweep`
-        sweep_io.write_plan(f"{RESULTS}/plan.json", SWEEP_NAME, PLAN,
+        sweep_chunkfiles.write_plan(f"{RESULTS}/plan.json", SWEEP_NAME, PLAN,
                             sweep_adaptive.plan_info(SETTINGS, RESULTS) if ADAPTIVE else None)

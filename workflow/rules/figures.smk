@@ -1,5 +1,5 @@
 # Execute the configured notebooks of workflow/notebooks/ against the cube, all in one process
-# (sweep.io.run_notebooks: no Jupyter kernel per notebook); each saves results/<name>/figures/<name>.png
+# (sweep.notebooks.run_notebooks: no Jupyter kernel per notebook); each saves results/<name>/figures/<name>.png
 # and is kept with its outputs as results/<name>/notebooks/<name>.ipynb.
 
 if SETTINGS["outputs"]["notebooks"]:

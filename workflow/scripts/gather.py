@@ -1,10 +1,10 @@
 """Snakemake job `gather`: verified chunk files -> results/cube.nc."""
 import json
 
-from sweep import batch, io
+from sweep import batch, gather
 
 batch.setup_logging(snakemake.log[0])  # noqa: F821 (injected by Snakemake)
-io.gather(
+gather.gather(
     chunk_paths=snakemake.input.chunks,  # noqa: F821
     settings=json.loads(snakemake.params.settings),  # noqa: F821
     out_path=snakemake.output[0],  # noqa: F821

@@ -1,7 +1,7 @@
 """Snakemake job `notebook`: execute the configured notebooks against the cube in this one process; each writes its figure."""
-from sweep import io
+from sweep import notebooks
 
-io.run_notebooks(
+notebooks.run_notebooks(
     notebooks=snakemake.input.notebooks,  # noqa: F821 (injected by Snakemake)
     cube=snakemake.input.cube,  # noqa: F821
     figures=snakemake.output.figures,  # noqa: F821

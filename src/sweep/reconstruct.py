@@ -1,0 +1,168 @@
+"""The full map of an adaptive run rebuilt from its computed nodes, with error bars.
+
+Every node not computed is interpolated multilinearly in the finest cell holding it (log values
+for positive times and frequencies; the outcome and the categorical values from the nearest
+corner), with an error bar (absolute, the output's units) calibrated on the map's surpluses
+(sweep.errorbars) or, where the map has a hold-out (sweep.refine.holdout_size), on the hold-out's
+errors (`holdout_bars`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errorbars import MIN_CALIBRATION, bar_factors, bar_indicator, cell_class, conformal_quantile
+from .lattice import Fields, Lattice, Settings, flat_index, leaf_of, multilinear
+from .refine import holdout_mask
+from .surplus import cell_states, surpluses
+
+
+# The bars calibrated on the hold-out: the reconstructed nodes split at this quantile of their
+# error scale (`Map.scale`) into quiet and loud, each bin's bar its tests' conformal quantile.
+QUIET_SHARE = 0.6
+
+
+@dataclass
+class Map:
+    """The full lattice rebuilt: per node (flat) its outcome, the index of the corner that gave
+    its categorical values (itself where computed), each continuous output with its
+    interpolation error bar (absolute, the output's units; 0 where computed), and whether its
+    cell is rough; `scale`: per continuous output, each reconstructed node's error scale (in its
+    interpolation space: the spread of the corners it is interpolated from plus its cell's
+    bar_indicator; NaN where computed); `holdout`: the hold-out nodes (holdout_mask), or None."""
+    outcome: np.ndarray
+    source: np.ndarray
+    values: dict[str, np.ndarray]
+    bars: dict[str, np.ndarray]
+    rough: np.ndarray
+    cell_level: np.ndarray
+    scale: dict[str, np.ndarray] = field(default_factory=dict)
+    holdout: np.ndarray | None = None
+
+
+def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
+    """The full map from the computed nodes (see the module's docstring for the bars): the map's
+    cells are interpolated without the hold-out nodes, whose errors then calibrate the bars
+    (holdout_bars); in the map they are computed nodes like the others."""
+    hold = holdout_mask(lat, f, st)
+    if not hold.any():
+        return _interpolate(lat, f, st)
+    known = f.subset(~hold)
+    m = _interpolate(lat, known, st)
+    holdout_bars(f, known, m, hold)
+    idx = np.nonzero(hold)[0]
+    m.outcome[idx] = f.outcome[idx]
+    m.source[idx] = idx
+    m.rough[idx] = False
+    m.cell_level[idx] = -1
+    for name, v in f.values.items():
+        m.values[name][idx] = v[idx]
+        m.bars[name][idx] = np.where(np.isfinite(v[idx]), 0.0, np.nan)
+        m.scale[name][idx] = np.nan
+    m.holdout = hold
+    return m
+
+
+def holdout_bars(f: Fields, known: Fields, m: Map, hold: np.ndarray) -> None:
+    """Replace the bars of `m` (reconstructed from `known`: `f` without the hold-out nodes `hold`) by bars calibrated on the hold-out (split-conformal on a uniform sample of the nodes
+    reconstructed, so its COVERAGE holds for them): per output and component, the reconstructed
+    nodes with a value split at the QUIET_SHARE quantile of their error scale (`m.scale`) into
+    quiet and loud; each bin's bar (in the interpolation space) is the conformal quantile
+    (conformal_quantile) of its hold-out tests' |error|, in the loud bin at least the bar calibrated on the
+    surpluses (the loud bin mixes rough cells with merely steep ones: its constant bar is not
+    allowed to undercut the per-class one). A bin with fewer than MIN_CALIBRATION tests keeps the
+    bars calibrated on the surpluses."""
+    idx = np.nonzero(hold)[0]
+    for name, v in f.values.items():
+        log = known.is_log(name)
+        est, scale = m.values[name], m.scale[name]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g_true = np.log(v[idx]) if log else v[idx]
+            g_est = np.log(est) if log else est
+        rec = (m.cell_level >= 0)[:, None] & np.isfinite(est)                 # (n, m): reconstructed, a value
+        for c in range(v.shape[1]):
+            pop = rec[:, c]
+            if not pop.any():
+                continue
+            sc = np.where(np.isfinite(scale[:, c]), scale[:, c], np.inf)
+            cut = np.quantile(sc[pop], QUIET_SHARE, method="inverted_cdf")
+            err = np.abs(g_true[:, c] - g_est[idx, c])
+            ok = np.isfinite(err)
+            for loud in (False, True):
+                in_bin = (sc > cut) if loud else (sc <= cut)
+                tests = err[ok & in_bin[idx]]
+                if len(tests) < MIN_CALIBRATION:
+                    continue
+                q = conformal_quantile(tests)
+                sel = pop & in_bin & ~hold
+                bar = est[sel, c] * np.expm1(q) if log else np.full(int(sel.sum()), q)
+                m.bars[name][sel, c] = np.fmax(bar, m.bars[name][sel, c]) if loud else bar
+
+
+def _interpolate(lat: Lattice, f: Fields, st: Settings) -> Map:
+    """The full map from the computed nodes of `f`, bars calibrated on its surpluses."""
+    n = lat.size
+    all_nodes = np.array(np.unravel_index(np.arange(n), lat.shape)).T.astype(np.int64)
+    outcome = f.outcome.copy()
+    source = np.arange(n)
+    values = {k: v.copy() for k, v in f.values.items()}
+    bars = {k: np.where(np.isfinite(v), 0.0, np.nan) for k, v in f.values.items()}
+    rough_node = np.zeros(n, bool)
+    cell_level = np.full(n, -1, np.int64)
+    miss = np.nonzero(~f.computed)[0]
+    scales = {k: np.full(v.shape, np.nan) for k, v in f.values.items()}
+    if not miss.size:
+        return Map(outcome, source, values, bars, rough_node, cell_level, scales)
+    nodes = all_nodes[miss]
+    level, lower = leaf_of(lat, f.computed, nodes)
+    cell_level[miss] = level
+    surs = {k: surpluses(lat, f, k) for k in f.values}
+    driving = {o: surs[o] for o in st.outputs}
+    factors = {k: bar_factors(lat, f, st, k, surs[k], driving) for k in f.values}
+    for k in np.unique(level):
+        sel = np.nonzero(level == k)[0]
+        s = lat.stride(int(k))
+        corners, w = multilinear(lat, nodes[sel], lower[sel], s)
+        cidx = flat_index(lat, corners.reshape(-1, lat.ndim)).reshape(corners.shape[:2])
+        # nearest corner (largest weight; ties: the first in lexicographic order) gives the outcome
+        # where the corners disagree, and every categorical value
+        near = cidx[np.arange(len(sel)), np.argmax(w, axis=1)]
+        oc = f.outcome[cidx]
+        used = w > 0
+        out = f.outcome[near]
+        tgt = miss[sel]
+        outcome[tgt] = out
+        source[tgt] = near
+        # the cells' rough flags (by the driving outputs): reported, and a calibration class
+        ucells, inv = np.unique(lower[sel], axis=0, return_inverse=True)
+        inv = inv.ravel()
+        cell_rough = cell_states(lat, f, st, int(k), ucells, driving)["rough"]
+        rough_node[tgt] = cell_rough[inv]
+        same = used & (oc == out[:, None])
+        for name, g_all in ((nm, f.transformed(nm)) for nm in f.values):
+            gv = g_all[cidx]                                            # (n, 2^d, m)
+            ok = same[:, :, None] & np.isfinite(gv)
+            wv = np.where(ok, w[:, :, None], 0.0)
+            wsum = wv.sum(axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                est = np.einsum("ncm,ncm->nm", wv, np.where(ok, gv, 0.0)) / wsum
+            est[(wsum <= 0) | ~np.isfinite(g_all[near])] = np.nan
+            lo = np.where(ok, gv, np.inf).min(axis=1)
+            hi = np.where(ok, gv, -np.inf).max(axis=1)
+            spread = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, np.nan)
+            ind = bar_indicator(lat, int(k), ucells, surs[name])[inv]            # (n, m)
+            cls = cell_class(lat, f, st, int(k), ucells, g_all, driving, cell_rough)[inv]    # (n, m)
+            # no indicator (no surplus at this level around): the corners' spread
+            bar = np.where(np.isfinite(ind), factors[name].bar(cls, ind), spread)
+            scales[name][tgt] = np.where(np.isfinite(spread) | np.isfinite(ind),
+                                         np.nan_to_num(spread) + np.nan_to_num(ind), np.nan)
+            if f.is_log(name):
+                x = np.exp(est)
+                absbar = x * np.expm1(bar)
+            else:
+                x, absbar = est, bar
+            absbar = np.where(np.isfinite(x), absbar, np.nan)
+            values[name][tgt] = x
+            bars[name][tgt] = absbar
+    return Map(outcome, source, values, bars, rough_node, cell_level, scales)
