@@ -10,6 +10,9 @@ import json
 import math
 import os
 import random
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -710,3 +713,60 @@ def test_gather_refuses_a_point_held_twice(tmp_path, tiny):
                                            rf"positions; the grid has {n}"):
         gather.gather(paths + [copy], tiny, tmp_path / "cube.nc")
     assert not (tmp_path / "cube.nc").exists()
+
+
+# ------------------------------------------------------------------------------- a new output
+
+# a new per-scene output, as a maintainer would add it: one entry in sweep/outputs.py's OUTPUTS
+TRIES_ENTRY = '''    Output("n_tries", "int", "1", "number of integration steps tried (accepted and rejected)",
+           lambda s, j: int(s.istats[I_STEPS] + s.istats[I_REJECTED])),
+'''
+
+TRIES_CHECKS = r'''
+import json, sys
+import numpy as np
+import xarray as xr
+import yaml
+import sweep
+from sweep import chunkfiles, chunking, gather, grid, validation
+cfg = yaml.safe_load(open(sys.argv[2]))
+settings = grid.normalize(cfg, validation.load_schema(), check_scenes=False)
+paper = yaml.safe_load(open(sys.argv[1]))
+paper["stop"].update(t_max=0.3, levels=list(settings["levels"]))
+s = sweep.simulate(paper).summary
+paths = [chunkfiles.write_chunk(c, [s] * len(c.points), f"{cid}.nc") for cid, c in chunking.plan_chunks(settings).items()]
+gather.gather(paths, settings, "cube.nc")
+with xr.open_dataset(paths[0]) as ch, xr.open_dataset("cube.nc") as cube:
+    v = cube["n_tries"]
+    print(json.dumps({"summary": [s["n_tries"], s["n_steps"], s["n_rejected"]],
+                      "chunk": sorted(set(ch["n_tries"].values.ravel().tolist())),
+                      "cube": sorted(set(v.values.ravel().tolist())), "dims": list(v.dims),
+                      "attrs": {k: v.attrs.get(k) for k in ("units", "long_name")},
+                      "compressed": bool(v.encoding.get("zlib") or v.encoding.get("compression"))}))
+'''
+
+
+def test_a_new_output_is_one_registry_entry(tmp_path):
+    """Add an output to a copy of the package as one OUTPUTS entry (nothing else edited): a scene's
+    summary has it (the paper's, kernels run as Python), a chunk file and the gathered cube carry it
+    over the grid's dimensions with its units and long name, compressed."""
+    src = Path(outputs.__file__).resolve().parents[1]
+    copy = tmp_path / "src"
+    shutil.copytree(src / "sweep", copy / "sweep", ignore=shutil.ignore_patterns("__pycache__"))
+    registry = copy / "sweep" / "outputs.py"
+    text = registry.read_text()
+    anchor = '    Output("n_steps", "int", "1",'
+    assert text.count(anchor) == 1
+    registry.write_text(text.replace(anchor, TRIES_ENTRY + anchor))
+    env = {"PYTHONPATH": str(copy), "PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "NUMBA_DISABLE_JIT": "1"}
+    run = subprocess.run([sys.executable, "-c", TRIES_CHECKS, str(ROOT / "config" / "scenes" / "kessler2002.yaml"),
+                          str(ROOT / "config" / "tiny.yaml")], capture_output=True, text=True, env=env, cwd=tmp_path,
+                         timeout=600)
+    assert run.returncode == 0, run.stderr
+    out = json.loads(run.stdout.splitlines()[-1])
+    n_tries, n_steps, n_rejected = out["summary"]
+    assert n_tries == n_steps + n_rejected and n_steps > 0
+    assert out["chunk"] == out["cube"] == [n_tries]
+    assert out["dims"] == list(axes.AXES)
+    assert out["attrs"] == {"units": "1", "long_name": "number of integration steps tried (accepted and rejected)"}
+    assert out["compressed"]
