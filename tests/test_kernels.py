@@ -73,7 +73,7 @@ def _f(t, y, p, cs, n=M.N_CORE):
     dy = np.zeros(M.N_FULL)
     aux = np.zeros(M.N_AUX)
     contact = M.Contact(CN.ROLL, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3], 1.0, 0.0)
-    M.rhs(t, y, p, contact, n, dy, aux)
+    M.rhs(y, p, contact, n, dy, aux)
     return dy[:n].copy(), aux
 
 
@@ -213,7 +213,7 @@ def test_energy_rate_is_the_gradient_of_the_energy_and_the_power_defect_is_round
         dy = np.zeros(M.N_FULL)
         aux = np.zeros(M.N_AUX)
         contact = M.Contact(mode, int(side), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3], 1.0, 0.0)
-        M.rhs(0.0, y, p, contact, M.N_CORE, dy, aux)
+        M.rhs(y, p, contact, M.N_CORE, dy, aux)
         if aux[M.X_OK] != 1.0:
             continue
         # the power's terms: the rates of the energy's parts and the dissipated powers
@@ -253,9 +253,9 @@ def test_energy_kernels_from_the_rhs_trig_are_the_plain_ones_to_the_bit(setup):
         slip = mode != CN.ROLL
         assert CR.mode_energy_at(y, aux, p, cs) == CR.mode_energy(y, p, cs)
         v = rng.normal(size=M.N_FULL) * 1e-3
-        assert (M.energy_rate_trig(y, v, p, side, slip, aux[M.X_SINA], aux[M.X_COSA])
+        assert (M.energy_rate_trig(y, v, p, side, slip, (aux[M.X_SINA], aux[M.X_COSA]))
                 == M.energy_rate(y, v, p, side, slip))
-        assert (M.energy_increment_trig(y, v, p, side, slip, aux[M.X_SINA], aux[M.X_COSA])
+        assert (M.energy_increment_trig(y, v, p, side, slip, (aux[M.X_SINA], aux[M.X_COSA]))
                 == M.energy_increment(y, v, p, side, slip))
 
 
@@ -536,13 +536,13 @@ def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
         nu = SL.attracting_direction(nu0, u, 0.0, y, _sys(p, sl, n, wk, ist))
         if math.isnan(nu):
             continue
-        c, _ = CR.slip_rates(nu, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        c, _ = CR.slip_rates(nu, u, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), dy, aux), ys)
         assert abs(c) < 1e-10
         # attracting: the direction rate cross/u points back to the root from both sides
-        cm, _ = CR.slip_rates(nu - 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
-        cp, _ = CR.slip_rates(nu + 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        cm, _ = CR.slip_rates(nu - 1e-3, u, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), dy, aux), ys)
+        cp, _ = CR.slip_rates(nu + 1e-3, u, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), dy, aux), ys)
         assert cm > 0.0 > cp
-        nu2 = CR.slaved_direction(nu + 1e-4, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        nu2 = CR.slaved_direction(nu + 1e-4, u, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), dy, aux), ys)
         assert abs(math.remainder(nu2 - nu, 2 * math.pi)) < 1e-12
 
 
@@ -572,14 +572,14 @@ def test_onset_direction_takes_a_root_with_a_solution_and_never_a_painleve_pole(
         cs = cs0.copy()
         cs[L.CS_SIDE] = 1.0 if y[M.Y_ALPHA] >= 0.0 else -1.0
         cs[L.CS_SIG:L.CS_SIG + 3] = np.sign(rng.normal(size=3))
-        CR.model_call(0.0, y, _sys(p, cs, n, wk, ist), dy, aux, 1.0, 0.0)
+        CR.model_call(L.Eval(0.0, y, _sys(p, cs, n, wk, ist), dy, aux), 1.0, 0.0)
         if aux[M.X_OK] != 1.0 or aux[M.X_PHI] <= 0.0:
             continue
         F1, F2 = aux[M.X_F1], aux[M.X_F2]
         guess = math.atan2(-F2, -F1)
         cs[L.CS_MODE] = CN.SLAVED
         sys_ = _sys(p, cs, n, wk, ist)
-        scan = np.array([CR.slip_rates(x, 0.0, 0.0, y, sys_, dy, aux, ys) + (aux[M.X_OK],) for x in grid])
+        scan = np.array([CR.slip_rates(x, 0.0, L.Eval(0.0, y, sys_, dy, aux), ys) + (aux[M.X_OK],) for x in grid])
         flips = np.nonzero((scan[:-1, 0] > 0.0) != (scan[1:, 0] > 0.0))[0]
         consistent = any(scan[j, 2] > 0.0 and scan[j + 1, 2] > 0.0 and scan[j + 1, 1] > 0.0 for j in flips)
         poles_seen += sum(1 for j in flips if scan[j, 2] != scan[j + 1, 2])
@@ -587,7 +587,7 @@ def test_onset_direction_takes_a_root_with_a_solution_and_never_a_painleve_pole(
         if nu == guess:
             assert not consistent
             continue
-        cr, dr = CR.slip_rates(nu, 0.0, 0.0, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+        cr, dr = CR.slip_rates(nu, 0.0, L.Eval(0.0, y, _sys(p, cs, n, wk, ist), dy, aux), ys)
         assert math.isfinite(cr) and abs(cr) <= 1e-9 * max(1.0, abs(dr)) and dr > 0.0   # a root, not a pole
         if consistent:
             assert aux[M.X_OK] == 1.0
@@ -615,12 +615,12 @@ def test_slaved_direction_near_a_fold_converges_at_the_round_off_floor():
     assert cs[L.CS_MODE] == CN.SLAVED
     u = math.hypot(y[M.Y_U1], y[M.Y_U2])
     dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
-    root = CR.slaved_direction(cs[L.CS_NU], u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+    root = CR.slaved_direction(cs[L.CS_NU], u, L.Eval(t, y, _sys(p, cs, n, wk, ist), dy, aux), ys)
     assert aux[M.X_OK] == 1.0
     for k in range(-40, 41):
         start = root + k * 4e-16
-        nu = CR.slaved_direction(start, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
-        c, d = CR.slip_rates(nu, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+        nu = CR.slaved_direction(start, u, L.Eval(t, y, _sys(p, cs, n, wk, ist), dy, aux), ys)
+        c, d = CR.slip_rates(nu, u, L.Eval(t, y, _sys(p, cs, n, wk, ist), dy, aux), ys)
         assert aux[M.X_OK] == 1.0, (k, nu)
         assert abs(c) <= CR.DIR_NOISE * math.hypot(c, d) and abs(nu - root) < 1e-12, (k, nu, c)
     # and the slaved right-hand side there is finite (it was NaN with X_OK 1 left by the model)
@@ -910,7 +910,7 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
         # the stored direction would have given another value
         assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[ID.EV_SLIP_STOP]) > 1e-3 * u
     sl[L.CS_NU] = root
-    nu, lag, _, ok, _ = CR.slaved_slip(root, 0.0, y, _sys(p, sl, n, wk, ist), np.zeros(M.N_FULL), np.zeros(M.N_AUX))
+    nu, lag, _, ok, _ = CR.slaved_slip(root, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), np.zeros(M.N_FULL), np.zeros(M.N_AUX)))
     assert ok == 1.0
     # the slip along the friction's direction: the quasi-static one plus its lag (docs/model.md, 'Slow slip')
     expected = y[M.Y_U1] * math.cos(nu + lag) + y[M.Y_U2] * math.sin(nu + lag)

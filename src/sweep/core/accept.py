@@ -110,7 +110,7 @@ def try_step(t, h, consts, work, sys):
 def power_defect(y, dy, aux, p, cs):
     """|dE/dtau + dissipated power| of the evaluated right-hand side dy, aux at y: 0 for the exact
     flow, so what is left is the right-hand side's own round-off in the energy direction."""
-    rate = energy_rate_trig(y, dy, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, aux[X_SINA], aux[X_COSA])
+    rate = energy_rate_trig(y, dy, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, (aux[X_SINA], aux[X_COSA]))
     return abs(rate + dy[Y_DSLIDE] + dy[Y_DK1] + dy[Y_DK2] + dy[Y_DK3])
 
 
@@ -120,7 +120,7 @@ def balance_error(y, aux, d, h, defect, p, cs, consts):
     wk[W_DELTA]) from y (aux: the right-hand side's there) over h, over what it may be (see
     BALANCE_FACTOR); accepted if <= 1. defect: power_defect at the step's ends (the larger); of the
     run's constants (layout.RunConsts) e0 = |E(0)| > 0, t_max (tau) and rtol."""
-    change, scale = energy_increment_trig(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, aux[X_SINA], aux[X_COSA])
+    change, scale = energy_increment_trig(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, (aux[X_SINA], aux[X_COSA]))
     dissipated = d[Y_DSLIDE] + d[Y_DK1] + d[Y_DK2] + d[Y_DK3]
     allowed = (BALANCE_FACTOR * consts.rtol * (max(dissipated, 0.0) + consts.e0 * h / consts.t_max)
                + BALANCE_ROUNDOFF * (scale + abs(d[Y_DSLIDE]) + abs(d[Y_DK1]) + abs(d[Y_DK2]) + abs(d[Y_DK3]))

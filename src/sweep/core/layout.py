@@ -186,6 +186,11 @@ RunConsts = namedtuple("RunConsts", "n rtol atol h_max t_max max_steps peaks_on 
 # outcome). The stepper (dop853) passes it through to the right-hand side it is given and reads only
 # n and wk. integrate.system_arrays allocates it; a run's n is its settings' state_size.
 System = namedtuple("System", "p cs n wk istats")
+# Eval: one evaluation of a right-hand side: at tau t and the state y, in the system sys (System),
+# into the rows dy (d y/d tau) and aux (N_AUX). The slaved slip's solvers (contact_rhs) take it as
+# the state their trial slips (a direction nu, a speed u) are evaluated at and where they leave the
+# last right-hand side.
+Eval = namedtuple("Eval", "t y sys dy aux")
 # Point: a state y, its derivative f and the right-hand side's aux there (N_AUX): a step's start
 # and end (accept.try_step, dop853.rk_step).
 Point = namedtuple("Point", "y f aux")
