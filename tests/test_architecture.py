@@ -31,19 +31,12 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "sweep"
 MAX_PARAMS = 6
 # The core functions over MAX_PARAMS, by reason. Each is a candidate for grouping into a record; a
 # new wide function must be added here with its reason (or take a group instead).
-_STEPPER = "the generic stepper's interface: the caller's right-hand side, its system, the step and its stage/dense buffers"
 _BUFFERS = "a recorder or check writing into caller buffers beside the state and the run's constants"
 WIDE_ALLOWED = {
     "accept.balance_error": _BUFFERS,
     "accept.error_scale": _BUFFERS,
     "accept.state_balance_error": _BUFFERS,
-    "dop853.dense_coeffs": _STEPPER,
-    "dop853.dense_component": _STEPPER,
-    "dop853.dense_eval": _STEPPER,
-    "dop853.initial_step": _STEPPER,
-    "dop853.rk_step": _STEPPER,
     "fits.summary_fits": "the fits' inputs as plain arrays and counts (called from numba and from Python alike)",
-    "frequency.theta_crossing": _BUFFERS,
     "integrate.end_segment": _BUFFERS,
     "integrate.record_segment": _BUFFERS,
     "integrate.integrate": "the Python entry point's public signature (state, parameters, settings, levels, samples, capacities)",
@@ -54,7 +47,6 @@ WIDE_ALLOWED = {
     "scan.lift_off": "a bracket's end values and slopes (g0, d0, g1, d1) of event k on a span at a level",
     "tracking._add_peak": _BUFFERS,
     "tracking.dense_wanted": _BUFFERS,
-    "tracking.step_dense": _STEPPER,
     "tracking.track_frequency": _BUFFERS,
 }
 # a module of the core that outgrows this is split along its seams (contact_rhs / slip / moments /

@@ -65,7 +65,7 @@ def _step(t, y, f, h, sys, K, y_new, f_new=None):
     """dop853.rk_step with the contact right-hand side from (t, y, f) over h into y_new (its
     derivative into f_new if given), in the system sys (layout.System)."""
     f_new = np.zeros(M.N_FULL) if f_new is None else f_new
-    D.rk_step(CR.eval_rhs, t, h, L.Point(y, f, np.zeros(M.N_AUX)), L.Point(y_new, f_new, np.zeros(M.N_AUX)), sys,
+    D.rk_step(CR.eval_rhs, t, h, (L.Point(y, f, np.zeros(M.N_AUX)), L.Point(y_new, f_new, np.zeros(M.N_AUX))), sys,
               K)
 
 
@@ -315,16 +315,17 @@ def test_dense_output_interpolates_the_step_at_seventh_order(setup):
         y_new = np.zeros(M.N_FULL)
         f_new = np.zeros(M.N_FULL)
         _step(0.0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new, f_new)
-        D.dense_coeffs(CR.eval_rhs, 0.0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
+        span = L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist))
+        D.dense_coeffs(CR.eval_rhs, span, y_new, K)
         out = np.zeros(M.N_FULL)
-        D.dense_eval(F, 0, y, 0.0, h, 0.0, n, out)
+        D.dense_eval(span, 0.0, n, out)
         assert np.max(np.abs(out[:n] - y[:n])) < 1e-15
-        D.dense_eval(F, 0, y, 0.0, h, h, n, out)
+        D.dense_eval(span, h, n, out)
         assert np.max(np.abs(out[:n] - y_new[:n])) < 1e-14
         # midpoint against two half steps
         yh = np.zeros(M.N_FULL)
         _step(0.0, y, f, 0.5 * h, _sys(p, cs, n, wk, ist), K, yh)
-        D.dense_eval(F, 0, y, 0.0, h, 0.5 * h, n, out)
+        D.dense_eval(span, 0.5 * h, n, out)
         errs.append(np.max(np.abs(out[:n] - yh[:n])))
     assert errs[0] / errs[1] > 2 ** 6.5      # local error of the interpolant ~ h^8
 
@@ -378,7 +379,7 @@ def _dense_step(p, y, cs, h, n=M.N_CORE, t0=0.0, y_end=None):
     f[:n] = _f(t0, y, p, cs)[0]
     y_new, f_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
     _step(t0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new, f_new)
-    D.dense_coeffs(CR.eval_rhs, t0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
+    D.dense_coeffs(CR.eval_rhs, L.Span(F, 0, y, t0, h, _sys(p, cs, n, wk, ist)), y_new, K)
     if y_end is not None:
         y_end[:] = y_new
     return F, wk, ist
@@ -437,9 +438,10 @@ def test_brent_finds_the_maximum_of_the_normal_force(setup):
     n, h = M.N_CORE, 1.5
     F, wk, ist = _dense_step(p, y, cs, h)
     grid = np.linspace(0.0, h, 2001)
+    span = L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist))
     phi = []
     for t in grid:
-        D.dense_eval(F, 0, y, 0.0, h, t, n, wk[L.W_YBUF])
+        D.dense_eval(span, t, n, wk[L.W_YBUF])
         phi.append(_f(t, wk[L.W_YBUF], p, cs)[1][M.X_PHI])
     i = int(np.argmax(phi))
     assert 0 < i < len(grid) - 1, "the test step must contain an interior maximum of Phi"

@@ -86,7 +86,8 @@ def try_step(t, h, consts, work, sys):
     aux = wk[W_AUX]
     aux_new = wk[W_AUXNEW]
     e_cur = mode_energy_at(y, aux, p, cs)
-    rk_step(eval_rhs, t, h, Point(y, f, aux), Point(y_new, wk[W_FNEW], aux_new), sys, K)
+    start = Point(y, f, aux)
+    rk_step(eval_rhs, t, h, (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K)
     err = 0.0
     for i in range(n):
         if not math.isfinite(y_new[i]):
@@ -222,7 +223,7 @@ def segment_end(span, seg_end, event, check, consts):
         for i in range(sys.n):
             y_seg[i] = wk[W_YNEW, i]
         return mode_energy_at(y_seg, wk[W_AUXNEW], p, cs), 0.0
-    dense_eval(span.F, 0, y, t, span.h, seg_end, sys.n, y_seg)
+    dense_eval(span, seg_end, sys.n, y_seg)
     e_seg = mode_energy(y_seg, p, cs)
     if not check:
         return e_seg, 0.0

@@ -144,7 +144,7 @@ def record_start(consts, work, rec, sys):
     start_scan(work.trk.scan)
     if consts.peaks_on:
         freq_start(y[Y_THETA], aux[X_PHI], rec.fq)
-    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, consts.rtol, consts.atol, norm_size(n))
+    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, (consts.rtol, consts.atol, norm_size(n)))
 
 
 @kernel
@@ -312,13 +312,13 @@ def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
     span = Span(work.F, 0, y, seg.t, seg.h, sys)
     have_dense = seg.dense
     if not have_dense and dense_wanted(seg, e_seg, wk[W_YSEG, Y_THETA], phi_c, consts, trk.track, rec.fq):
-        step_dense(seg.t, y, seg.h, wk[W_YNEW], sys, work.K, work.F)
+        step_dense(span, wk[W_YNEW], work.K)
         have_dense = True
     if seg.running:
         t_halt = record_levels(span, seg.end, e_seg, consts, trk, rec)
         if t_halt >= 0.0:
             outcome = oc.HALTED
-            dense_eval(work.F, 0, y, seg.t, seg.h, t_halt, consts.n, wk[W_YBUF])
+            dense_eval(span, t_halt, consts.n, wk[W_YBUF])
             mark_end(t_halt, wk[W_YBUF], sys, trk.ends, rec)
             start_deep_levels(level_e, rec.levels, sys.p, trk.track, rec.fstats)
         elif trk.track.at[TK_LEVEL] < level_e.shape[0]:

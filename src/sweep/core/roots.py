@@ -160,7 +160,7 @@ def reads_forces(k):
 def span_state(t, span):
     """The state at time t on the dense output of a step (span: layout.Span), into its wk[W_YBUF]."""
     sys = span.sys
-    dense_eval(span.F, span.row0, span.y0, span.t0, span.h, t, sys.n, sys.wk[W_YBUF])
+    dense_eval(span, t, sys.n, sys.wk[W_YBUF])
 
 
 @kernel

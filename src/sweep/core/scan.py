@@ -109,7 +109,7 @@ def dense_built(have_dense, span, work):
     """The accepted step's dense output in F[0:7] (the step span, layout.Span, from work.y to
     wk[W_YNEW]), built once per step: returns True."""
     if not have_dense:
-        step_dense(span.t0, span.y0, span.h, span.sys.wk[W_YNEW], span.sys, work.K, span.F)
+        step_dense(span, span.sys.wk[W_YNEW], work.K)
     return True
 
 

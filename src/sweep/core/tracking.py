@@ -78,12 +78,13 @@ def peak_bracketed(phi_c, trk):
 
 
 @kernel
-def step_dense(t, y, h, y_new, sys, K, F):
-    """dop853.dense_coeffs for the contact right-hand side (contact_rhs.eval_rhs): the dense output F[0:7]
-    of the step from y at t over h to y_new, from its stages K, in the system sys (layout.System).
+def step_dense(span, y_new, K):
+    """dop853.dense_coeffs for the contact right-hand side (contact_rhs.eval_rhs): the dense output
+    (rows row0..row0 + 6 of span.F) of the step span (layout.Span: from y0 at t0 over h, in its
+    system) to y_new, from its stages K.
     A kernel of its own: the stepper's kernels are inlined into their callers, and this one
     compiled copy serves every step's dense output (scan.dense_built, previous_dense)."""
-    dense_coeffs(eval_rhs, t, y, h, y_new, sys, K, F)
+    dense_coeffs(eval_rhs, span, y_new, K)
 
 
 @kernel
@@ -94,7 +95,8 @@ def previous_dense(sys, work):
     K, F, trk, wk = work.K, work.F, work.trk.track, sys.wk
     if not trk.flags[TF_PREV_DENSE]:
         before = System(sys.p, wk[W_CSPREV, :N_CS], sys.n, wk, sys.istats)
-        step_dense(trk.phi[PH_TPREV], wk[W_YPREV], trk.phi[PH_HPREV], work.y, before, K[K_PREV:], F[N_DENSE:])
+        span = Span(F, N_DENSE, wk[W_YPREV], trk.phi[PH_TPREV], trk.phi[PH_HPREV], before)
+        step_dense(span, work.y, K[K_PREV:])
         trk.flags[TF_PREV_DENSE] = True
 
 
@@ -122,7 +124,7 @@ def record_levels(span, seg_end, e_seg, consts, trk, rec):
             ta, tb = locate(EV_LEVEL, t, gl0, seg_end, gl, span, level_e[L])
         tl = 0.5 * (ta + tb)
         ybuf = sys.wk[W_YBUF]
-        dense_eval(span.F, 0, y, t, h, tl, sys.n, ybuf)
+        dense_eval(span, tl, sys.n, ybuf)
         level_out[L, L_TAU] = tl
         level_out[L, L_ALPHA] = ybuf[Y_ALPHA]
         if consts.peaks_on:
@@ -168,7 +170,7 @@ def record_samples(span, seg_end, t_stop, sample_tau, trk, samples):
         ts = sample_tau[j]
         if ts > seg_end or ts > t_stop:
             return
-        dense_eval(span.F, 0, span.y0, span.t0, span.h, ts, n, wk[W_YBUF])
+        dense_eval(span, ts, n, wk[W_YBUF])
         eval_rhs(ts, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])
         record_sample(wk[W_YBUF], wk[W_AUXBUF], p, cs, n, samples[j])
         trk.at[TK_SAMPLE] = j + 1
@@ -228,10 +230,10 @@ def track_peaks(this, seg_end, phi_c, running, work, rec):
         ybuf = wk[W_YBUF]
         if pv1 >= pv2:
             tpk, pvk = tp1, pv1
-            dense_eval(F, N_DENSE, wk[W_YPREV], trk.phi[PH_TPREV], trk.phi[PH_HPREV], tpk, sys.n, ybuf)
+            dense_eval(before, tpk, sys.n, ybuf)
         else:
             tpk, pvk = tp2, pv2
-            dense_eval(F, 0, this.y0, t, this.h, tpk, sys.n, ybuf)
+            dense_eval(this, tpk, sys.n, ybuf)
         thk = ybuf[Y_THETA]
         # round-off wiggles (e.g. of a creeping slip) have no prominence; real nutation peaks rise
         # ~0.1 Phi above the bracket ends
