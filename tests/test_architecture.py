@@ -29,25 +29,14 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "sweep"
 MAX_PARAMS = 6
-# The core functions over MAX_PARAMS, by reason. Each is a candidate for grouping into a record; a
-# new wide function must be added here with its reason (or take a group instead).
-_BUFFERS = "a recorder or check writing into caller buffers beside the state and the run's constants"
+# The core functions over MAX_PARAMS, by reason: Python's entry points. Every kernel takes its groups
+# as records (layout.py: System, Work, Record, RunConsts, Run, Eval, Point, Span, Segment, Bracket,
+# Hermite, Peak; model.Contact) or small tuples ((sin, cos) of alpha, a 2x2 system (m, b)). A new
+# wide function must be added here with its reason (or take a group instead).
 WIDE_ALLOWED = {
-    "accept.balance_error": _BUFFERS,
-    "accept.error_scale": _BUFFERS,
-    "accept.state_balance_error": _BUFFERS,
-    "fits.summary_fits": "the fits' inputs as plain arrays and counts (called from numba and from Python alike)",
-    "integrate.end_segment": _BUFFERS,
-    "integrate.record_segment": _BUFFERS,
+    "fits.summary_fits": "the fits' inputs as plain arrays and counts: called from Python (sweep.simulate) as from numba (core.ensemble)",
     "integrate.integrate": "the Python entry point's public signature (state, parameters, settings, levels, samples, capacities)",
     "model.make_params": "the physical inputs of a disk (Python, once per scene)",
-    "roots.event_rates": _BUFFERS,
-    "roots.locate": "a bracket (ta, ga, tb, gb) of event k on a span at a level",
-    "roots.sign_slopes": "a step's two ends (y, f) and its size for component i's sign",
-    "scan.lift_off": "a bracket's end values and slopes (g0, d0, g1, d1) of event k on a span at a level",
-    "tracking._add_peak": _BUFFERS,
-    "tracking.dense_wanted": _BUFFERS,
-    "tracking.track_frequency": _BUFFERS,
 }
 # a module of the core that outgrows this is split along its seams (contact_rhs / slip / moments /
 # event_rules; integrate / scan / accept)

@@ -129,7 +129,8 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
         inc_res = abs(change + np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]))
         assert abs(inc_res - res[-1]) < 1e-15 * e_cur, (inc_res, res[-1])
         # balance_error is that residual over its allowance, which grows with h and the dissipation
-        ratio = A.balance_error(y, aux, wk[L.W_DELTA], h, 0.0, p, cs, _consts(1e-10, e0=e_cur, t_max=100.0))
+        ratio = A.balance_error(L.Point(y, f, aux), wk[L.W_DELTA], h, 0.0, _sys(p, cs, n, wk, ist),
+                                _consts(1e-10, e0=e_cur, t_max=100.0))
         allowed = A.BALANCE_FACTOR * 1e-10 * (np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
         assert inc_res / ratio >= allowed
     assert res[0] / res[1] > 256.0 and res[2] / res[3] > 256.0, res
@@ -297,7 +298,7 @@ def test_error_scale_is_hairers_with_the_inclination_and_slip_rules(alpha):
         ref = atol + rtol * mag
         ref[M.Y_U1:M.Y_U2 + 1] = u_atol + rtol * mag[M.Y_U1:M.Y_U2 + 1]
         sc = np.full(M.N_FULL, -1.0)
-        error_scale(y, y_new, n, rtol, atol, u_atol, sc)
+        error_scale(y, y_new, n, (rtol, atol, u_atol), sc)
         np.testing.assert_allclose(sc[:n], ref, rtol=1e-12)
         assert np.all(sc[n:] == -1.0)
 
@@ -398,7 +399,7 @@ def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
     g0 = R.event_value_at(k, 0.0, span, math.nan)
     g1 = R.event_value_at(k, h, span, math.nan)
     assert g0 > 0.0 >= g1, (g0, g1)
-    ta, tb = R.locate(k, 0.0, g0, h, g1, span, math.nan)
+    ta, tb = R.locate(k, L.Bracket(0.0, g0, h, g1), span, math.nan)
     assert tb - ta <= R.location_tol(tb)
     assert R.event_value_at(k, ta, span, math.nan) > 0.0
     assert R.event_value_at(k, tb, span, math.nan) <= 0.0
@@ -424,7 +425,7 @@ def test_locate_closes_a_force_event_bracket_superlinearly(setup):
     g1 = R.event_value_at(k, h, span, math.nan)
     assert g0 > 0.0 >= g1, (g0, g1)
     rhs_before = ist[L.I_RHS]
-    ta, tb = R.locate(k, 0.0, g0, h, g1, span, math.nan)
+    ta, tb = R.locate(k, L.Bracket(0.0, g0, h, g1), span, math.nan)
     evaluations = ist[L.I_RHS] - rhs_before
     assert tb - ta <= R.location_tol(tb)
     assert R.event_value_at(k, ta, span, math.nan) > 0.0
@@ -437,8 +438,8 @@ def test_brent_finds_the_maximum_of_the_normal_force(setup):
     p, y, cs = setup
     n, h = M.N_CORE, 1.5
     F, wk, ist = _dense_step(p, y, cs, h)
-    grid = np.linspace(0.0, h, 2001)
     span = L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist))
+    grid = np.linspace(0.0, h, 2001)
     phi = []
     for t in grid:
         D.dense_eval(span, t, n, wk[L.W_YBUF])
@@ -731,7 +732,7 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
     g = np.zeros(L.N_WCOLS)
     ED.event_values(0.0, y, aux, _ev_sys(p, cs), math.nan, g)
     rates = np.zeros(L.N_WCOLS)
-    R.event_rates(0.0, y, f, g, rates, math.nan, _sys(p, cs, n, wk, ist))
+    R.event_rates(0.0, L.Point(y, f, aux), g, rates, math.nan, _sys(p, cs, n, wk, ist))
     for k in range(3):
         exact = cs[L.CS_SIG + k] * R.sign_rate(k, y, f)
         assert rates[ID.EV_SIGN1 + k] == pytest.approx(exact, rel=1e-6, abs=1e-7)

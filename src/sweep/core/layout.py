@@ -203,3 +203,13 @@ Span = namedtuple("Span", "F row0 y0 t0 h sys")
 # (dense), whether the scene was running when the step began (running: not yet ended, else the
 # step only completes frequency windows after a halt), and whether the step ends at t_max (at_tmax).
 Segment = namedtuple("Segment", "t h end k dense running at_tmax")
+# Bracket: event k's value ga > 0 at tau ta and gb <= 0 at tb > ta (roots.locate shrinks it).
+Bracket = namedtuple("Bracket", "ta ga tb gb")
+# Hermite: a function's values g0, g1 at the two ends of a step and its slopes d0, d1 there per unit
+# of the step (the cubic Hermite interpolant's data: roots.hermite_peak, scan.lift_off).
+Hermite = namedtuple("Hermite", "g0 d0 g1 d1")
+# Peak: a maximum of the normal force: tau, Phi and theta there (tracking's counted maxima, PK_*).
+Peak = namedtuple("Peak", "tau phi theta")
+# Run: what a scene's step loop carries from step to step (integrate.run): its constants (RunConsts),
+# the system (System) and the buffers it integrates in and writes (Work, Record).
+Run = namedtuple("Run", "consts sys work rec")
