@@ -29,34 +29,14 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "sweep"
 MAX_PARAMS = 6
-# The core functions over MAX_PARAMS, by reason. Each is a candidate for grouping into a record; a
-# new wide function must be added here with its reason (or take a group instead).
-_EQUATIONS = "the model's scalar equations: state, parameters and the trig values or side the inlined right-hand side passes, as scalars (a tuple built per call inside the hot right-hand side)"
-_STEPPER = "the generic stepper's interface: the caller's right-hand side, its system, the step and its stage/dense buffers"
-_SLIP_SOLVE = "a trial slip (direction nu, speed u) at the state (t, y) in the system, with the output rows it fills"
-_BUFFERS = "a recorder or check writing into caller buffers beside the state and the run's constants"
+# The core functions over MAX_PARAMS, by reason: Python's entry points. Every kernel takes its groups
+# as records (layout.py: System, Work, Record, RunConsts, Run, Eval, Point, Span, Segment, Bracket,
+# Hermite, Peak; model.Contact) or small tuples ((sin, cos) of alpha, a 2x2 system (m, b)). A new
+# wide function must be added here with its reason (or take a group instead).
 WIDE_ALLOWED = {
-    "accept.balance_error": _BUFFERS, "accept.error_scale": _BUFFERS, "accept.state_balance_error": _BUFFERS,
-    "contact_rhs._model": _SLIP_SOLVE, "contact_rhs.direction_lag": _SLIP_SOLVE, "contact_rhs.lag_and_error": _SLIP_SOLVE,
-    "contact_rhs.model_call": _SLIP_SOLVE, "contact_rhs.root_lag": _SLIP_SOLVE, "contact_rhs.slaved_direction": _SLIP_SOLVE,
-    "contact_rhs.slide_model": _SLIP_SOLVE, "contact_rhs.slip_rates": _SLIP_SOLVE, "slip.dip_crosses": _SLIP_SOLVE,
-    "contact_rhs.direction_from": _SLIP_SOLVE, "contact_rhs.second_order": _SLIP_SOLVE,
-    "contact_rhs.second_order_lag": _SLIP_SOLVE,
-    "dop853.dense_coeffs": _STEPPER, "dop853.dense_component": _STEPPER, "dop853.dense_eval": _STEPPER,
-    "dop853.initial_step": _STEPPER, "dop853.rk_step": _STEPPER,
-    "fits.summary_fits": "the fits' inputs as plain arrays and counts (called from numba and from Python alike)",
-    "frequency.theta_crossing": _BUFFERS, "impulse.project_velocity": _EQUATIONS,
-    "integrate.end_segment": _BUFFERS, "integrate.record_segment": _BUFFERS,
+    "fits.summary_fits": "the fits' inputs as plain arrays and counts: called from Python (sweep.simulate) as from numba (core.ensemble)",
     "integrate.integrate": "the Python entry point's public signature (state, parameters, settings, levels, samples, capacities)",
-    "model.centre_velocity": _EQUATIONS, "model.contact_rates": _EQUATIONS, "model.energy_from_trig": _EQUATIONS,
-    "model.energy_increment_trig": _EQUATIONS, "model.energy_rate_trig": _EQUATIONS, "model.held_spin_rates": _EQUATIONS,
-    "model.make_params": "the physical inputs of a disk (Python, once per scene)", "model.rhs": _EQUATIONS,
-    "model.spin_balance": _EQUATIONS, "model.tilt_balance": _EQUATIONS,
-    "roots.event_rates": _BUFFERS, "roots.locate": "a bracket (ta, ga, tb, gb) of event k on a span at a level",
-    "roots.sign_slopes": "a step's two ends (y, f) and its size for component i's sign",
-    "scan.lift_off": "a bracket's end values and slopes (g0, d0, g1, d1) of event k on a span at a level",
-    "tracking._add_peak": _BUFFERS, "tracking.dense_wanted": _BUFFERS,
-    "tracking.step_dense": _STEPPER, "tracking.track_frequency": _BUFFERS,
+    "model.make_params": "the physical inputs of a disk (Python, once per scene)",
 }
 # a module of src/sweep that outgrows this is split along its seams (the core's contact_rhs / slip /
 # moments / event_rules and integrate / scan / accept; the pipeline's chunkfiles / verify / gather / cf)

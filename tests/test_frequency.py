@@ -41,7 +41,7 @@ def nutation_hz(beta, scene):
     def f(y):
         dy = np.zeros(model.N_FULL)
         aux = np.zeros(model.N_AUX)
-        model.rhs(0.0, y, p, model.Contact(ROLL, 1.0, np.ones(3), np.zeros(3), 0.0, 0.0), model.N_CORE, dy, aux)
+        model.rhs(y, p, model.Contact(ROLL, 1.0, np.ones(3), np.zeros(3), 0.0, 0.0), model.N_CORE, dy, aux)
         return dy[:4]
 
     assert np.max(np.abs(f(y0))) < 1e-13          # it is steady

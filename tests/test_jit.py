@@ -72,5 +72,5 @@ def test_kernels_compile_without_refcounts_and_return_no_arrays(tmp_path):
     for name, k in kernels.items():
         assert k["nrt"] is False and k["cached"], name
         assert not k["array_return"], (name, k["returns"])
-        # a constant argument (dense_eval(F, 0, ...)) does not compile a copy of its own (core.jit.Kernel)
+        # a constant argument (slip_rates(x, 0.0, ...)) does not compile a copy of its own (core.jit.Kernel)
         assert k["kernel"] == "Kernel" and not k["literal_args"], (name, k["literal_args"])

@@ -65,7 +65,7 @@ def _step(t, y, f, h, sys, K, y_new, f_new=None):
     """dop853.rk_step with the contact right-hand side from (t, y, f) over h into y_new (its
     derivative into f_new if given), in the system sys (layout.System)."""
     f_new = np.zeros(M.N_FULL) if f_new is None else f_new
-    D.rk_step(CR.eval_rhs, t, h, L.Point(y, f, np.zeros(M.N_AUX)), L.Point(y_new, f_new, np.zeros(M.N_AUX)), sys,
+    D.rk_step(CR.eval_rhs, t, h, (L.Point(y, f, np.zeros(M.N_AUX)), L.Point(y_new, f_new, np.zeros(M.N_AUX))), sys,
               K)
 
 
@@ -73,7 +73,7 @@ def _f(t, y, p, cs, n=M.N_CORE):
     dy = np.zeros(M.N_FULL)
     aux = np.zeros(M.N_AUX)
     contact = M.Contact(CN.ROLL, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3], 1.0, 0.0)
-    M.rhs(t, y, p, contact, n, dy, aux)
+    M.rhs(y, p, contact, n, dy, aux)
     return dy[:n].copy(), aux
 
 
@@ -129,7 +129,8 @@ def test_energy_balance_residual_is_the_local_error_of_the_step(setup, side):
         inc_res = abs(change + np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]))
         assert abs(inc_res - res[-1]) < 1e-15 * e_cur, (inc_res, res[-1])
         # balance_error is that residual over its allowance, which grows with h and the dissipation
-        ratio = A.balance_error(y, aux, wk[L.W_DELTA], h, 0.0, p, cs, _consts(1e-10, e0=e_cur, t_max=100.0))
+        ratio = A.balance_error(L.Point(y, f, aux), wk[L.W_DELTA], h, 0.0, _sys(p, cs, n, wk, ist),
+                                _consts(1e-10, e0=e_cur, t_max=100.0))
         allowed = A.BALANCE_FACTOR * 1e-10 * (np.sum(delta[M.Y_DSLIDE:M.Y_DK3 + 1]) + e_cur * h / 100.0)
         assert inc_res / ratio >= allowed
     assert res[0] / res[1] > 256.0 and res[2] / res[3] > 256.0, res
@@ -213,7 +214,7 @@ def test_energy_rate_is_the_gradient_of_the_energy_and_the_power_defect_is_round
         dy = np.zeros(M.N_FULL)
         aux = np.zeros(M.N_AUX)
         contact = M.Contact(mode, int(side), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3], 1.0, 0.0)
-        M.rhs(0.0, y, p, contact, M.N_CORE, dy, aux)
+        M.rhs(y, p, contact, M.N_CORE, dy, aux)
         if aux[M.X_OK] != 1.0:
             continue
         # the power's terms: the rates of the energy's parts and the dissipated powers
@@ -253,9 +254,9 @@ def test_energy_kernels_from_the_rhs_trig_are_the_plain_ones_to_the_bit(setup):
         slip = mode != CN.ROLL
         assert CR.mode_energy_at(y, aux, p, cs) == CR.mode_energy(y, p, cs)
         v = rng.normal(size=M.N_FULL) * 1e-3
-        assert (M.energy_rate_trig(y, v, p, side, slip, aux[M.X_SINA], aux[M.X_COSA])
+        assert (M.energy_rate_trig(y, v, p, side, slip, (aux[M.X_SINA], aux[M.X_COSA]))
                 == M.energy_rate(y, v, p, side, slip))
-        assert (M.energy_increment_trig(y, v, p, side, slip, aux[M.X_SINA], aux[M.X_COSA])
+        assert (M.energy_increment_trig(y, v, p, side, slip, (aux[M.X_SINA], aux[M.X_COSA]))
                 == M.energy_increment(y, v, p, side, slip))
 
 
@@ -297,7 +298,7 @@ def test_error_scale_is_hairers_with_the_inclination_and_slip_rules(alpha):
         ref = atol + rtol * mag
         ref[M.Y_U1:M.Y_U2 + 1] = u_atol + rtol * mag[M.Y_U1:M.Y_U2 + 1]
         sc = np.full(M.N_FULL, -1.0)
-        error_scale(y, y_new, n, rtol, atol, u_atol, sc)
+        error_scale(y, y_new, n, (rtol, atol, u_atol), sc)
         np.testing.assert_allclose(sc[:n], ref, rtol=1e-12)
         assert np.all(sc[n:] == -1.0)
 
@@ -315,16 +316,17 @@ def test_dense_output_interpolates_the_step_at_seventh_order(setup):
         y_new = np.zeros(M.N_FULL)
         f_new = np.zeros(M.N_FULL)
         _step(0.0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new, f_new)
-        D.dense_coeffs(CR.eval_rhs, 0.0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
+        span = L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist))
+        D.dense_coeffs(CR.eval_rhs, span, y_new, K)
         out = np.zeros(M.N_FULL)
-        D.dense_eval(F, 0, y, 0.0, h, 0.0, n, out)
+        D.dense_eval(span, 0.0, n, out)
         assert np.max(np.abs(out[:n] - y[:n])) < 1e-15
-        D.dense_eval(F, 0, y, 0.0, h, h, n, out)
+        D.dense_eval(span, h, n, out)
         assert np.max(np.abs(out[:n] - y_new[:n])) < 1e-14
         # midpoint against two half steps
         yh = np.zeros(M.N_FULL)
         _step(0.0, y, f, 0.5 * h, _sys(p, cs, n, wk, ist), K, yh)
-        D.dense_eval(F, 0, y, 0.0, h, 0.5 * h, n, out)
+        D.dense_eval(span, 0.5 * h, n, out)
         errs.append(np.max(np.abs(out[:n] - yh[:n])))
     assert errs[0] / errs[1] > 2 ** 6.5      # local error of the interpolant ~ h^8
 
@@ -378,7 +380,7 @@ def _dense_step(p, y, cs, h, n=M.N_CORE, t0=0.0, y_end=None):
     f[:n] = _f(t0, y, p, cs)[0]
     y_new, f_new = np.zeros(M.N_FULL), np.zeros(M.N_FULL)
     _step(t0, y, f, h, _sys(p, cs, n, wk, ist), K, y_new, f_new)
-    D.dense_coeffs(CR.eval_rhs, t0, y, h, y_new, _sys(p, cs, n, wk, ist), K, F)
+    D.dense_coeffs(CR.eval_rhs, L.Span(F, 0, y, t0, h, _sys(p, cs, n, wk, ist)), y_new, K)
     if y_end is not None:
         y_end[:] = y_new
     return F, wk, ist
@@ -397,7 +399,7 @@ def test_locate_brackets_a_sign_event_to_the_tolerance(setup):
     g0 = R.event_value_at(k, 0.0, span, math.nan)
     g1 = R.event_value_at(k, h, span, math.nan)
     assert g0 > 0.0 >= g1, (g0, g1)
-    ta, tb = R.locate(k, 0.0, g0, h, g1, span, math.nan)
+    ta, tb = R.locate(k, L.Bracket(0.0, g0, h, g1), span, math.nan)
     assert tb - ta <= R.location_tol(tb)
     assert R.event_value_at(k, ta, span, math.nan) > 0.0
     assert R.event_value_at(k, tb, span, math.nan) <= 0.0
@@ -423,7 +425,7 @@ def test_locate_closes_a_force_event_bracket_superlinearly(setup):
     g1 = R.event_value_at(k, h, span, math.nan)
     assert g0 > 0.0 >= g1, (g0, g1)
     rhs_before = ist[L.I_RHS]
-    ta, tb = R.locate(k, 0.0, g0, h, g1, span, math.nan)
+    ta, tb = R.locate(k, L.Bracket(0.0, g0, h, g1), span, math.nan)
     evaluations = ist[L.I_RHS] - rhs_before
     assert tb - ta <= R.location_tol(tb)
     assert R.event_value_at(k, ta, span, math.nan) > 0.0
@@ -436,10 +438,11 @@ def test_brent_finds_the_maximum_of_the_normal_force(setup):
     p, y, cs = setup
     n, h = M.N_CORE, 1.5
     F, wk, ist = _dense_step(p, y, cs, h)
+    span = L.Span(F, 0, y, 0.0, h, _sys(p, cs, n, wk, ist))
     grid = np.linspace(0.0, h, 2001)
     phi = []
     for t in grid:
-        D.dense_eval(F, 0, y, 0.0, h, t, n, wk[L.W_YBUF])
+        D.dense_eval(span, t, n, wk[L.W_YBUF])
         phi.append(_f(t, wk[L.W_YBUF], p, cs)[1][M.X_PHI])
     i = int(np.argmax(phi))
     assert 0 < i < len(grid) - 1, "the test step must contain an interior maximum of Phi"
@@ -536,13 +539,13 @@ def test_slaved_and_attracting_directions_are_roots_of_the_cross_product(setup):
         nu = SL.attracting_direction(nu0, u, 0.0, y, _sys(p, sl, n, wk, ist))
         if math.isnan(nu):
             continue
-        c, _ = CR.slip_rates(nu, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        c, _ = CR.slip_rates(nu, u, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), dy, aux), ys)
         assert abs(c) < 1e-10
         # attracting: the direction rate cross/u points back to the root from both sides
-        cm, _ = CR.slip_rates(nu - 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
-        cp, _ = CR.slip_rates(nu + 1e-3, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        cm, _ = CR.slip_rates(nu - 1e-3, u, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), dy, aux), ys)
+        cp, _ = CR.slip_rates(nu + 1e-3, u, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), dy, aux), ys)
         assert cm > 0.0 > cp
-        nu2 = CR.slaved_direction(nu + 1e-4, u, 0.0, y, _sys(p, sl, n, wk, ist), dy, aux, ys)
+        nu2 = CR.slaved_direction(nu + 1e-4, u, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), dy, aux), ys)
         assert abs(math.remainder(nu2 - nu, 2 * math.pi)) < 1e-12
 
 
@@ -572,14 +575,14 @@ def test_onset_direction_takes_a_root_with_a_solution_and_never_a_painleve_pole(
         cs = cs0.copy()
         cs[L.CS_SIDE] = 1.0 if y[M.Y_ALPHA] >= 0.0 else -1.0
         cs[L.CS_SIG:L.CS_SIG + 3] = np.sign(rng.normal(size=3))
-        CR.model_call(0.0, y, _sys(p, cs, n, wk, ist), dy, aux, 1.0, 0.0)
+        CR.model_call(L.Eval(0.0, y, _sys(p, cs, n, wk, ist), dy, aux), 1.0, 0.0)
         if aux[M.X_OK] != 1.0 or aux[M.X_PHI] <= 0.0:
             continue
         F1, F2 = aux[M.X_F1], aux[M.X_F2]
         guess = math.atan2(-F2, -F1)
         cs[L.CS_MODE] = CN.SLAVED
         sys_ = _sys(p, cs, n, wk, ist)
-        scan = np.array([CR.slip_rates(x, 0.0, 0.0, y, sys_, dy, aux, ys) + (aux[M.X_OK],) for x in grid])
+        scan = np.array([CR.slip_rates(x, 0.0, L.Eval(0.0, y, sys_, dy, aux), ys) + (aux[M.X_OK],) for x in grid])
         flips = np.nonzero((scan[:-1, 0] > 0.0) != (scan[1:, 0] > 0.0))[0]
         consistent = any(scan[j, 2] > 0.0 and scan[j + 1, 2] > 0.0 and scan[j + 1, 1] > 0.0 for j in flips)
         poles_seen += sum(1 for j in flips if scan[j, 2] != scan[j + 1, 2])
@@ -587,7 +590,7 @@ def test_onset_direction_takes_a_root_with_a_solution_and_never_a_painleve_pole(
         if nu == guess:
             assert not consistent
             continue
-        cr, dr = CR.slip_rates(nu, 0.0, 0.0, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+        cr, dr = CR.slip_rates(nu, 0.0, L.Eval(0.0, y, _sys(p, cs, n, wk, ist), dy, aux), ys)
         assert math.isfinite(cr) and abs(cr) <= 1e-9 * max(1.0, abs(dr)) and dr > 0.0   # a root, not a pole
         if consistent:
             assert aux[M.X_OK] == 1.0
@@ -615,12 +618,12 @@ def test_slaved_direction_near_a_fold_converges_at_the_round_off_floor():
     assert cs[L.CS_MODE] == CN.SLAVED
     u = math.hypot(y[M.Y_U1], y[M.Y_U2])
     dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
-    root = CR.slaved_direction(cs[L.CS_NU], u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+    root = CR.slaved_direction(cs[L.CS_NU], u, L.Eval(t, y, _sys(p, cs, n, wk, ist), dy, aux), ys)
     assert aux[M.X_OK] == 1.0
     for k in range(-40, 41):
         start = root + k * 4e-16
-        nu = CR.slaved_direction(start, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
-        c, d = CR.slip_rates(nu, u, t, y, _sys(p, cs, n, wk, ist), dy, aux, ys)
+        nu = CR.slaved_direction(start, u, L.Eval(t, y, _sys(p, cs, n, wk, ist), dy, aux), ys)
+        c, d = CR.slip_rates(nu, u, L.Eval(t, y, _sys(p, cs, n, wk, ist), dy, aux), ys)
         assert aux[M.X_OK] == 1.0, (k, nu)
         assert abs(c) <= CR.DIR_NOISE * math.hypot(c, d) and abs(nu - root) < 1e-12, (k, nu, c)
     # and the slaved right-hand side there is finite (it was NaN with X_OK 1 left by the model)
@@ -729,7 +732,7 @@ def test_event_rates_are_the_slopes_of_the_event_functions_along_the_solution(se
     g = np.zeros(L.N_WCOLS)
     ED.event_values(0.0, y, aux, _ev_sys(p, cs), math.nan, g)
     rates = np.zeros(L.N_WCOLS)
-    R.event_rates(0.0, y, f, g, rates, math.nan, _sys(p, cs, n, wk, ist))
+    R.event_rates(0.0, L.Point(y, f, aux), g, rates, math.nan, _sys(p, cs, n, wk, ist))
     for k in range(3):
         exact = cs[L.CS_SIG + k] * R.sign_rate(k, y, f)
         assert rates[ID.EV_SIGN1 + k] == pytest.approx(exact, rel=1e-6, abs=1e-7)
@@ -910,7 +913,7 @@ def test_a_slaved_slips_end_reads_the_slaved_direction_at_the_state(setup):
         # the stored direction would have given another value
         assert abs(y[M.Y_U1] * math.cos(stored) + y[M.Y_U2] * math.sin(stored) - g[ID.EV_SLIP_STOP]) > 1e-3 * u
     sl[L.CS_NU] = root
-    nu, lag, _, ok, _ = CR.slaved_slip(root, 0.0, y, _sys(p, sl, n, wk, ist), np.zeros(M.N_FULL), np.zeros(M.N_AUX))
+    nu, lag, _, ok, _ = CR.slaved_slip(root, L.Eval(0.0, y, _sys(p, sl, n, wk, ist), np.zeros(M.N_FULL), np.zeros(M.N_AUX)))
     assert ok == 1.0
     # the slip along the friction's direction: the quasi-static one plus its lag (docs/model.md, 'Slow slip')
     expected = y[M.Y_U1] * math.cos(nu + lag) + y[M.Y_U2] * math.sin(nu + lag)

@@ -160,7 +160,7 @@ def rhs_errors(rolling, stuckset, seed, n_valid=N_VALID):
         sig = np.array([1.0 if gi > 0 else (-1.0 if gi < 0 else float(rng.choice([-1, 1])))
                         for gi in g])
 
-        M.rhs(0.0, y, p, M.Contact(mode, side, sig, stuck, n0[0], n0[1]), M.N_FULL, dy, aux)
+        M.rhs(y, p, M.Contact(mode, side, sig, stuck, n0[0], n0[1]), M.N_FULL, dy, aux)
         ws, sol, der, dyr, auxr, n_dir = reference_rhs(disk, y, side, rolling, sig, stuck, n0)
 
         # ok flag: den > 0 <=> the normal force increases with gravity (N is affine in g)
@@ -193,7 +193,7 @@ def rhs_errors(rolling, stuckset, seed, n_valid=N_VALID):
 
         # N_CORE call fills the same first 10 derivatives
         dy_core[:] = np.nan
-        M.rhs(0.0, y, p, M.Contact(mode, side, sig, stuck, n0[0], n0[1]), M.N_CORE, dy_core, aux)
+        M.rhs(y, p, M.Contact(mode, side, sig, stuck, n0[0], n0[1]), M.N_CORE, dy_core, aux)
         err["core_vs_full"] = max(err["core_vs_full"],
                                   np.max(np.abs(dy_core[:M.N_CORE] - dy[:M.N_CORE])))
 
@@ -342,7 +342,7 @@ def test_energy_balance_holds_past_the_rim_edge_with_the_side_kept(rolling):
         side = -math.copysign(1.0, alpha)      # past the edge, on the rim it came from
         y = random_state(rng, rolling, alpha)
         sig = np.array([float(rng.choice([-1.0, 1.0])) for _ in range(3)])
-        M.rhs(0.0, y, p, M.Contact(mode, side, sig, np.zeros(3, np.int64), 1.0, 0.0), M.N_FULL, dy, aux)
+        M.rhs(y, p, M.Contact(mode, side, sig, np.zeros(3, np.int64), 1.0, 0.0), M.N_FULL, dy, aux)
         if aux[M.X_OK] != 1.0 or p[M.P_H] < 0.01:
             continue
         n_valid += 1
@@ -395,7 +395,7 @@ def test_project_velocity():
                     ws_old = ne.from_reduced(disk, y0, side_old, mode_old == CN.ROLL,
                                              y0[M.Y_THETA], y0[M.Y_PSI])
                     E_old = M.energy(y0, p, side_old, mode_old)
-                    loss = project_velocity(y, p, side_old, mode_old == CN.SLIDE, side_new, mode_new == CN.SLIDE,
+                    loss = project_velocity(y, p, (side_old, mode_old == CN.SLIDE), (side_new, mode_new == CN.SLIDE),
                                             np.zeros((7, 12)))
                     # the impulse leaves the configuration: compare at the height of side_old (the
                     # two rims' heights differ where alpha != 0, i.e. everywhere but at a real edge change)

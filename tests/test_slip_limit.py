@@ -89,7 +89,7 @@ def _flow_fate(y, p, cs, u):
         ys[M.Y_U1], ys[M.Y_U2] = u * math.cos(nu), u * math.sin(nu)
         contact = M.Contact(CN.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3], cs[L.CS_STUCK:L.CS_STUCK + 3],
                             math.cos(nu), math.sin(nu))
-        M.rhs(0.0, ys, p, contact, n, dy, aux)
+        M.rhs(ys, p, contact, n, dy, aux)
         c, s = math.cos(nu), math.sin(nu)
         return dy[M.Y_U2] * c - dy[M.Y_U1] * s, dy[M.Y_U1] * c + dy[M.Y_U2] * s, aux[M.X_OK]
 
@@ -244,7 +244,7 @@ def test_a_narrow_root_pair_of_cross_is_not_taken_for_a_spiral():
     for nu in np.linspace(0.0, 2.0 * math.pi, 64 * 256, endpoint=False):
         ys = y[:n].copy()
         ys[M.Y_U1], ys[M.Y_U2] = u * math.cos(nu), u * math.sin(nu)
-        M.rhs(0.0, ys, p, M.Contact(CN.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3],
+        M.rhs(ys, p, M.Contact(CN.SLIDE, int(cs[L.CS_SIDE]), cs[L.CS_SIG:L.CS_SIG + 3],
                                     cs[L.CS_STUCK:L.CS_STUCK + 3], math.cos(nu), math.sin(nu)), n, dy, aux)
         assert aux[M.X_OK] == 1.0
         cross.append(dy[M.Y_U2] * math.cos(nu) - dy[M.Y_U1] * math.sin(nu))
@@ -402,7 +402,7 @@ def test_the_slaved_directions_lag_agrees_with_the_peers():
         root = SL.attracting_direction(rng.uniform(-math.pi, math.pi), u, 0.0, y, system)
         if not math.isfinite(root):
             continue
-        lag, dcross, err = CR.root_lag(root, u, 0.0, y, system, np.zeros(M.N_FULL), np.zeros(M.N_AUX))
+        lag, dcross, err = CR.root_lag(root, u, L.Eval(0.0, y, system, np.zeros(M.N_FULL), np.zeros(M.N_AUX)))
         c = Contact(1)
         c.mode = 1
         c.sig = list(cs[L.CS_SIG:L.CS_SIG + 3])
@@ -442,7 +442,7 @@ def _manifold(tau, y, p, second):
     root = SL.attracting_direction(math.atan2(y[M.Y_U2], y[M.Y_U1]), u, tau, y, system)
     if not math.isfinite(root):
         return math.nan, math.nan
-    nu, lag, _, ok, _ = CR.slaved_slip(root, tau, y, system, np.zeros(M.N_FULL), np.zeros(M.N_AUX))
+    nu, lag, _, ok, _ = CR.slaved_slip(root, L.Eval(tau, y, system, np.zeros(M.N_FULL), np.zeros(M.N_AUX)))
     return (nu, lag) if ok > 0.0 else (math.nan, math.nan)
 
 

@@ -296,7 +296,7 @@ class Disk:
     def model(self, t, y, mode, c, nx, ny, p=None):
         dy = np.empty(self.n)
         aux = np.empty(N_AUX)
-        self.be.rhs(t, y, self.p if p is None else p,
+        self.be.rhs(y, self.p if p is None else p,
                     model.Contact(ROLL if mode == ROLL else SLIDE, c.side, c.sig_arr(), c.stuck_arr(), nx, ny),
                     self.n, dy, aux)
         self.calls += 1
@@ -572,7 +572,7 @@ class Disk:
 
     def to_roll(self, y, c):
         """A slip ends: the plastic contact impulse removes it (loss booked to sliding)."""
-        y[Y_DSLIDE] += self.be.project_velocity(y, self.p, c.side, True, c.side, False, self.S)
+        y[Y_DSLIDE] += self.be.project_velocity(y, self.p, (c.side, True), (c.side, False), self.S)
         c.mode = ROLL
 
     def slip_fate(self, t, y, c):
@@ -657,7 +657,7 @@ class Disk:
         if fate == "ends":
             self.to_roll(y, c)
             return -1
-        y[Y_DSLIDE] += self.be.project_velocity(y, self.p, c.side, True, c.side, False, self.S)
+        y[Y_DSLIDE] += self.be.project_velocity(y, self.p, (c.side, True), (c.side, False), self.S)
         y[Y_U1] = 0.0
         y[Y_U2] = 0.0
         c.mode, c.nu, c.slave_off = SLAVED, nu, False
@@ -716,7 +716,7 @@ class Disk:
                 # the first-order slow manifold is no good here, or the direction has yet to
                 # relax onto it: it slides on
                 return "inaccurate"
-        loss = self.be.project_velocity(y, self.p, c.side, True, c.side, True, self.S, along)
+        loss = self.be.project_velocity(y, self.p, (c.side, True), (c.side, True), self.S, along)
         if y[Y_U1] * math.cos(along) + y[Y_U2] * math.sin(along) > 0.0:
             y[Y_DSLIDE] += loss
             c.mode = SLAVED
@@ -953,7 +953,7 @@ class Disk:
     def side_change(self, t, y, c):
         """alpha = 0: plastic impact of the other rim edge. Returns an outcome code or -1."""
         slipping = c.mode != ROLL
-        self.stats["impact_loss"] += self.be.project_velocity(y, self.p, c.side, slipping, -c.side, slipping,
+        self.stats["impact_loss"] += self.be.project_velocity(y, self.p, (c.side, slipping), (-c.side, slipping),
                                                               self.S)
         c.side = -c.side
         self.stats["n_impacts"] += 1

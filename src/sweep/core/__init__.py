@@ -6,9 +6,10 @@
     model.py     the Kessler-O'Reilly equations (dimensionless right-hand side, energy, steady motion)
     layout.py    named slots of the state, contact-state, work, settings and statistics arrays and
                  of the output rows, and the groups the kernels pass (namedtuples): the run's
-                 buffers (Work, Record) and constants (RunConsts), the system a right-hand side
-                 evaluates (System), a step's ends (Point), its dense output and its kept part
-                 (Span, Segment)
+                 buffers (Work, Record), constants (RunConsts) and the four together (Run), the
+                 system a right-hand side evaluates (System) and one evaluation (Eval), a step's
+                 ends (Point), its dense output and its kept part (Span, Segment), an event's
+                 bracket (Bracket), a step's Hermite data (Hermite), a normal-force maximum (Peak)
     contact_rhs.py  the right-hand side per contact state (roll, slide, slaved slip), the slip speeds
     slip.py      slip onset, hand-over between slide and slaved slip, a slow slide's fate
     moments.py   the dry-friction moment components (Filippov): stick test, stop at spin_tol, signs

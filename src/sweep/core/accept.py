@@ -86,7 +86,8 @@ def try_step(t, h, consts, work, sys):
     aux = wk[W_AUX]
     aux_new = wk[W_AUXNEW]
     e_cur = mode_energy_at(y, aux, p, cs)
-    rk_step(eval_rhs, t, h, Point(y, f, aux), Point(y_new, wk[W_FNEW], aux_new), sys, K)
+    start = Point(y, f, aux)
+    rk_step(eval_rhs, t, h, (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K)
     err = 0.0
     for i in range(n):
         if not math.isfinite(y_new[i]):
@@ -100,8 +101,8 @@ def try_step(t, h, consts, work, sys):
     if err == 0.0:
         defect = max(power_defect(y, f, aux, p, cs), power_defect(y_new, wk[W_FNEW], aux_new, p, cs))
         nc = norm_size(n)
-        error_scale(y, y_new, nc, rtol, atol, slip_atol(y, y_new, p, rtol, atol), wk[W_ESCALE])
-        err = max(error_norm(K, h, wk[W_ESCALE], nc), balance_error(y, aux, wk[W_DELTA], h, defect, p, cs, consts))
+        error_scale(y, y_new, nc, (rtol, atol, slip_atol(y, y_new, p, rtol, atol)), wk[W_ESCALE])
+        err = max(error_norm(K, h, wk[W_ESCALE], nc), balance_error(start, wk[W_DELTA], h, defect, sys, consts))
     tally_step(cs, sys.istats, err <= 1.0, 1)
     return err
 
@@ -110,17 +111,19 @@ def try_step(t, h, consts, work, sys):
 def power_defect(y, dy, aux, p, cs):
     """|dE/dtau + dissipated power| of the evaluated right-hand side dy, aux at y: 0 for the exact
     flow, so what is left is the right-hand side's own round-off in the energy direction."""
-    rate = energy_rate_trig(y, dy, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, aux[X_SINA], aux[X_COSA])
+    rate = energy_rate_trig(y, dy, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, (aux[X_SINA], aux[X_COSA]))
     return abs(rate + dy[Y_DSLIDE] + dy[Y_DK1] + dy[Y_DK2] + dy[Y_DK3])
 
 
 @kernel
-def balance_error(y, aux, d, h, defect, p, cs, consts):
+def balance_error(start, d, h, defect, sys, consts):
     """The energy-balance residual |Delta(E + dissipated)| of a step's increment d (before rounding:
-    wk[W_DELTA]) from y (aux: the right-hand side's there) over h, over what it may be (see
-    BALANCE_FACTOR); accepted if <= 1. defect: power_defect at the step's ends (the larger); of the
-    run's constants (layout.RunConsts) e0 = |E(0)| > 0, t_max (tau) and rtol."""
-    change, scale = energy_increment_trig(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, aux[X_SINA], aux[X_COSA])
+    wk[W_DELTA]) from start (layout.Point: y and the right-hand side's aux there) over h, in the
+    system sys (its parameters and contact state), over what it may be (see BALANCE_FACTOR);
+    accepted if <= 1. defect: power_defect at the step's ends (the larger); of the run's constants
+    (layout.RunConsts) e0 = |E(0)| > 0, t_max (tau) and rtol."""
+    y, aux, p, cs = start.y, start.aux, sys.p, sys.cs
+    change, scale = energy_increment_trig(y, d, p, cs[CS_SIDE], cs[CS_MODE] != ROLL, (aux[X_SINA], aux[X_COSA]))
     dissipated = d[Y_DSLIDE] + d[Y_DK1] + d[Y_DK2] + d[Y_DK3]
     allowed = (BALANCE_FACTOR * consts.rtol * (max(dissipated, 0.0) + consts.e0 * h / consts.t_max)
                + BALANCE_ROUNDOFF * (scale + abs(d[Y_DSLIDE]) + abs(d[Y_DK1]) + abs(d[Y_DK2]) + abs(d[Y_DK3]))
@@ -129,15 +132,17 @@ def balance_error(y, aux, d, h, defect, p, cs, consts):
 
 
 @kernel
-def state_balance_error(y, y_new, e_cur, e_new, h, p, consts):
-    """balance_error of the kept part of a step cut at an event, from the states at its ends (the
-    dense output's increment carries the round-off of its coefficients, not of the change).
+def state_balance_error(y, y_new, energies, h, p, consts):
+    """balance_error of the kept part of a step cut at an event, from the states at its ends y, y_new
+    and their energies (e_cur, e_new) (the dense output's increment carries the round-off of its
+    coefficients, not of the change).
 
     The residual's round-off, in units of EPS: E and the dissipated energy; the height's terms
     G cos(alpha) (1 + |h|), which cancel near upright for a thick disk; and the inclination's last
     bit times dE/dalpha ~ G (|sin alpha| + |h| cos(alpha)) + omega_1^2 (1 + |h|), which dominates
     near flat, where E << G. Once per event, this floor adds to the budget at most the events'
     number times it."""
+    e_cur, e_new = energies
     d_cur = y[Y_DSLIDE] + y[Y_DK1] + y[Y_DK2] + y[Y_DK3]
     d_new = y_new[Y_DSLIDE] + y_new[Y_DK1] + y_new[Y_DK2] + y_new[Y_DK3]
     residual = (e_new + d_new) - (e_cur + d_cur)
@@ -163,14 +168,15 @@ def norm_size(n):
 
 
 @kernel
-def error_scale(y, y_new, n, rtol, atol, u_atol, sc):
+def error_scale(y, y_new, n, tol, sc):
     """The error norm's scale of each of the components 0..n-1 of a step from y to y_new (dop853's
-    error_norm reads them): atol + rtol max(|y_i|, |y_new_i|), as in Hairer's dop853, with two
-    rules of this state's. The slip components (Y_U1, Y_U2) take the absolute tolerance u_atol
-    (slip_atol) instead of atol. The inclination's error is relative to its distance from the
+    error_norm reads them) into sc, tol = (rtol, atol, u_atol): atol + rtol max(|y_i|, |y_new_i|), as
+    in Hairer's dop853, with two rules of this state's. The slip components (Y_U1, Y_U2) take the
+    absolute tolerance u_atol (slip_atol) instead of atol. The inclination's error is relative to its distance from the
     nearer of upright and flat, min(|alpha|, pi/2 - |alpha|): near flat the dynamics and the face
     event depend on beta = pi/2 - |alpha| (the face contact lies at beta = 1e-6 rad), which an
     error relative to |alpha| ~ 1.57 would resolve only to rtol * 1.57 (n: norm_size)."""
+    rtol, atol, u_atol = tol
     for i in range(n):
         mag = max(abs(y[i]), abs(y_new[i]))
         if i == Y_ALPHA:
@@ -222,9 +228,9 @@ def segment_end(span, seg_end, event, check, consts):
         for i in range(sys.n):
             y_seg[i] = wk[W_YNEW, i]
         return mode_energy_at(y_seg, wk[W_AUXNEW], p, cs), 0.0
-    dense_eval(span.F, 0, y, t, span.h, seg_end, sys.n, y_seg)
+    dense_eval(span, seg_end, sys.n, y_seg)
     e_seg = mode_energy(y_seg, p, cs)
     if not check:
         return e_seg, 0.0
     # the kept part ends on the dense output (7th order)
-    return e_seg, state_balance_error(y, y_seg, mode_energy_at(y, wk[W_AUX], p, cs), e_seg, seg_end - t, p, consts)
+    return e_seg, state_balance_error(y, y_seg, (mode_energy_at(y, wk[W_AUX], p, cs), e_seg), seg_end - t, p, consts)

@@ -20,7 +20,7 @@ import math
 
 from .constants import BELOW, EPS, ROLL, SLAVED, SLIDE
 from .jit import kernel
-from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_SLAVE_OFF, CS_STUCK, I_RHS, System, W_AUXDRIFT,
+from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_SLAVE_OFF, CS_STUCK, I_RHS, Eval, System, W_AUXDRIFT,
                      W_AUXFLOW, W_AUXSLOPE, W_DYDRIFT, W_DYFLOW, W_DYSLOPE, W_PFRICTION, W_YDRIFT, W_YFLOW, W_YSLIP)
 from .model import (Contact, N_PARAMS, P_A, P_MUD, P_SLAVE, P_UTOL, X_COSA, X_DCROSS, X_LAG, X_NU, X_OK, X_PHI, X_SINA,
                     X_SLAVE_ERR, Y_ALPHA, Y_U1, Y_U2, Y_W3, energy_from_trig, rhs)
@@ -123,62 +123,66 @@ def exit_speed(y, aux, p):
 @kernel
 def mode_energy(y, p, cs):
     """Energy of the state in the contact state cs (eq. 6.1 corrected; the slip counts when sliding)."""
-    return _mode_energy_trig(y, p, cs, math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA]))
+    return _mode_energy_trig(y, p, cs, (math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA])))
 
 
 @kernel
 def mode_energy_at(y, aux, p, cs):
     """mode_energy(y, p, cs) from the sine and cosine of alpha in aux, the right-hand side's at y."""
-    return _mode_energy_trig(y, p, cs, aux[X_SINA], aux[X_COSA])
+    return _mode_energy_trig(y, p, cs, (aux[X_SINA], aux[X_COSA]))
 
 
 @kernel
-def _mode_energy_trig(y, p, cs, s, c):
+def _mode_energy_trig(y, p, cs, trig):
     side = int(cs[CS_SIDE])
     u1, u2 = (0.0, 0.0) if cs[CS_MODE] == ROLL else (y[Y_U1], y[Y_U2])
-    return energy_from_trig(y, p, side, u1, u2, s, c)
+    return energy_from_trig(y, p, side, u1, u2, trig)
 
 
 @kernel(inline="always")
-def _model(t, y, sys, mode, dy, aux, n0x, n0y):
-    """The model's right-hand side in mode ROLL or SLIDE (a constant at each call site, so that LLVM
-    specialises the copy), the friction along (n0x, n0y) at slip speeds <= slip_tol; counts the call."""
+def _model(ev, mode, n0x, n0y):
+    """The model's right-hand side (ev: layout.Eval) in mode ROLL or SLIDE (a constant at each call
+    site, so that LLVM specialises the copy), the friction along (n0x, n0y) at slip speeds <=
+    slip_tol; counts the call."""
+    sys = ev.sys
     cs = sys.cs
-    rhs(t, y, sys.p, Contact(mode, int(cs[CS_SIDE]), cs[CS_SIG:CS_SIG + 3], cs[CS_STUCK:CS_STUCK + 3], n0x, n0y),
-        sys.n, dy, aux)
+    rhs(ev.y, sys.p, Contact(mode, int(cs[CS_SIDE]), cs[CS_SIG:CS_SIG + 3], cs[CS_STUCK:CS_STUCK + 3], n0x, n0y),
+        sys.n, ev.dy, ev.aux)
     sys.istats[I_RHS] += 1
 
 
 @kernel
-def slide_model(t, y, sys, dy, aux, n0x, n0y):
-    """The sliding right-hand side (contact states SLIDE and SLAVED), the friction along (n0x, n0y) at
-    slip speeds <= slip_tol: the one compiled copy of the sliding model, which every sliding
-    evaluation calls (the rolling one is inlined into eval_rhs, where the steps of a rolling motion
-    call it; each inlined copy of the model costs ~3 s of compilation)."""
-    _model(t, y, sys, SLIDE, dy, aux, n0x, n0y)
+def slide_model(ev, n0x, n0y):
+    """The sliding right-hand side (contact states SLIDE and SLAVED; ev: layout.Eval), the friction
+    along (n0x, n0y) at slip speeds <= slip_tol: the one compiled copy of the sliding model, which
+    every sliding evaluation calls (the rolling one is inlined into eval_rhs, where the steps of a
+    rolling motion call it; each inlined copy of the model costs ~3 s of compilation)."""
+    _model(ev, SLIDE, n0x, n0y)
 
 
 @kernel
-def model_call(t, y, sys, dy, aux, n0x, n0y):
-    """The model for the contact state sys.cs (SLAVED evaluates as sliding, along (n0x, n0y)), where a
-    discrete update reads the right-hand side once (start_slip, set_slip)."""
-    if sys.cs[CS_MODE] == ROLL:
-        eval_rhs(t, y, sys, dy, aux)
+def model_call(ev, n0x, n0y):
+    """The model for the contact state ev.sys.cs (ev: layout.Eval; SLAVED evaluates as sliding, along
+    (n0x, n0y)), where a discrete update reads the right-hand side once (start_slip, set_slip)."""
+    if ev.sys.cs[CS_MODE] == ROLL:
+        eval_rhs(ev.t, ev.y, ev.sys, ev.dy, ev.aux)
     else:
-        slide_model(t, y, sys, dy, aux, n0x, n0y)
+        slide_model(ev, n0x, n0y)
 
 
 @kernel
 def eval_rhs(t, y, sys, dy, aux):
-    """d y/d tau and contact quantities (aux) for the contact state cs; counts its model calls."""
+    """d y/d tau and contact quantities (aux) for the contact state cs; counts its model calls. The
+    stepper's right-hand side (dop853: rhs(t, y, sys, dy, aux))."""
     cs, n = sys.cs, sys.n
+    ev = Eval(t, y, sys, dy, aux)
     mode = cs[CS_MODE]
     if mode == SLAVED:
-        nu, lag, dcross, ok, err = slaved_slip(cs[CS_NU], t, y, sys, dy, aux)
+        nu, lag, dcross, ok, err = slaved_slip(cs[CS_NU], ev)
         # the sliding equations at the slip vector itself with the friction along s(nu + lag): the
         # slip acceleration, the friction power (mu_d Phi s.u) and the energy stay those of one
         # Newton-Euler motion, so the energy books close however far u turns from s
-        friction_along(nu + lag, t, y, sys, dy, aux)
+        friction_along(nu + lag, ev)
         aux[X_DCROSS] = dcross
         aux[X_NU] = nu
         aux[X_LAG] = lag
@@ -194,49 +198,52 @@ def eval_rhs(t, y, sys, dy, aux):
         un = math.hypot(y[Y_U1], y[Y_U2])
         nx = y[Y_U1] / un if un > 0.0 else math.cos(cs[CS_NU])
         ny = y[Y_U2] / un if un > 0.0 else math.sin(cs[CS_NU])
-        _model(t, y, sys, SLIDE, dy, aux, nx, ny)
+        _model(ev, SLIDE, nx, ny)
     else:
         # (the rolling model inlined: the steps of a rolling motion call it, and a call passes ~50
         # words of arguments)
-        _model(t, y, sys, ROLL, dy, aux, 1.0, 0.0)
+        _model(ev, ROLL, 1.0, 0.0)
 
 
 @kernel
-def slip_rates(nu, u, t, y, sys, dy, aux, ys):
+def slip_rates(nu, u, ev, ys):
     """(cross, dot) of the slip acceleration with the slip direction s = (cos nu, sin nu), for the
-    slip vector u s; the full right-hand side is left in dy, aux."""
-    n = sys.n
+    slip vector u s at the state ev.y (ev: layout.Eval; the state with that slip in ys); the full
+    right-hand side is left in ev.dy, ev.aux."""
+    y, dy = ev.y, ev.dy
     c = math.cos(nu)
     s = math.sin(nu)
-    for i in range(n):
+    for i in range(ev.sys.n):
         ys[i] = y[i]
     ys[Y_U1] = u * c
     ys[Y_U2] = u * s
-    slide_model(t, ys, sys, dy, aux, c, s)
+    slide_model(Eval(ev.t, ys, ev.sys, dy, ev.aux), c, s)
     return dy[Y_U2] * c - dy[Y_U1] * s, dy[Y_U1] * c + dy[Y_U2] * s
 
 
 @kernel
-def slaved_direction(nu0, u, t, y, sys, dy, aux, ys):
-    """Slip direction near nu0 at which the slip acceleration is parallel to the slip (secant).
+def slaved_direction(nu0, u, ev, ys):
+    """Slip direction near nu0 at which the slip acceleration is parallel to the slip (secant), at the
+    slip speed u and the state of ev (layout.Eval; ys: slip_rates' scratch).
 
-    Returns nu; dy, aux hold the right-hand side there. aux[X_OK] = 0 if it does not converge.
+    Returns nu; ev.dy, ev.aux hold the right-hand side there. ev.aux[X_OK] = 0 if it does not converge.
     """
-    return direction_from(nu0, 0.0, u, t, y, sys, dy, aux, ys)
+    return direction_from(nu0, 0.0, u, ev, ys)
 
 
 @kernel
-def direction_from(nu0, slope, u, t, y, sys, dy, aux, ys):
+def direction_from(nu0, slope, u, ev, ys):
     """slaved_direction from nu0, its first update a Newton step with slope (d cross/d nu near the
     root, < 0) where one is known, else from a probe 1e-6 rad away; then the same damped secant."""
+    aux = ev.aux
     xa = nu0
-    ca, da = slip_rates(xa, u, t, y, sys, dy, aux, ys)
+    ca, da = slip_rates(xa, u, ev, ys)
     if abs(ca) <= DIR_NOISE * math.hypot(ca, da):
         return xa
     xb = nu0 + 1e-6
     if slope < 0.0:
         xb = nu0 - max(-DIR_MAXSTEP, min(DIR_MAXSTEP, ca / slope))
-    cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
+    cb, db = slip_rates(xb, u, ev, ys)
     for _ in range(DIR_MAXIT):
         if abs(cb) <= DIR_NOISE * math.hypot(cb, db) or abs(xb - xa) < DIR_TOL:
             return xb
@@ -250,36 +257,39 @@ def direction_from(nu0, slope, u, t, y, sys, dy, aux, ys):
         xc = xb + max(-DIR_MAXSTEP, min(DIR_MAXSTEP, dx))
         xa, ca = xb, cb
         xb = xc
-        cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
+        cb, db = slip_rates(xb, u, ev, ys)
     if aux[X_OK] > 0.0:
         aux[X_OK] = 0.0   # (a Painleve flag, -1, from the model stays)
     return xb
 
 
 @kernel
-def friction_along(nu, t, y, sys, dy, aux):
-    """The sliding right-hand side at the state's own slip vector with the friction along s(nu),
-    whatever |u| (the parameters with slip_tol, where the model freezes the friction direction,
-    lifted to inf, in wk[W_PFRICTION])."""
+def friction_along(nu, ev):
+    """The sliding right-hand side (ev: layout.Eval) at the state's own slip vector with the friction
+    along s(nu), whatever |u| (the parameters with slip_tol, where the model freezes the friction
+    direction, lifted to inf, in wk[W_PFRICTION])."""
+    sys = ev.sys
     p, wk = sys.p, sys.wk
     pf = wk[W_PFRICTION]
     for i in range(N_PARAMS):
         pf[i] = p[i]
     pf[P_UTOL] = math.inf
-    slide_model(t, y, System(pf, sys.cs, sys.n, wk, sys.istats), dy, aux, math.cos(nu), math.sin(nu))
+    friction = System(pf, sys.cs, sys.n, wk, sys.istats)
+    slide_model(Eval(ev.t, ev.y, friction, ev.dy, ev.aux), math.cos(nu), math.sin(nu))
 
 
 @kernel
-def direction_lag(nu, u, rates, t, y, sys, dy):
+def direction_lag(nu, u, rates, ev):
     """The lag (rad) of a slow slip's direction behind the quasi-static direction nu, first order
     in the relaxation time: on the slow manifold of d nu/d tau = cross(nu)/u the direction is
     nu* + delta, and with delta = k u (the lag scales with the slip, whose own rate u'/u = rad/u is
     as fast as the direction's) u (nu*' + delta') = c' delta gives delta = u nu*'/(c' - rad)
     (c' = d cross/d nu < 0 where nu attracts, rad = u' the slip's rate along s), with
-    nu*' = -(d cross/d tau at fixed nu)/c' (docs/model.md, 'Slow slip'). dy: the right-hand side
+    nu*' = -(d cross/d tau at fixed nu)/c' (docs/model.md, 'Slow slip'). ev.dy: the right-hand side
     at the slip vector u s(nu) (slip_rates'), rates = (cross, rad, c') there; d cross/d tau by a
     central difference along that motion (its round-off enters the second order's difference of
     the lag, second_order_lag). 0 where nu does not attract that way (c' - rad >= 0)."""
+    t, y, sys, dy = ev.t, ev.y, ev.sys, ev.dy
     cross0, rad0, dcross = rates
     den = dcross * (dcross - rad0)
     if not (dcross < 0.0 and dcross - rad0 < 0.0 and u > 0.0):
@@ -293,32 +303,32 @@ def direction_lag(nu, u, rates, t, y, sys, dy):
     yf = wk[W_YFLOW]
     for i in range(sys.n):
         yf[i] = y[i] + step * dy[i]
-    cross_f, _ = slip_rates(nu, u + step * rad0, t + step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW], wk[W_YSLIP])
+    cross_f, _ = slip_rates(nu, u + step * rad0, Eval(t + step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW]), wk[W_YSLIP])
     for i in range(sys.n):
         yf[i] = y[i] - step * dy[i]
-    cross_b, _ = slip_rates(nu, u - step * rad0, t - step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW], wk[W_YSLIP])
+    cross_b, _ = slip_rates(nu, u - step * rad0, Eval(t - step, yf, sys, wk[W_DYFLOW], wk[W_AUXFLOW]), wk[W_YSLIP])
     return -u * ((cross_f - cross_b) / (2.0 * step)) / den
 
 
 @kernel
-def root_lag(nu, u, t, y, sys, dy, aux):
-    """(lag, c', err) of the slow slip at the quasi-static direction nu (slaved_slip's): dy, aux get
-    the right-hand side at the slip vector u s(nu)."""
-    wk = sys.wk
-    cross0, rad0 = slip_rates(nu, u, t, y, sys, dy, aux, wk[W_YSLIP])
-    return lag_and_error(nu, u, cross0, t, y, sys, dy, aux)
+def root_lag(nu, u, ev):
+    """(lag, c', err) of the slow slip at the quasi-static direction nu (slaved_slip's), at the state
+    of ev (layout.Eval): ev.dy, ev.aux get the right-hand side at the slip vector u s(nu)."""
+    cross0, rad0 = slip_rates(nu, u, ev, ev.sys.wk[W_YSLIP])
+    return lag_and_error(nu, u, cross0, ev)
 
 
 @kernel
-def lag_and_error(nu, u, cross0, t, y, sys, dy, aux):
-    """(lag, c', err) at the quasi-static direction nu, dy, aux the right-hand side at the slip vector
-    u s(nu) and cross0 its cross: c' = d cross/d nu by a forward difference, the lag
-    (direction_lag) and the slaved direction's error measure (slaved_slip)."""
+def lag_and_error(nu, u, cross0, ev):
+    """(lag, c', err) at the quasi-static direction nu, ev.dy, ev.aux (layout.Eval) the right-hand
+    side at the slip vector u s(nu) and cross0 its cross: c' = d cross/d nu by a forward difference,
+    the lag (direction_lag) and the slaved direction's error measure (slaved_slip)."""
+    y, sys, dy, aux = ev.y, ev.sys, ev.dy, ev.aux
     wk = sys.wk
     rad0 = dy[Y_U1] * math.cos(nu) + dy[Y_U2] * math.sin(nu)
-    cross1, _ = slip_rates(nu + DCROSS_DNU, u, t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP])
+    cross1, _ = slip_rates(nu + DCROSS_DNU, u, Eval(ev.t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE]), wk[W_YSLIP])
     dcross = (cross1 - cross0) / DCROSS_DNU
-    lag = direction_lag(nu, u, (cross0, rad0, dcross), t, y, sys, dy)
+    lag = direction_lag(nu, u, (cross0, rad0, dcross), ev)
     relax = rad0 - dcross
     err = math.inf
     if dcross < 0.0 and relax > 0.0:
@@ -327,32 +337,33 @@ def lag_and_error(nu, u, cross0, t, y, sys, dy, aux):
 
 
 @kernel
-def slaved_slip(nu0, t, y, sys, dy, aux):
+def slaved_slip(nu0, ev):
     """The slow slip's direction at the state: (nu*, lag, c', ok, err). nu* is the quasi-static
     direction continued from nu0 (slaved_direction), the friction acts along nu* + lag
     (direction_lag), c' = d cross/d nu there; ok is slaved_direction's aux[X_OK] (0: no root
     near nu0). err measures how far the first-order slow manifold is from exact: the direction's
     relaxation time |u|/|c' - rad| times the motion's rate 1 + |theta'|, plus the lag itself
     (the neglected terms are of the order of their product and of the lag squared); inf where the
-    direction does not relax onto nu* + lag (c' - rad >= 0). dy, aux are left with the
-    right-hand side at the slip vector |u| s(nu*)."""
+    direction does not relax onto nu* + lag (c' - rad >= 0). ev (layout.Eval): the state; its dy,
+    aux are left with the right-hand side at the slip vector |u| s(nu*)."""
+    y, dy = ev.y, ev.dy
     u = math.hypot(y[Y_U1], y[Y_U2])
-    nu = slaved_direction(nu0, u, t, y, sys, dy, aux, sys.wk[W_YSLIP])
-    ok = aux[X_OK]
+    nu = slaved_direction(nu0, u, ev, ev.sys.wk[W_YSLIP])
+    ok = ev.aux[X_OK]
     cross0 = dy[Y_U2] * math.cos(nu) - dy[Y_U1] * math.sin(nu)
-    lag, dcross, err = lag_and_error(nu, u, cross0, t, y, sys, dy, aux)
+    lag, dcross, err = lag_and_error(nu, u, cross0, ev)
     if not ok > 0.0:
         lag = 0.0
-    elif sys.p[P_SLAVE] > 0.0 and abs(lag) * err > EPS:
-        lag, err = second_order(nu, lag, dcross, err, t, y, sys, dy, aux)
+    elif ev.sys.p[P_SLAVE] > 0.0 and abs(lag) * err > EPS:
+        lag, err = second_order(nu, lag, dcross, err, ev)
     return nu, lag, dcross, ok, err
 
 
 @kernel
-def second_order(nu, lag, dcross, err, t, y, sys, dy, aux):
+def second_order(nu, lag, dcross, err, ev):
     """(lag, err) of the second-order slow manifold from the first-order one (lag, err:
     lag_and_error's at the quasi-static direction nu): the lag to second order (second_order_lag,
-    with the right-hand side along nu + lag in dy, aux), and the error measure raised to the
+    with the right-hand side along nu + lag in ev.dy, ev.aux; ev: layout.Eval), and the error measure raised to the
     series' own: the second-order term d2 over the first, |d2| / |lag|, estimates the expansion's
     parameter (where the manifold moves faster than the motion's rate 1 + |theta'| tells, it
     exceeds the first-order measure), and times |d2| the neglected third order, d2^2 / |lag|; err
@@ -360,22 +371,23 @@ def second_order(nu, lag, dcross, err, t, y, sys, dy, aux):
     err <= slave_tol bounds the neglected terms by slave_tol^3 as it bounds the first-order
     manifold's by slave_tol^2 (docs/model.md, 'Slow slip'). Below that product's round-off
     (|lag| err <= EPS) the second order is not computed."""
-    friction_along(nu + lag, t, y, sys, dy, aux)
-    lag2 = second_order_lag(nu, lag, dcross, t, y, sys, dy, aux)
+    friction_along(nu + lag, ev)
+    lag2 = second_order_lag(nu, lag, dcross, ev)
     d2 = abs(lag2 - lag)
     return lag2, max(err, (d2 * d2 / abs(lag)) ** (1.0 / 3.0))
 
 
 @kernel
-def second_order_lag(nu, lag, dcross, t, y, sys, dy, aux):
+def second_order_lag(nu, lag, dcross, ev):
     """The slow manifold's lag behind nu* to second order in the relaxation time. On the manifold
     nu = h(state) the direction dynamics u nu' = cross(nu) read u Dh = cross(h) (D: the rate along
     the motion with the friction along h), exact. The first-order manifold h1 = nu* + lag
     (slaved_slip's) makes the residual second order; here Dh1 is a forward difference of h1 over
-    DRIFT_DTAU / (1 + |theta'|) along the motion with the friction along h1 (dy, aux: the
-    right-hand side there), and h solves cross(h) = u Dh1 by secant steps from h1 with the slope
+    DRIFT_DTAU / (1 + |theta'|) along the motion with the friction along h1 (ev.dy, ev.aux,
+    layout.Eval: the right-hand side there), and h solves cross(h) = u Dh1 by secant steps from h1 with the slope
     c' = dcross: the neglected terms are third order (docs/model.md, 'Slow slip'). Returns the lag
     h - nu*; the first-order one where the slaved direction is lost along the difference."""
+    t, y, sys, dy, aux = ev
     wk = sys.wk
     n = sys.n
     u = math.hypot(y[Y_U1], y[Y_U2])
@@ -389,16 +401,17 @@ def second_order_lag(nu, lag, dcross, t, y, sys, dy, aux):
     uf = u + step * rad
     # (started where nu* moves to at its first-order rate, lag (c' - rad)/u: the root is then a
     # Newton step away)
-    nuf = direction_from(nu + step * lag * (dcross - rad) / u, dcross, uf, t + step, yf, sys, dyf, auxf, wk[W_YSLIP])
+    evf = Eval(t + step, yf, sys, dyf, auxf)
+    nuf = direction_from(nu + step * lag * (dcross - rad) / u, dcross, uf, evf, wk[W_YSLIP])
     if not auxf[X_OK] > 0.0:
         return lag
     crossf = dyf[Y_U2] * math.cos(nuf) - dyf[Y_U1] * math.sin(nuf)
-    lagf, _, _ = lag_and_error(nuf, uf, crossf, t + step, yf, sys, dyf, auxf)
+    lagf, _, _ = lag_and_error(nuf, uf, crossf, evf)
     if lagf == 0.0:
         return lag
     drift = u * ((nuf + lagf) - (nu + lag)) / step
     # one Newton step from h1 with the slope at nu*: the correction d2 is of the order of the lag
     # times the expansion's parameter, and the step's own error, of d2 times the slope's change
     # over lag + d2, is third order
-    cross1, _ = slip_rates(nu + lag, u, t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE], wk[W_YSLIP])
+    cross1, _ = slip_rates(nu + lag, u, Eval(t, y, sys, wk[W_DYSLOPE], wk[W_AUXSLOPE]), wk[W_YSLIP])
     return lag - max(-abs(lag), min(abs(lag), (cross1 - drift) / dcross))

@@ -33,10 +33,11 @@ N_DENSE = 7                 # rows of dense-output coefficients
 
 
 @kernel(inline="always")
-def rk_step(rhs, t, h, start, end, sys, K):
-    """One DOP853 step of size h from start (layout.Point: y, f at t): end.y, and end.f = K[12] =
-    f(t + h, end.y) with its aux end.aux; the increment end.y - start.y before rounding in
-    sys.wk[W_DELTA]."""
+def rk_step(rhs, t, h, ends, sys, K):
+    """One DOP853 step of size h from start (ends = (start, end), each a layout.Point; start: y, f
+    at t): end.y, and end.f = K[12] = f(t + h, end.y) with its aux end.aux; the increment
+    end.y - start.y before rounding in sys.wk[W_DELTA]."""
+    start, end = ends
     n = sys.n
     y, f, y_new, f_new = start.y, start.f, end.y, end.f
     for i in range(n):
@@ -65,9 +66,11 @@ def error_norm(K, h, sc, n):
 
 
 @kernel(inline="always")
-def dense_coeffs(rhs, t, y, h, y_new, sys, K, F):
-    """Coefficients F[0:7] of the continuous extension of the step from y at t over h to y_new, from
-    its stages K[0:13] (K[12] = f(t + h, y_new)); 3 extra RHS calls: stages 13..15."""
+def dense_coeffs(rhs, span, y_new, K):
+    """Coefficients F[row0:row0+7] of the continuous extension of the step span (layout.Span: from y0
+    at t0 over h, in the system sys) to y_new, from its stages K[0:13] (K[12] = f(t0 + h, y_new));
+    3 extra RHS calls: stages 13..15."""
+    t, y, h, sys, F = span.t0, span.y0, span.h, span.sys, span.F[span.row0:]
     n = sys.n
     dense_stages(rhs, t, y, h, sys, K)
     for i in range(n):
@@ -79,15 +82,18 @@ def dense_coeffs(rhs, t, y, h, y_new, sys, K, F):
 
 
 @kernel
-def dense_eval(F, row0, y_old, t_old, h, t, n, out):
-    """7th-order continuous extension (coefficients F[row0:row0+7]) at t in [t_old, t_old + h]."""
+def dense_eval(span, t, n, out):
+    """7th-order continuous extension of the step span (layout.Span, or any record with its fields
+    F, row0, y0, t0, h: coefficients F[row0:row0+7] of the step from y0 at t0 over h) at t in
+    [t0, t0 + h], its components 0..n-1 into out."""
     for i in range(n):
-        out[i] = dense_component(F, row0, y_old, t_old, h, t, i)
+        out[i] = dense_component(span, t, i)
 
 
 @kernel
-def dense_component(F, row0, y_old, t_old, h, t, i):
+def dense_component(span, t, i):
     """Component i of the continuous extension at t (dense_eval for one component)."""
+    F, row0, y_old, t_old, h = span.F, span.row0, span.y0, span.t0, span.h
     x = (t - t_old) / h
     x1 = 1.0 - x
     v = F[row0 + 6, i]
@@ -101,9 +107,11 @@ def dense_component(F, row0, y_old, t_old, h, t, i):
 
 
 @kernel(inline="always")
-def initial_step(rhs, t, y, f, sys, rtol, atol, nc):
-    """Starting step size (Hairer & Wanner II.4, 'starting step size'), its norms over the
-    components 0..nc-1 (the caller's: those that carry the dynamics) with scale atol + rtol |y_i|."""
+def initial_step(rhs, t, y, f, sys, norm):
+    """Starting step size (Hairer & Wanner II.4, 'starting step size') from y, f = rhs at (t, y):
+    norm = (rtol, atol, nc), its norms over the components 0..nc-1 (the caller's: those that carry
+    the dynamics) with scale atol + rtol |y_i|."""
+    rtol, atol, nc = norm
     n, wk = sys.n, sys.wk
     d0 = 0.0
     d1 = 0.0

@@ -178,7 +178,7 @@ def slip_stop_update(t, y, sys):
     error) is removed by the plastic impulse, so the energy books stay exact."""
     p, cs, wk = sys.p, sys.cs, sys.wk
     side = int(cs[CS_SIDE])
-    y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
+    y[Y_DSLIDE] += project_velocity(y, p, (side, True), (side, False), wk[W_SCRATCH:W_SCRATCH + 7])
     cs[CS_MODE] = ROLL
     return -1
 
@@ -294,7 +294,7 @@ def side_change(t, y, sys, fstats):
     p, cs, wk, istats = sys.p, sys.cs, sys.wk, sys.istats
     mode = cs[CS_MODE]
     side = cs[CS_SIDE]
-    loss = project_velocity(y, p, int(side), mode != ROLL, int(-side), mode != ROLL, wk[W_SCRATCH:W_SCRATCH + 7])
+    loss = project_velocity(y, p, (int(side), mode != ROLL), (int(-side), mode != ROLL), wk[W_SCRATCH:W_SCRATCH + 7])
     fstats[F_DIMPACT] += loss
     cs[CS_SIDE] = -side
     istats[I_IMPACTS] += 1

@@ -109,11 +109,11 @@ def open_level(L, tl, fq, windows):
 
 
 @kernel
-def theta_crossing(F, y, t, h, ta, tb, target, sgn):
+def theta_crossing(span, ta, tb, target, sgn):
     """A time where sgn (theta - target) turns >= 0 in [ta, tb] (negative at ta, >= 0 at tb), to
-    round-off (Illinois regula falsi on the dense output)."""
-    ga = sgn * (dense_component(F, 0, y, t, h, ta, Y_THETA) - target)
-    gb = sgn * (dense_component(F, 0, y, t, h, tb, Y_THETA) - target)
+    round-off (Illinois regula falsi on the dense output of span, layout.Span)."""
+    ga = sgn * (dense_component(span, ta, Y_THETA) - target)
+    gb = sgn * (dense_component(span, tb, Y_THETA) - target)
     if not ga < 0.0:
         return ta
     side = 0
@@ -123,7 +123,7 @@ def theta_crossing(F, y, t, h, ta, tb, target, sgn):
         tm = (ta * gb - tb * ga) / (gb - ga)
         if not (ta < tm < tb):
             tm = 0.5 * (ta + tb)
-        gm = sgn * (dense_component(F, 0, y, t, h, tm, Y_THETA) - target)
+        gm = sgn * (dense_component(span, tm, Y_THETA) - target)
         if gm < 0.0:
             ta, ga = tm, gm
             if side == -1:
@@ -162,7 +162,7 @@ def _next_crossing(r, t_lo, seg_end, theta_end, span, fq):
     target, sgn = _next_target(r, fq)
     if sgn * (theta_end - target) < 0.0:
         return math.inf
-    return theta_crossing(span.F, span.y0, span.t0, span.h, t_lo, seg_end, target, sgn)
+    return theta_crossing(span, t_lo, seg_end, target, sgn)
 
 
 @kernel
@@ -181,7 +181,7 @@ def lattice_step(span, seg_end, windows, rec):
     while tu < math.inf or td < math.inf:
         r = 0 if tu <= td else 1
         tc = tu if r == 0 else td
-        dense_eval(span.F, 0, span.y0, t, span.h, tc, sys.n, wk[W_YBUF])
+        dense_eval(span, tc, sys.n, wk[W_YBUF])
         eval_rhs(tc, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])
         push_lattice(r, tc, wk[W_AUXBUF, X_PHI], fq, level_out, windows)
         if r == 0:

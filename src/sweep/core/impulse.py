@@ -81,13 +81,16 @@ def _least_change(S, nq):
 
 
 @kernel
-def project_velocity(y, p, side_old, slip_old, side_new, slip_new, S, slip_dir=math.nan):
-    """Project y's velocity onto the contact on `side_new` in place; returns the energy lost.
+def project_velocity(y, p, old, new, S, slip_dir=math.nan):
+    """Project y's velocity onto the new contact in place; returns the energy lost.
 
-    slip_old/slip_new: the old/new contact slides, else it rolls. A new sliding contact has both
-    slip components free, or, with slip_dir (rad) given, only the slip along (cos, sin)(slip_dir).
+    old, new: the contact before and after, each (side, slides): the rim edge (+1/-1) and whether
+    the contact slides (else it rolls). A new sliding contact has both slip components free, or,
+    with slip_dir (rad) given, only the slip along (cos, sin)(slip_dir).
     S: scratch array with at least 7 rows and 12 columns.
     """
+    side_old, slip_old = old
+    side_new, slip_new = new
     V = S[_VROW]
     physical_velocity(y, p, side_old, 1 if slip_old else 0, V)
     with_slip = slip_new

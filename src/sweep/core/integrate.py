@@ -28,10 +28,10 @@ from .layout import (CS_MODE, CS_NU, CS_SIDE, CS_SIG, CS_STUCK, EA_DIMPACT, EA_H
                      EN_STICK, EN_TRANS, EndState, F_APPROACH, F_DIMPACT, F_E0, F_EEND, F_HLAST, F_SLIDETIME, F_TEND,
                      F_THALT, F_THALT_ERR, F_TIMPACT, I_EVENTS, I_FLAT, I_IMPACTS, I_OUTCOME, I_OVERFLOW, I_PEAKS,
                      I_REJECTED, I_STEPS, I_STICK, I_TRAJ, I_TRANS, LEVEL_COLS, L_PENDING, N_CS, N_EA, N_EN, N_FSTATS,
-                     N_FT, N_ISTATS, N_KROWS, N_PH, N_SC, N_TF, N_TK, N_WCOLS, N_WORK, PEAK_COLS, Record, RunConsts,
-                     SAMPLE_COLS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, ScanState, Segment, Span,
-                     System, TK_LEVEL, TRAJ_COLS, TrackState, Tracking, W_AUX, W_AUXBUF, W_AUXNEW, W_DYBUF, W_F, W_FNEW,
-                     W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, Work)
+                     N_FT, N_ISTATS, N_KROWS, N_PH, N_SC, N_TF, N_TK, N_WCOLS, N_WORK, PEAK_COLS, Record, Run,
+                     RunConsts, SAMPLE_COLS, S_ATOL, S_HMAX, S_KIN, S_MAXSTEPS, S_PEAKS, S_RTOL, S_TMAX, ScanState,
+                     Segment, Span, System, TK_LEVEL, TRAJ_COLS, TrackState, Tracking, W_AUX, W_AUXBUF, W_AUXNEW,
+                     W_DYBUF, W_F, W_FNEW, W_GNEW, W_GOLD, W_YBUF, W_YNEW, W_YSEG, Work)
 from .model import N_AUX, N_CORE, N_FULL, N_PARAMS, N_THETA, X_NU, X_OK, X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_U2
 from .moments import consistent_signs
 from .roots import location_tol
@@ -144,7 +144,7 @@ def record_start(consts, work, rec, sys):
     start_scan(work.trk.scan)
     if consts.peaks_on:
         freq_start(y[Y_THETA], aux[X_PHI], rec.fq)
-    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, consts.rtol, consts.atol, norm_size(n))
+    return initial_step(eval_rhs, 0.0, y, wk[W_F], sys, (consts.rtol, consts.atol, norm_size(n)))
 
 
 @kernel
@@ -300,25 +300,26 @@ def next_try(t, h, outcome, consts, work, istats):
 
 
 @kernel
-def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
+def record_segment(seg, e_seg, outcome, lev, run):
     """What the kept part of the step (seg: layout.Segment; its end state wk[W_YSEG], energy
     e_seg) holds: the levels it crosses (HALTED at the last, with its end state), the samples, the
-    Phi maxima (consts: layout.RunConsts; sys: the step's layout.System). Returns (the outcome, the energy of
-    the next level to cross)."""
+    Phi maxima (run: layout.Run, the run's constants, the step's system and the buffers). Returns
+    (the outcome, the energy of the next level to cross)."""
+    consts, sys, work, rec = run
     y, wk, trk = work.y, sys.wk, work.trk
     level_e = consts.level_e
     event = seg.k >= 0
     phi_c = segment_phi(seg.end, event, sys) if consts.peaks_on else 0.0
     span = Span(work.F, 0, y, seg.t, seg.h, sys)
     have_dense = seg.dense
-    if not have_dense and dense_wanted(seg, e_seg, wk[W_YSEG, Y_THETA], phi_c, consts, trk.track, rec.fq):
-        step_dense(seg.t, y, seg.h, wk[W_YNEW], sys, work.K, work.F)
+    if not have_dense and dense_wanted(seg, (e_seg, wk[W_YSEG, Y_THETA], phi_c), consts, trk.track, rec.fq):
+        step_dense(span, wk[W_YNEW], work.K)
         have_dense = True
     if seg.running:
         t_halt = record_levels(span, seg.end, e_seg, consts, trk, rec)
         if t_halt >= 0.0:
             outcome = oc.HALTED
-            dense_eval(work.F, 0, y, seg.t, seg.h, t_halt, consts.n, wk[W_YBUF])
+            dense_eval(span, t_halt, consts.n, wk[W_YBUF])
             mark_end(t_halt, wk[W_YBUF], sys, trk.ends, rec)
             start_deep_levels(level_e, rec.levels, sys.p, trk.track, rec.fstats)
         elif trk.track.at[TK_LEVEL] < level_e.shape[0]:
@@ -329,16 +330,17 @@ def record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys):
     # after the end, only while a level's frequencies wait for the motion (not for the whole deep
     # search of the halt fit: its Phi maxima are past the scene's end)
     if consts.peaks_on and (seg.running or pending(trk)):
-        track_frequency(span, seg.end, phi_c, have_dense, seg.running, work, rec)
+        track_frequency(span, seg, phi_c, have_dense, work, rec)
     return outcome, lev
 
 
 @kernel
-def end_segment(seg, outcome, lev, consts, work, rec, sys):
+def end_segment(seg, outcome, lev, run):
     """Restart at the end of the kept part (seg: layout.Segment): an event's discrete update
     (restart_after_event: an outcome there ends the scene; a disk lying flat has halted), or the
-    step end's values carried on (at t_max the scene ends). consts: layout.RunConsts; sys: the step's
-    layout.System. Returns (the outcome, whether the loop stops)."""
+    step end's values carried on (at t_max the scene ends). run: layout.Run (the run's constants,
+    the step's system, the buffers). Returns (the outcome, whether the loop stops)."""
+    consts, sys, work, rec = run
     y, cs, wk, trk = work.y, sys.cs, sys.wk, work.trk
     istats, fstats = sys.istats, rec.fstats
     level_e = consts.level_e
@@ -389,6 +391,7 @@ def run(settings, level_e, sample_tau, sys, work, rec):
     h_max = settings[S_HMAX] if settings[S_HMAX] > 0.0 else math.inf
     consts = RunConsts(sys.n, settings[S_RTOL], settings[S_ATOL], h_max, settings[S_TMAX], int(settings[S_MAXSTEPS]),
                        settings[S_PEAKS] > 0.0, max(abs(rec.fstats[F_E0]), 1e-300), level_e, sample_tau)
+    run = Run(consts, sys, work, rec)
     h = min(record_start(consts, work, rec, sys), consts.h_max)
     t = 0.0
     after_reject = False
@@ -436,8 +439,8 @@ def run(settings, level_e, sample_tau, sys, work, rec):
             after_reject = True
             continue
         seg = Segment(t, h, seg_end, first_k, have_dense, running, at_tmax)
-        outcome, lev = record_segment(seg, e_seg, outcome, lev, consts, work, rec, sys)
-        outcome, stop = end_segment(seg, outcome, lev, consts, work, rec, sys)
+        outcome, lev = record_segment(seg, e_seg, outcome, lev, run)
+        outcome, stop = end_segment(seg, outcome, lev, run)
         t = seg_end
         if stop:
             break

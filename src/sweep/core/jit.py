@@ -117,7 +117,7 @@ register_locator(_caching.CacheImpl)
 
 class Kernel(CPUDispatcher):
     """numba's dispatcher, compiled once per signature of non-literal types. numba types a constant
-    argument at a call site from jitted code (`dense_eval(F, 0, ...)`, `tally_step(cs, istats,
+    argument at a call site from jitted code (`slip_rates(x, 0.0, ...)`, `tally_step(cs, istats,
     True, 1)`) as a Literal of its value, and compiled one copy of the kernel, with its callees
     linked in again, per value: 25 of the 189 signatures a first `simulate` compiled. Typed
     without its value, the argument is the same number at run time, and the kernel computes the

@@ -186,6 +186,11 @@ RunConsts = namedtuple("RunConsts", "n rtol atol h_max t_max max_steps peaks_on 
 # outcome). The stepper (dop853) passes it through to the right-hand side it is given and reads only
 # n and wk. integrate.system_arrays allocates it; a run's n is its settings' state_size.
 System = namedtuple("System", "p cs n wk istats")
+# Eval: one evaluation of a right-hand side: at tau t and the state y, in the system sys (System),
+# into the rows dy (d y/d tau) and aux (N_AUX). The slaved slip's solvers (contact_rhs) take it as
+# the state their trial slips (a direction nu, a speed u) are evaluated at and where they leave the
+# last right-hand side.
+Eval = namedtuple("Eval", "t y sys dy aux")
 # Point: a state y, its derivative f and the right-hand side's aux there (N_AUX): a step's start
 # and end (accept.try_step, dop853.rk_step).
 Point = namedtuple("Point", "y f aux")
@@ -198,3 +203,13 @@ Span = namedtuple("Span", "F row0 y0 t0 h sys")
 # (dense), whether the scene was running when the step began (running: not yet ended, else the
 # step only completes frequency windows after a halt), and whether the step ends at t_max (at_tmax).
 Segment = namedtuple("Segment", "t h end k dense running at_tmax")
+# Bracket: event k's value ga > 0 at tau ta and gb <= 0 at tb > ta (roots.locate shrinks it).
+Bracket = namedtuple("Bracket", "ta ga tb gb")
+# Hermite: a function's values g0, g1 at the two ends of a step and its slopes d0, d1 there per unit
+# of the step (the cubic Hermite interpolant's data: roots.hermite_peak, scan.lift_off).
+Hermite = namedtuple("Hermite", "g0 d0 g1 d1")
+# Peak: a maximum of the normal force: tau, Phi and theta there (tracking's counted maxima, PK_*).
+Peak = namedtuple("Peak", "tau phi theta")
+# Run: what a scene's step loop carries from step to step (integrate.run): its constants (RunConsts),
+# the system (System) and the buffers it integrates in and writes (Work, Record).
+Run = namedtuple("Run", "consts sys work rec")

@@ -151,10 +151,11 @@ def energy(y, p, side, mode):
 
 
 @kernel
-def centre_velocity(u1, u2, w1, w2, w3, h, e, f):
+def centre_velocity(y, u1, u2, h, e, f):
     """Velocity of the centre of mass in chi R/tau, on an orthonormal frame whose first axis is a1:
-    (u1 + w2 - h w3, u2 - e w1, f w1), (u1, u2) the contact point's slip (eq. 4.9 for e, f); half
-    its square is the translational part of energy()."""
+    (u1 + w2 - h w3, u2 - e w1, f w1), (w1, w2, w3) y's angular velocity, (u1, u2) the contact
+    point's slip (eq. 4.9 for e, f); half its square is the translational part of energy()."""
+    w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
     return u1 + w2 - h * w3, u2 - e * w1, f * w1
 
 
@@ -169,18 +170,20 @@ def slip_of(y, slip):
 @kernel
 def energy_with_slip(y, p, side, u1, u2):
     """energy() with the slip components on a1, a2 given explicitly."""
-    return energy_from_trig(y, p, side, u1, u2, math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA]))
+    return energy_from_trig(y, p, side, u1, u2, (math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA])))
 
 
 @kernel
-def energy_from_trig(y, p, side, u1, u2, s, c):
-    """energy_with_slip with s, c = sin, cos of y's inclination given (e.g. aux[X_SINA], aux[X_COSA]
-    of the right-hand side at y): the same arithmetic, the same result to the last bit."""
+def energy_from_trig(y, p, side, u1, u2, trig):
+    """energy_with_slip with trig = (s, c), the sine and cosine of y's inclination, given (e.g.
+    aux[X_SINA], aux[X_COSA] of the right-hand side at y): the same arithmetic, the same result to
+    the last bit."""
+    s, c = trig
     h = side * p[P_H]
     e = c + h * s
     f = h * c - s
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
-    vx, vy, vz = centre_velocity(u1, u2, w1, w2, w3, h, e, f)
+    vx, vy, vz = centre_velocity(y, u1, u2, h, e, f)
     kin = 0.5 * (vx * vx + vy * vy + vz * vz) + 0.5 * p[P_A] * (w1 * w1 + w3 * w3) + 0.5 * p[P_C] * w2 * w2
     return kin + p[P_G] * height_from_trig(s, c, h)
 
@@ -188,11 +191,11 @@ def energy_from_trig(y, p, side, u1, u2, s, c):
 @kernel
 def energy_increment(y, d, p, side, slip):
     """energy_increment_trig with sin, cos of y's inclination evaluated here."""
-    return energy_increment_trig(y, d, p, side, slip, math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA]))
+    return energy_increment_trig(y, d, p, side, slip, (math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA])))
 
 
 @kernel
-def energy_increment_trig(y, d, p, side, slip, s, c):
+def energy_increment_trig(y, d, p, side, slip, trig):
     """E(y + d) - E(y) of energy_with_slip (the slip counted where slip), in difference form.
 
     d is a step's increment before it is rounded into the state. Evaluated as the difference of two
@@ -202,7 +205,8 @@ def energy_increment_trig(y, d, p, side, slip, s, c):
     the dissipation budget'). Here every
     term is (change of q) x (q + change/2), the cosine and sine by their half-angle products, so the
     round-off is relative to the change. Returns (change, scale): scale bounds the change's round-off
-    in units of EPS. s, c: sin, cos of y's inclination."""
+    in units of EPS. trig: (s, c), the sine and cosine of y's inclination."""
+    s, c = trig
     h = side * p[P_H]
     a = y[Y_ALPHA]
     half = 0.5 * d[Y_ALPHA]
@@ -219,7 +223,7 @@ def energy_increment_trig(y, d, p, side, slip, s, c):
     d1, d2, d3 = d[Y_W1], d[Y_W2], d[Y_W3]
     u1, u2 = slip_of(y, slip)
     du1, du2 = slip_of(d, slip)
-    vx, vy, vz = centre_velocity(u1, u2, w1, w2, w3, h, e, f)
+    vx, vy, vz = centre_velocity(y, u1, u2, h, e, f)
     dvx = du1 + d2 - h * d3
     dvy = du2 - (de * (w1 + d1) + e * d1)
     dvz = df * (w1 + d1) + f * d1
@@ -239,18 +243,20 @@ def energy_increment_trig(y, d, p, side, slip, s, c):
 @kernel
 def energy_rate(y, dy, p, side, slip):
     """energy_rate_trig with sin, cos of y's inclination evaluated here."""
-    return energy_rate_trig(y, dy, p, side, slip, math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA]))
+    return energy_rate_trig(y, dy, p, side, slip, (math.sin(y[Y_ALPHA]), math.cos(y[Y_ALPHA])))
 
 
 @kernel
-def energy_rate_trig(y, dy, p, side, slip, s, c):
+def energy_rate_trig(y, dy, p, side, slip, trig):
     """dE/dtau along dy at y: the gradient of energy_with_slip (the slip counted where slip) times dy.
 
     With dy the right-hand side, energy_rate(y, dy) + dy[Y_DSLIDE] + dy[Y_DK1..3] is exactly 0 for
     the exact flow (the power balance of eq. 6.1); what the evaluated right-hand side leaves of it
     is its round-off in the energy direction, which near flat (tan(alpha) ~ 1e6 in the gyroscopic
     terms) is far above the round-off of the energy's own terms (accept.balance_error).
-    Uses de/dalpha = f, df/dalpha = -e (eq. 4.9); s, c: sin, cos of y's inclination."""
+    Uses de/dalpha = f, df/dalpha = -e (eq. 4.9); trig: (s, c), the sine and cosine of y's
+    inclination."""
+    s, c = trig
     h = side * p[P_H]
     e = c + h * s
     f = h * c - s
@@ -258,7 +264,7 @@ def energy_rate_trig(y, dy, p, side, slip, s, c):
     da, d1, d2, d3 = dy[Y_ALPHA], dy[Y_W1], dy[Y_W2], dy[Y_W3]
     u1, u2 = slip_of(y, slip)
     du1, du2 = slip_of(dy, slip)
-    vx, vy, vz = centre_velocity(u1, u2, w1, w2, w3, h, e, f)
+    vx, vy, vz = centre_velocity(y, u1, u2, h, e, f)
     dvx = du1 + d2 - h * d3
     dvy = du2 - f * da * w1 - e * d1
     dvz = -e * da * w1 + f * d1
@@ -298,11 +304,13 @@ def slip_direction(y, p, mode, n0x, n0y):
 
 
 @kernel(inline="always")
-def tilt_balance(y, p, mode, geo, n2, sig, stuck):
+def tilt_balance(y, p, contact, geo, n2):
     """(dw1, Phi, sigma_1, ok): d omega_1/d tau and the normal force from the e1 moment balance and
-    the vertical balance, Phi = phi0 + f dw1 (eq. 4.6; rolling: eq. 5.3_2 with Phi kept). A stuck
-    omega.a_1 (stuck[0], k1 > 0) is held at 0 and its effective sign sigma_1 solved instead.
-    ok = -1 where no acceleration satisfies the contact law (a Painleve inconsistency), else 1."""
+    the vertical balance, Phi = phi0 + f dw1 (eq. 4.6; rolling: eq. 5.3_2 with Phi kept), in the
+    contact's mode with its signs sig (Contact). A stuck omega.a_1 (contact.stuck[0], k1 > 0) is
+    held at 0 and its effective sign sigma_1 solved instead. ok = -1 where no acceleration satisfies
+    the contact law (a Painleve inconsistency), else 1."""
+    mode, sig, stuck = contact.mode, contact.sig, contact.stuck
     G, A, C, k1 = p[P_G], p[P_A], p[P_C], p[P_K1]
     h, s, c, t, e, f, thd = geo
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
@@ -325,10 +333,11 @@ def tilt_balance(y, p, mode, geo, n2, sig, stuck):
 
 
 @kernel(inline="always")
-def spin_balance(y, p, mode, geo, phi, n1, sig, stuck):
+def spin_balance(y, p, contact, geo, phi, n1):
     """(dw2, dw3, sigma_2, sigma_3) from the e2, e3 moment balances, M [dw2, dw3] = b - Phi [kb2,
-    kb3] (eq. 4.8; rolling: eq. 5.3 with the constraint's force); held_spin_rates where a stuck
-    omega.a_2 or omega.a_3 (k > 0) is held at 0."""
+    kb3] (eq. 4.8; rolling: eq. 5.3 with the constraint's force), in the contact's mode with its
+    signs (Contact); held_spin_rates where a stuck omega.a_2 or omega.a_3 (k > 0) is held at 0."""
+    mode, sig, stuck = contact.mode, contact.sig, contact.stuck
     A, C, k2, k3, mud = p[P_A], p[P_C], p[P_K2], p[P_K3], p[P_MUD]
     h, s, c, t, e, f, thd = geo
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
@@ -339,7 +348,7 @@ def spin_balance(y, p, mode, geo, phi, n1, sig, stuck):
         m = (C + 1.0, -h, -h, A + h * h)
         b = (-e * w1 * thd, -C * w1 * w2 + A * w1 * w3 * t + h * e * w1 * thd)
     if (stuck[1] == 1 and k2 > 0.0) or (stuck[2] == 1 and k3 > 0.0):
-        return held_spin_rates(y, p, geo, phi, m, b, sig, stuck)
+        return held_spin_rates(y, p, contact, geo, phi, (m, b))
     sig2 = sig[1]
     sig3 = sig[2]
     kb2 = k2 * sig2 * c + k3 * sig3 * s
@@ -349,12 +358,14 @@ def spin_balance(y, p, mode, geo, phi, n1, sig, stuck):
 
 
 @kernel(inline="always")
-def held_spin_rates(y, p, geo, phi, m, b, sig, stuck):
+def held_spin_rates(y, p, contact, geo, phi, balance):
     """spin_balance's (dw2, dw3, sigma_2, sigma_3) with omega.a_2 and/or omega.a_3 held at 0 by the
-    dry-friction moment (stuck, k > 0: Filippov sliding); m = (m11, m12, m21, m22) and b = (b2, b3)
-    its system without the moment. The rates are dw = W0 + sig2 W2 + sig3 W3, and each held sigma
-    is solved from d/dtau(w2 c - w3 s) = dw2 c - dw3 s - w1 (w2 s + w3 c) = 0, respectively
-    d/dtau(w2 s + w3 c) = dw2 s + dw3 c + w1 (w2 c - w3 s) = 0."""
+    dry-friction moment (contact.stuck, k > 0: Filippov sliding); balance = (m, b), m = (m11, m12, m21,
+    m22) and b = (b2, b3) its system without the moment. The rates are dw = W0 + sig2 W2 + sig3 W3, and
+    each held sigma is solved from d/dtau(w2 c - w3 s) = dw2 c - dw3 s - w1 (w2 s + w3 c) = 0,
+    respectively d/dtau(w2 s + w3 c) = dw2 s + dw3 c + w1 (w2 c - w3 s) = 0."""
+    sig, stuck = contact.sig, contact.stuck
+    m, b = balance
     k2, k3 = p[P_K2], p[P_K3]
     s, c = geo[1], geo[2]
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
@@ -379,10 +390,11 @@ def held_spin_rates(y, p, geo, phi, m, b, sig, stuck):
 
 
 @kernel(inline="always")
-def contact_rates(y, p, mode, geo, phi, n, dw):
-    """(F1, F2, du1, du2): the friction on a1, a2 and the slip's rates, given Phi, the slip
-    direction n = (n1, n2) and dw = (dw1, dw2, dw3). Sliding: F = -mud Phi n and eq. 4.7_1,2;
-    rolling: the friction the constraint needs (eq. 5.2_1), and no slip."""
+def contact_rates(y, p, mode, geo, load, dw):
+    """(F1, F2, du1, du2): the friction on a1, a2 and the slip's rates, given load = (Phi, n) with
+    n = (n1, n2) the slip direction, and dw = (dw1, dw2, dw3). Sliding: F = -mud Phi n and
+    eq. 4.7_1,2; rolling: the friction the constraint needs (eq. 5.2_1), and no slip."""
+    phi, n = load
     h, s, c, t, e, f, thd = geo
     w1 = y[Y_W1]
     dw1, dw2, dw3 = dw
@@ -414,8 +426,9 @@ def kinematics_rates(y, geo, u1, u2, nstate, dy):
 
 
 @kernel(inline="always")
-def rhs(tau, y, p, contact, nstate, dy, aux):
-    """Time derivatives d y/d tau of the state, and contact quantities in `aux`.
+def rhs(y, p, contact, nstate, dy, aux):
+    """Time derivatives d y/d tau of the state, and contact quantities in `aux` (the model is
+    autonomous: no term reads tau).
 
     contact (Contact): mode ROLL (eq. 5.3, corrected) or SLIDE (eq. 4.7); side = sign(alpha) = +-1
     selects H; sig[i]: sign of omega.a_i used in M_f (eq. 3.3) for a component that is not stuck;
@@ -426,13 +439,13 @@ def rhs(tau, y, p, contact, nstate, dy, aux):
     aux: Phi, F1, F2 (friction on a1, a2), effective sigma_1..3, omega.a_1..3, ok-flag (1; -1 where the
     e1 balance's coefficient of Phi is not positive: a Painleve inconsistency), sin and cos of alpha.
     """
-    mode, sig, stuck = contact.mode, contact.sig, contact.stuck
+    mode = contact.mode
     geo = geometry(y, p, contact.side)
     s, c = geo[1], geo[2]
     u1, u2, n1, n2 = slip_direction(y, p, mode, contact.n0x, contact.n0y)
-    dw1, phi, sig1, ok = tilt_balance(y, p, mode, geo, n2, sig, stuck)
-    dw2, dw3, sig2, sig3 = spin_balance(y, p, mode, geo, phi, n1, sig, stuck)
-    F1, F2, du1, du2 = contact_rates(y, p, mode, geo, phi, (n1, n2), (dw1, dw2, dw3))
+    dw1, phi, sig1, ok = tilt_balance(y, p, contact, geo, n2)
+    dw2, dw3, sig2, sig3 = spin_balance(y, p, contact, geo, phi, n1)
+    F1, F2, du1, du2 = contact_rates(y, p, mode, geo, (phi, (n1, n2)), (dw1, dw2, dw3))
     w1, w2, w3 = y[Y_W1], y[Y_W2], y[Y_W3]
     g2 = w2 * c - w3 * s
     g3 = w2 * s + w3 * c

@@ -12,7 +12,7 @@ import math
 from .constants import SLAVED
 from .contact_rhs import eval_rhs, friction_along, slaved_slip
 from .jit import kernel
-from .layout import CS_MODE, CS_NU, CS_SIG, CS_STUCK, I_STICK, W_AUXTMP, W_DYTMP, W_SCRATCH
+from .layout import CS_MODE, CS_NU, CS_SIG, CS_STUCK, I_STICK, Eval, W_AUXTMP, W_DYTMP, W_SCRATCH
 from .model import (P_K1, P_K2, P_K3, P_WTOL, X_DCROSS, X_G1, X_LAG, X_NU, X_SIG1, X_SLAVE_ERR, Y_U1, Y_U2,
                     moment_axes_rates, sign_rate)
 
@@ -40,14 +40,14 @@ def decision_rhs(i, t, y, sys, dy, aux):
     slaved = cs[CS_MODE] == SLAVED
     root, lag, dcross, ok, err = cs[CS_NU], 0.0, 0.0, 1.0, 0.0
     if slaved:
-        root, lag, dcross, ok, err = slaved_slip(root, t, y, sys, dy, aux)
+        root, lag, dcross, ok, err = slaved_slip(root, Eval(t, y, sys, dy, aux))
         if ok == 0.0:
             root, lag = math.atan2(y[Y_U2], y[Y_U1]), 0.0
     was = cs[CS_STUCK + i] if i >= 0 else 0.0
     if i >= 0:
         cs[CS_STUCK + i] = 1.0
     if slaved:
-        friction_along(root + lag, t, y, sys, dy, aux)
+        friction_along(root + lag, Eval(t, y, sys, dy, aux))
         # the slaved slip's own quantities, as eval_rhs leaves them (the event functions read them)
         aux[X_DCROSS] = dcross
         aux[X_NU] = root

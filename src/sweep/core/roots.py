@@ -29,10 +29,11 @@ RATE_STEP = 1e-7
 
 
 @kernel
-def sign_slopes(i, sig, y0, f0, y1, f1, h):
-    """End slopes, per unit of the step [y0, y1] of length h, of sig * omega.a_i: exact, from the
-    state and its derivative (no RHS evaluation); for the sign and spin events' Hermite checks."""
-    return sig * sign_rate(i, y0, f0) * h, sig * sign_rate(i, y1, f1) * h
+def sign_slopes(i, sig, start, end, h):
+    """End slopes, per unit of the step from start to end (layout.Point: y and its derivative f) of
+    length h, of sig * omega.a_i: exact, from the state and its derivative (no RHS evaluation); for
+    the sign and spin events' Hermite checks."""
+    return sig * sign_rate(i, start.y, start.f) * h, sig * sign_rate(i, end.y, end.f) * h
 
 
 @kernel
@@ -129,11 +130,12 @@ def hermite_peak(g0, d0, g1, d1):
 
 
 @kernel
-def event_rates(t, y, f, g_here, rates, lev, sys):
-    """d g_k/d tau along the solution at (t, y) for every event k (g_here: the values there,
-    derivative f; lev: the next level's energy) into rates, by a forward difference of step
-    RATE_STEP along f: one RHS evaluation for all, in the system sys (layout.System). 0 where g_k is
-    inactive (inf)."""
+def event_rates(t, at, g_here, rates, lev, sys):
+    """d g_k/d tau along the solution at (t, at.y) for every event k (at: layout.Point, its derivative
+    at.f; g_here: the values there; lev: the next level's energy) into rates, by a forward
+    difference of step RATE_STEP along f: one RHS evaluation for all, in the system sys
+    (layout.System). 0 where g_k is inactive (inf)."""
+    y, f = at.y, at.f
     wk = sys.wk
     ys = wk[W_YBUF]
     for i in range(sys.n):
@@ -160,7 +162,7 @@ def reads_forces(k):
 def span_state(t, span):
     """The state at time t on the dense output of a step (span: layout.Span), into its wk[W_YBUF]."""
     sys = span.sys
-    dense_eval(span.F, span.row0, span.y0, span.t0, span.h, t, sys.n, sys.wk[W_YBUF])
+    dense_eval(span, t, sys.n, sys.wk[W_YBUF])
 
 
 @kernel
@@ -185,18 +187,18 @@ def location_tol(tau):
 
 
 @kernel
-def locate(k, ta, ga, tb, gb, span, lev):
+def locate(k, bracket, span, lev):
     """Brent's method (inverse quadratic and secant steps inside a shrinking bracket, bisection
-    where they would be slow) for g_k on [ta, tb] with g(ta) > 0 >= g(tb), on the dense output of
-    span (layout.Span; lev: the next level's energy). Returns the (ta, tb) bracket, no wider than
-    location_tol, g > 0 at ta.
+    where they would be slow) for g_k on [ta, tb] with g(ta) = ga > 0 >= g(tb) = gb (bracket:
+    layout.Bracket), on the dense output of span (layout.Span; lev: the next level's energy).
+    Returns the (ta, tb) bracket, no wider than location_tol, g > 0 at ta.
 
     b is the best point so far and c the bracket's other end (g of the other sign); a step is at
     least half the tolerance, so a bracket that converges from one side closes. A NaN value (a
     right-hand side that failed) counts as past the event. At most 200 evaluations: Brent's method
     needs at most ~2 per bisection's worth of bracket, ~100 from a whole step to 4 ulp.
     """
-    a, fa, b, fb = ta, ga, tb, gb
+    a, fa, b, fb = bracket
     c, fc = a, fa
     d = b - a
     e = d

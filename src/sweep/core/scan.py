@@ -10,8 +10,8 @@ from .event_ids import EVENTS, EV_AGAINST1, N_DYN_EVENTS
 from .events import (C_MOMENT, D_RATES, D_SIDE, D_SIGN, D_SLIP, E_CLASS, E_COMPONENT, E_DIP, E_HOLDS, E_RESTART, R_SPIN,
                      R_SURFACE)
 from .jit import kernel
-from .layout import (CS_SIDE, CS_SIG, SC_RATES_NEW, SC_RATES_OLD, W_F, W_FNEW, W_GNEW, W_GOLD, W_RATENEW, W_RATEOLD,
-                     W_YBUF, W_YNEW)
+from .layout import (CS_SIDE, CS_SIG, SC_RATES_NEW, SC_RATES_OLD, W_AUX, W_AUXNEW, W_F, W_FNEW, W_GNEW, W_GOLD,
+                     W_RATENEW, W_RATEOLD, W_YBUF, W_YNEW, Bracket, Hermite, Point)
 from .model import Y_W1
 from .moments import spin_sticks
 from .roots import (brent_min, event_rates, event_value_at, hermite_dip, hermite_peak, locate, reads_forces,
@@ -71,7 +71,7 @@ def first_event(span, lev, work):
                     dip_end = tm
         if ta >= 0.0 and ta < first_t:
             have_dense = dense_built(have_dense, span, work)
-            ra, rb = locate(k, ta, ga, tb, gb, span, lev)
+            ra, rb = locate(k, Bracket(ta, ga, tb, gb), span, lev)
             if (rb < first_t or first_k < 0) and (EVENTS[k, E_HOLDS] == 0
                                                   or spin_holds(EVENTS[k, E_COMPONENT], rb, span)):
                 first_k = k_event
@@ -80,16 +80,30 @@ def first_event(span, lev, work):
     return first_k, first_t, have_dense
 
 
+@kernel(inline="always")
+def step_start(y, wk):
+    """The accepted step's start (layout.Point): y (work.y), its derivative wk[W_F] and aux wk[W_AUX]."""
+    return Point(y, wk[W_F], wk[W_AUX])
+
+
+@kernel(inline="always")
+def step_end(wk):
+    """The accepted step's end (layout.Point): wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW]."""
+    return Point(wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW])
+
+
 @kernel
-def lift_off(k, span, g0, d0, g1, d1, lev):
+def lift_off(k, span, ends, lev):
     """On the step span (layout.Span: [t, t + h] from its y0, dense output built) that starts on
     event k's surface (g0 <= 0, just after a discrete update put the state there) and ends with
     g1 <= 0: a time where g_k > 0 and its value, to bracket a return to the surface within the step;
-    (-1, 0) if there is none. d0, d1: exact end derivatives of g_k per unit of the step. Starts at
+    (-1, 0) if there is none. ends (layout.Hermite): g0, g1 and the exact end derivatives d0, d1 of
+    g_k per unit of the step. Starts at
     the peak of the cubic Hermite interpolant of g_k; where g_k leaves the surface upwards (d0 > 0)
     it halves towards t, where g_k ~ g0 + d0 x > 0. lev: the next level's energy.
     """
     t, h = span.t0, span.h
+    g0, d0, g1, d1 = ends
     x = hermite_peak(g0, d0, g1, d1)
     tries = 60 if d0 > 0.0 else 1
     if x <= 0.0:
@@ -109,7 +123,7 @@ def dense_built(have_dense, span, work):
     """The accepted step's dense output in F[0:7] (the step span, layout.Span, from work.y to
     wk[W_YNEW]), built once per step: returns True."""
     if not have_dense:
-        step_dense(span.t0, span.y0, span.h, span.sys.wk[W_YNEW], span.sys, work.K, span.F)
+        step_dense(span, span.sys.wk[W_YNEW], work.K)
     return True
 
 
@@ -130,8 +144,8 @@ def surface_bracket(k, span, lev, work):
         d0 = cs[CS_SIDE] * y[Y_W1] * h
         d1 = cs[CS_SIDE] * y_new[Y_W1] * h
     else:
-        d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], y_new, wk[W_FNEW], h)
-    ta, ga = lift_off(k, span, g0, d0, g1, d1, lev)
+        d0, d1 = sign_slopes(i, cs[CS_SIG + i], step_start(y, wk), step_end(wk), h)
+    ta, ga = lift_off(k, span, Hermite(g0, d0, g1, d1), lev)
     tb, gb = t + h, g1
     k_event = k
     moment = EVENTS[k, E_CLASS] == C_MOMENT
@@ -165,7 +179,7 @@ def spin_bracket(k, span, lev, work, have_dense):
     t, h = span.t0, span.h
     y, cs, wk = work.y, span.sys.cs, span.sys.wk
     i = EVENTS[k, E_COMPONENT]
-    d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, wk[W_F], wk[W_YNEW], wk[W_FNEW], h)
+    d0, d1 = sign_slopes(i, cs[CS_SIG + i], step_start(y, wk), step_end(wk), h)
     peak = hermite_peak(wk[W_GOLD, k], d0, wk[W_GNEW, k], d1)
     if peak > 0.0:
         have_dense = dense_built(have_dense, span, work)
@@ -196,7 +210,7 @@ def dip_bracket(k, span, lev, work, have_dense):
     elif how == D_SIGN:
         # sigma_i omega.a_i (less spin_tol): exact slopes from the state
         i = EVENTS[k, E_COMPONENT]
-        d0, d1 = sign_slopes(i, cs[CS_SIG + i], y, f, y_new, f_new, h)
+        d0, d1 = sign_slopes(i, cs[CS_SIG + i], step_start(y, wk), step_end(wk), h)
         dip = hermite_dip(g0, d0, g1, d1)
     elif how == D_SLIP:
         # |u| less a speed: a V where the slip passes by u = 0, placed from the slip's own smooth
@@ -204,10 +218,10 @@ def dip_bracket(k, span, lev, work, have_dense):
         dip = slip_closest_approach(y, f, y_new, f_new, h)
     elif how == D_RATES:
         if not scan.rates[SC_RATES_OLD]:
-            event_rates(t, y, f, wk[W_GOLD], wk[W_RATEOLD], lev, span.sys)
+            event_rates(t, step_start(y, wk), wk[W_GOLD], wk[W_RATEOLD], lev, span.sys)
             scan.rates[SC_RATES_OLD] = True
         if not scan.rates[SC_RATES_NEW]:
-            event_rates(t + h, y_new, f_new, wk[W_GNEW], wk[W_RATENEW], lev, span.sys)
+            event_rates(t + h, step_end(wk), wk[W_GNEW], wk[W_RATENEW], lev, span.sys)
             scan.rates[SC_RATES_NEW] = True
         dip = hermite_dip(g0, wk[W_RATEOLD, k] * h, g1, wk[W_RATENEW, k] * h)
     else:

@@ -21,7 +21,7 @@ from .contact_rhs import (SLAVE_FLOOR, eval_rhs, model_call, root_lag, second_or
                           slip_floor, slip_rates, slip_roundoff)
 from .impulse import project_velocity
 from .jit import kernel
-from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SLAVE_OFF, W_AUXSLOPE, W_AUXTMP, W_DYSLOPE, W_DYTMP,
+from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SLAVE_OFF, Eval, W_AUXSLOPE, W_AUXTMP, W_DYSLOPE, W_DYTMP,
                      W_SCRATCH, W_YSLIP)
 from .model import P_MUD, P_MUS, P_SLAVE, P_UTOL, X_F1, X_F2, X_OK, X_PHI, Y_DSLIDE, Y_U1, Y_U2
 
@@ -82,6 +82,7 @@ def onset_direction(t, y, sys, F1, F2):
     dy = wk[W_DYTMP]
     aux = wk[W_AUXTMP]
     ys = wk[W_YSLIP]
+    ev = Eval(t, y, sys, dy, aux)
     guess = math.atan2(-F2, -F1)
     best = guess
     bestd = 1e300    # the nearest root with a solution
@@ -89,17 +90,17 @@ def onset_direction(t, y, sys, F1, F2):
     bestd_none = 1e300   # ... and without one
     m = 64
     xa = guess - math.pi
-    ca, _ = slip_rates(xa, 0.0, t, y, sys, dy, aux, ys)
+    ca, _ = slip_rates(xa, 0.0, ev, ys)
     oka = aux[X_OK]
     for j in range(1, m + 1):
         xb = guess - math.pi + 2.0 * math.pi * j / m
-        cb, _ = slip_rates(xb, 0.0, t, y, sys, dy, aux, ys)
+        cb, _ = slip_rates(xb, 0.0, ev, ys)
         okb = aux[X_OK]
         if (ca > 0.0) != (cb > 0.0):
             lo, hi, clo, oklo, okhi = xa, xb, ca, oka, okb
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
-                cm, _ = slip_rates(mid, 0.0, t, y, sys, dy, aux, ys)
+                cm, _ = slip_rates(mid, 0.0, ev, ys)
                 if (cm > 0.0) == (clo > 0.0):
                     lo, clo, oklo = mid, cm, aux[X_OK]
                 else:
@@ -107,7 +108,7 @@ def onset_direction(t, y, sys, F1, F2):
                 if hi - lo < 1e-13:
                     break
             root = 0.5 * (lo + hi)
-            _, dr = slip_rates(root, 0.0, t, y, sys, dy, aux, ys)
+            _, dr = slip_rates(root, 0.0, ev, ys)
             dist = abs(math.atan2(math.sin(root - guess), math.cos(root - guess)))
             if dr > 0.0 and (oklo > 0.0) == (okhi > 0.0):
                 if oklo > 0.0 and dist < bestd:
@@ -122,7 +123,7 @@ def onset_direction(t, y, sys, F1, F2):
 def start_slip(t, y, sys):
     """ROLL -> SLAVED at zero slip speed, in the onset direction."""
     cs, wk = sys.cs, sys.wk
-    model_call(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
+    model_call(Eval(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP]), 1.0, 0.0)
     F1 = wk[W_AUXTMP, X_F1]
     F2 = wk[W_AUXTMP, X_F2]
     cs[CS_MODE] = SLAVED
@@ -143,12 +144,12 @@ def set_slip(t, y, sys):
         cs[CS_MODE] = SLIDE
         cs[CS_NU] = nu
         cs[CS_SLAVE_OFF] = HANDOVER_ARMED
-        model_call(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], 1.0, 0.0)
+        model_call(Eval(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP]), 1.0, 0.0)
         if un <= slave_speed(y, wk[W_AUXTMP], p):
             return try_slave(t, y, sys)
         return -1
     cs[CS_MODE] = SLAVED
-    cs[CS_NU] = slaved_direction(nu, un, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP])
+    cs[CS_NU] = slaved_direction(nu, un, Eval(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP]), wk[W_YSLIP])
     return -1
 
 
@@ -166,7 +167,8 @@ def attracting_direction(nu, u, t, y, sys):
     dy = wk[W_DYTMP]
     aux = wk[W_AUXTMP]
     ys = wk[W_YSLIP]
-    ca, da = slip_rates(nu, u, t, y, sys, dy, aux, ys)
+    ev = Eval(t, y, sys, dy, aux)
+    ca, da = slip_rates(nu, u, ev, ys)
     if aux[X_OK] < 0.0:
         return JAMMED
     if ca == 0.0:
@@ -177,26 +179,26 @@ def attracting_direction(nu, u, t, y, sys):
     xa = nu
     for j in range(1, 65):
         xb = nu + j * step
-        cb, db = slip_rates(xb, u, t, y, sys, dy, aux, ys)
+        cb, db = slip_rates(xb, u, ev, ys)
         crossed = (cb > 0.0) != (ca > 0.0) or aux[X_OK] < 0.0
         lo, hi = xa, xb
         if not crossed and abs(ca) < c_prev and abs(ca) <= abs(cb):
             # |cross| dips at xa: a root pair may lie between the neighbouring steps
-            x_min = dip_crosses(x_prev if c_prev < math.inf else xa, xb, sense, u, t, y, sys)
+            x_min = dip_crosses(x_prev if c_prev < math.inf else xa, xb, sense, u, ev)
             if not math.isnan(x_min):
                 crossed = True
                 lo, hi = (x_prev if c_prev < math.inf else xa), x_min
         if crossed:
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
-                cm, dm = slip_rates(mid, u, t, y, sys, dy, aux, ys)
+                cm, dm = slip_rates(mid, u, ev, ys)
                 if (cm > 0.0) == (sense > 0.0) and aux[X_OK] >= 0.0:
                     lo = mid
                 else:
                     hi = mid
                 if abs(hi - lo) < 1e-13:
                     break
-            slip_rates(hi, u, t, y, sys, dy, aux, ys)
+            slip_rates(hi, u, ev, ys)
             if aux[X_OK] < 0.0:
                 return JAMMED
             return 0.5 * (lo + hi)
@@ -206,32 +208,32 @@ def attracting_direction(nu, u, t, y, sys):
 
 
 @kernel
-def dip_crosses(lo, hi, sense, u, t, y, sys):
+def dip_crosses(lo, hi, sense, u, ev):
     """Where sense x cross has its minimum on [lo, hi] (golden section), if it is <= 0 there or the
     contact law has no solution (a root pair, or the Painleve pole, between two scan steps of
-    attracting_direction whose cross has the sign sense): that point, else NaN."""
-    wk = sys.wk
-    dy, aux, ys = wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP]
+    attracting_direction whose cross has the sign sense): that point, else NaN. ev (layout.Eval):
+    the state the trial slips of speed u are evaluated at, and where they leave the right-hand side."""
+    aux, ys = ev.aux, ev.sys.wk[W_YSLIP]
     g = 0.5 * (math.sqrt(5.0) - 1.0)
     x1 = hi - g * (hi - lo)
     x2 = lo + g * (hi - lo)
-    f1, _ = slip_rates(x1, u, t, y, sys, dy, aux, ys)
+    f1, _ = slip_rates(x1, u, ev, ys)
     if aux[X_OK] < 0.0 or sense * f1 <= 0.0:
         return x1
-    f2, _ = slip_rates(x2, u, t, y, sys, dy, aux, ys)
+    f2, _ = slip_rates(x2, u, ev, ys)
     if aux[X_OK] < 0.0 or sense * f2 <= 0.0:
         return x2
     for _ in range(DIP_ITERATIONS):
         if sense * f1 < sense * f2:
             hi, x2, f2 = x2, x1, f1
             x1 = hi - g * (hi - lo)
-            f1, _ = slip_rates(x1, u, t, y, sys, dy, aux, ys)
+            f1, _ = slip_rates(x1, u, ev, ys)
             if aux[X_OK] < 0.0 or sense * f1 <= 0.0:
                 return x1
         else:
             lo, x1, f1 = x1, x2, f2
             x2 = lo + g * (hi - lo)
-            f2, _ = slip_rates(x2, u, t, y, sys, dy, aux, ys)
+            f2, _ = slip_rates(x2, u, ev, ys)
             if aux[X_OK] < 0.0 or sense * f2 <= 0.0:
                 return x2
     return math.nan
@@ -284,9 +286,10 @@ def settle_onto(root, t, y, sys, strict):
     p, cs, n, wk = sys.p, sys.cs, sys.n, sys.wk
     side = int(cs[CS_SIDE])
     u = math.hypot(y[Y_U1], y[Y_U2])
-    lag, dcross, err = root_lag(root, u, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+    ev = Eval(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+    lag, dcross, err = root_lag(root, u, ev)
     if p[P_SLAVE] > 0.0 and abs(lag) * err > EPS:
-        lag, err = second_order(root, lag, dcross, err, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
+        lag, err = second_order(root, lag, dcross, err, ev)
     along = root + lag
     if strict and p[P_SLAVE] > 0.0 and u > SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]:
         # the slow manifold is no good approximation here, or the slip's direction has yet to
@@ -299,7 +302,7 @@ def settle_onto(root, t, y, sys, strict):
     saved = wk[W_YSLIP]
     for i in range(n):
         saved[i] = y[i]
-    loss = project_velocity(y, p, side, True, side, True, wk[W_SCRATCH:W_SCRATCH + 7], along)
+    loss = project_velocity(y, p, (side, True), (side, True), wk[W_SCRATCH:W_SCRATCH + 7], along)
     if y[Y_U1] * math.cos(along) + y[Y_U2] * math.sin(along) > 0.0:
         y[Y_DSLIDE] += loss
         cs[CS_MODE] = SLAVED
@@ -331,18 +334,19 @@ def slip_fate(t, y, sys):
     dy = wk[W_DYTMP]
     aux = wk[W_AUXTMP]
     ys = wk[W_YSLIP]
+    ev = Eval(t, y, sys, dy, aux)
     u = math.hypot(y[Y_U1], y[Y_U2])
     root = attracting_direction(math.atan2(y[Y_U2], y[Y_U1]), u, t, y, sys)
     if root == JAMMED:
         return FATE_JAMMED, math.nan
     if not math.isnan(root):
-        _, rad = slip_rates(root, u, t, y, sys, dy, aux, ys)
+        _, rad = slip_rates(root, u, ev, ys)
         if rad > 0.0:
             return FATE_PASSES, root
         return FATE_ENDS, root
     turn = 0.0
     for j in range(SPIRAL_POINTS):
-        cross, rad = slip_rates(2.0 * math.pi * j / SPIRAL_POINTS, u, t, y, sys, dy, aux, ys)
+        cross, rad = slip_rates(2.0 * math.pi * j / SPIRAL_POINTS, u, ev, ys)
         turn += rad / abs(cross)
     if turn > 0.0:
         return FATE_SPIRALS_OUT, math.nan
@@ -384,7 +388,7 @@ def slow_slide(t, y, sys):
         end_slip(y, sys)
         return -1
     side = int(cs[CS_SIDE])
-    y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
+    y[Y_DSLIDE] += project_velocity(y, p, (side, True), (side, False), wk[W_SCRATCH:W_SCRATCH + 7])
     y[Y_U1] = 0.0
     y[Y_U2] = 0.0
     cs[CS_MODE] = SLAVED
@@ -399,7 +403,7 @@ def end_slip(y, sys):
     a slip that ends at the round-off floor or spirals in (slow_slide)."""
     p, cs, wk = sys.p, sys.cs, sys.wk
     side = int(cs[CS_SIDE])
-    y[Y_DSLIDE] += project_velocity(y, p, side, True, side, False, wk[W_SCRATCH:W_SCRATCH + 7])
+    y[Y_DSLIDE] += project_velocity(y, p, (side, True), (side, False), wk[W_SCRATCH:W_SCRATCH + 7])
     cs[CS_MODE] = ROLL
 
 
@@ -419,7 +423,7 @@ def confirm_slaved(t, y, sys):
     """
     cs, wk = sys.cs, sys.wk
     u = math.hypot(y[Y_U1], y[Y_U2])
-    nu = slaved_direction(cs[CS_NU], u, t, y, sys, wk[W_DYTMP], wk[W_AUXTMP], wk[W_YSLIP])
+    nu = slaved_direction(cs[CS_NU], u, Eval(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP]), wk[W_YSLIP])
     if wk[W_AUXTMP, X_OK] != 0.0:
         cs[CS_NU] = nu
         return -1

@@ -17,11 +17,11 @@ from .fits import halt_from_three
 from .frequency import (Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_step, open_level, peak_candidate,
                         peak_confirmed)
 from .jit import kernel
-from .layout import (CS_MODE, FT_B, FT_DEEP_B, FT_DEEP_E, FT_T, F_APPROACH, F_NFMAX, F_TEND, F_THALT, F_THALT_ERR,
-                     I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, L_ALPHA, L_FHAT, L_PENDING, L_TAU, N_CS, PH_A, PH_B,
-                     PH_HPREV, PH_TA, PH_TB, PH_TPREV, PK_PHI, PK_TAU, PK_THETA, SA_ENERGY, SA_MODE, SA_PHI, SA_Y, Span,
-                     System, TF_PREV_DENSE, TF_PREV_OK, TF_RING, TK_FHAT_PENDING, TK_LEVEL, TK_NPK, TK_SAMPLE, TR_MODE,
-                     TR_PHI, TR_TAU, TR_Y, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV)
+from .layout import (Bracket, CS_MODE, FT_B, FT_DEEP_B, FT_DEEP_E, FT_T, F_APPROACH, F_NFMAX, F_TEND, F_THALT,
+                     F_THALT_ERR, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, L_ALPHA, L_FHAT, L_PENDING, L_TAU,
+                     N_CS, PH_A, PH_B, PH_HPREV, PH_TA, PH_TB, PH_TPREV, PK_PHI, PK_TAU, PK_THETA, Peak, SA_ENERGY,
+                     SA_MODE, SA_PHI, SA_Y, Span, System, TF_PREV_DENSE, TF_PREV_OK, TF_RING, TK_FHAT_PENDING, TK_LEVEL,
+                     TK_NPK, TK_SAMPLE, TR_MODE, TR_PHI, TR_TAU, TR_Y, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV)
 from .model import X_PHI, Y_ALPHA, Y_THETA, steady_rolling_energy
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
@@ -36,11 +36,13 @@ PEAK_SIDE_TOL = 1e-12
 
 
 @kernel
-def dense_wanted(seg, e_seg, theta_seg, phi_c, consts, trk, fq):
+def dense_wanted(seg, at_end, consts, trk, fq):
     """Whether a recorder reads the dense output of the kept part seg (layout.Segment) of a step (the
     tests they make): a level crossed (while running, or one the halt fit waits for after the halt),
-    a sample due, a new point of the precession lattice, a bracketed Phi maximum. e_seg, theta_seg,
-    phi_c: the energy (mode_energy), theta and Phi at the segment end; consts: layout.RunConsts."""
+    a sample due, a new point of the precession lattice, a bracketed Phi maximum. at_end = (e_seg,
+    theta_seg, phi_c): the energy (mode_energy), theta and Phi at the segment end; consts:
+    layout.RunConsts."""
+    e_seg, theta_seg, phi_c = at_end
     level_e, sample_tau = consts.level_e, consts.sample_tau
     L = trk.at[TK_LEVEL]
     if seg.running and L < level_e.shape[0] and e_seg - level_e[L] <= 0.0:
@@ -78,12 +80,13 @@ def peak_bracketed(phi_c, trk):
 
 
 @kernel
-def step_dense(t, y, h, y_new, sys, K, F):
-    """dop853.dense_coeffs for the contact right-hand side (contact_rhs.eval_rhs): the dense output F[0:7]
-    of the step from y at t over h to y_new, from its stages K, in the system sys (layout.System).
+def step_dense(span, y_new, K):
+    """dop853.dense_coeffs for the contact right-hand side (contact_rhs.eval_rhs): the dense output
+    (rows row0..row0 + 6 of span.F) of the step span (layout.Span: from y0 at t0 over h, in its
+    system) to y_new, from its stages K.
     A kernel of its own: the stepper's kernels are inlined into their callers, and this one
     compiled copy serves every step's dense output (scan.dense_built, previous_dense)."""
-    dense_coeffs(eval_rhs, t, y, h, y_new, sys, K, F)
+    dense_coeffs(eval_rhs, span, y_new, K)
 
 
 @kernel
@@ -94,7 +97,8 @@ def previous_dense(sys, work):
     K, F, trk, wk = work.K, work.F, work.trk.track, sys.wk
     if not trk.flags[TF_PREV_DENSE]:
         before = System(sys.p, wk[W_CSPREV, :N_CS], sys.n, wk, sys.istats)
-        step_dense(trk.phi[PH_TPREV], wk[W_YPREV], trk.phi[PH_HPREV], work.y, before, K[K_PREV:], F[N_DENSE:])
+        span = Span(F, N_DENSE, wk[W_YPREV], trk.phi[PH_TPREV], trk.phi[PH_HPREV], before)
+        step_dense(span, work.y, K[K_PREV:])
         trk.flags[TF_PREV_DENSE] = True
 
 
@@ -119,10 +123,10 @@ def record_levels(span, seg_end, e_seg, consts, trk, rec):
             ta = t
             tb = t
         else:
-            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, gl, span, level_e[L])
+            ta, tb = locate(EV_LEVEL, Bracket(t, gl0, seg_end, gl), span, level_e[L])
         tl = 0.5 * (ta + tb)
         ybuf = sys.wk[W_YBUF]
-        dense_eval(span.F, 0, y, t, h, tl, sys.n, ybuf)
+        dense_eval(span, tl, sys.n, ybuf)
         level_out[L, L_TAU] = tl
         level_out[L, L_ALPHA] = ybuf[Y_ALPHA]
         if consts.peaks_on:
@@ -168,7 +172,7 @@ def record_samples(span, seg_end, t_stop, sample_tau, trk, samples):
         ts = sample_tau[j]
         if ts > seg_end or ts > t_stop:
             return
-        dense_eval(span.F, 0, span.y0, span.t0, span.h, ts, n, wk[W_YBUF])
+        dense_eval(span, ts, n, wk[W_YBUF])
         eval_rhs(ts, wk[W_YBUF], sys, wk[W_DYBUF], wk[W_AUXBUF])
         record_sample(wk[W_YBUF], wk[W_AUXBUF], p, cs, n, samples[j])
         trk.at[TK_SAMPLE] = j + 1
@@ -192,15 +196,17 @@ def record_traj(t, y, phi, sys, traj):
 
 
 @kernel
-def track_frequency(span, seg_end, phi_c, have_dense, running, work, rec):
-    """The frequency recorders on the segment [t, seg_end] of the step span (layout.Span, from
-    t = span.t0; its end state in wk[W_YSEG], Phi there phi_c): the precession lattice, the Phi
-    maxima (the previous step's dense output where a maximum is bracketed), and the window of the
-    last two segments kept for the next bracket."""
+def track_frequency(span, seg, phi_c, have_dense, work, rec):
+    """The frequency recorders on the kept part seg (layout.Segment: [t, seg.end]; seg.running: the
+    scene has not ended) of the step span (layout.Span, from t = span.t0; its end state in
+    wk[W_YSEG], Phi there phi_c; have_dense: its dense output is built): the precession lattice,
+    the Phi maxima (the previous step's dense output where a maximum is bracketed), and the window
+    of the last two segments kept for the next bracket."""
+    seg_end = seg.end
     lattice_step(span, seg_end, work.trk.windows, rec)
     if peak_bracketed(phi_c, work.trk.track):
         previous_dense(span.sys, work)
-    track_peaks(span, seg_end, phi_c, running, work, rec)
+    track_peaks(span, seg_end, phi_c, seg.running, work, rec)
     shift_peak_window(span, seg_end, phi_c, have_dense, work)
 
 
@@ -228,10 +234,10 @@ def track_peaks(this, seg_end, phi_c, running, work, rec):
         ybuf = wk[W_YBUF]
         if pv1 >= pv2:
             tpk, pvk = tp1, pv1
-            dense_eval(F, N_DENSE, wk[W_YPREV], trk.phi[PH_TPREV], trk.phi[PH_HPREV], tpk, sys.n, ybuf)
+            dense_eval(before, tpk, sys.n, ybuf)
         else:
             tpk, pvk = tp2, pv2
-            dense_eval(F, 0, this.y0, t, this.h, tpk, sys.n, ybuf)
+            dense_eval(this, tpk, sys.n, ybuf)
         thk = ybuf[Y_THETA]
         # round-off wiggles (e.g. of a creeping slip) have no prominence; real nutation peaks rise
         # ~0.1 Phi above the bracket ends
@@ -242,7 +248,7 @@ def track_peaks(this, seg_end, phi_c, running, work, rec):
         if npk >= peaks.shape[0] and not trk.flags[TF_RING]:
             istats[I_OVERFLOW] |= 2
         else:
-            if _add_peak(fq[0, Q_CAND_T], fq[0, Q_CAND_PHI], fq[0, Q_CAND_TH], npk, running, trk, rec):
+            if _add_peak(Peak(fq[0, Q_CAND_T], fq[0, Q_CAND_PHI], fq[0, Q_CAND_TH]), npk, running, trk, rec):
                 istats[I_OVERFLOW] |= 2   # a ring too short for a level's look-back (never on the CPU path)
             npk += 1
     trk.at[TK_NPK] = npk
@@ -274,10 +280,12 @@ def peak_sides(seg_end, before, this, trk):
 
 
 @kernel
-def _add_peak(tpk, pvk, thk, npk, running, trk, rec):
-    """Count maximum npk of Phi (tau tpk, value pvk, theta thk) into rec.peaks (layout.PK_*), the
-    largest f_hat seen (rec.fstats[F_NFMAX]; running: the scene has not ended) and the f_hat of the
-    levels waiting for it (rec.levels). Returns True where a level's look-back outgrows a ring buffer."""
+def _add_peak(peak, npk, running, trk, rec):
+    """Count maximum npk of Phi (peak: layout.Peak, its tau, value and theta) into rec.peaks
+    (layout.PK_*), the largest f_hat seen (rec.fstats[F_NFMAX]; running: the scene has not ended) and
+    the f_hat of the levels waiting for it (rec.levels). Returns True where a level's look-back
+    outgrows a ring buffer."""
+    tpk, pvk, thk = peak
     level_out, peaks, fstats = rec.levels, rec.peaks, rec.fstats
     short = False
     cap = peaks.shape[0]   # row of peak j: j, or j % cap where the buffer is a ring (flags[TF_RING])
@@ -429,7 +437,7 @@ def deep_levels(span, seg_end, e_seg, trk, fstats):
         if gl0 <= 0.0:
             tl = t
         else:
-            ta, tb = locate(EV_LEVEL, t, gl0, seg_end, e_seg - le, span, le)
+            ta, tb = locate(EV_LEVEL, Bracket(t, gl0, seg_end, e_seg - le), span, le)
             tl = 0.5 * (ta + tb)
         push_fit_level(trk, tl, trk.fit[FT_DEEP_B])
         th, pw = fit_last_three(trk)
