@@ -56,9 +56,12 @@ SLIP_RESOLUTION = 256.0
 DIR_TOL = 1e-14
 
 
-# ... or when cross is at its round-off floor: |cross| <= DIR_NOISE |slip acceleration|. Near a fold
-# (d cross/d nu small) the secant can stall there, two iterates giving the same rounded cross, before
-# its angle update gets below DIR_TOL: the root is then found to machine precision, not lost.
+# ... or when cross is at its round-off floor: |cross| <= DIR_NOISE (1 + |slip acceleration|). cross
+# sums terms as large as gravity's (1 in these units) whatever the slip acceleration they leave: at
+# mu_d ~ 1e-3 it is ~1e-3 and the iterates jitter by eps/|d cross/d nu| ~ 1e-13 rad about the root,
+# never within DIR_TOL of each other. Near a fold (d cross/d nu small) the secant can stall there, two
+# iterates giving the same rounded cross, before its angle update gets below DIR_TOL: the root is
+# then found to machine precision, not lost.
 DIR_NOISE = 64.0 * EPS
 
 
@@ -238,14 +241,14 @@ def direction_from(nu0, slope, u, ev, ys):
     aux = ev.aux
     xa = nu0
     ca, da = slip_rates(xa, u, ev, ys)
-    if abs(ca) <= DIR_NOISE * math.hypot(ca, da):
+    if abs(ca) <= DIR_NOISE * (1.0 + math.hypot(ca, da)):
         return xa
     xb = nu0 + 1e-6
     if slope < 0.0:
         xb = nu0 - max(-DIR_MAXSTEP, min(DIR_MAXSTEP, ca / slope))
     cb, db = slip_rates(xb, u, ev, ys)
     for _ in range(DIR_MAXIT):
-        if abs(cb) <= DIR_NOISE * math.hypot(cb, db) or abs(xb - xa) < DIR_TOL:
+        if abs(cb) <= DIR_NOISE * (1.0 + math.hypot(cb, db)) or abs(xb - xa) < DIR_TOL:
             return xb
         if cb == ca:
             break
