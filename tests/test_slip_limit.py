@@ -195,7 +195,7 @@ def test_cross_changes_sign_across_the_rim_tangent():
             ys = y[:M.N_CORE].copy()
             ys[M.Y_U1], ys[M.Y_U2] = 1e-12 * math.cos(nu), 1e-12 * math.sin(nu)
             dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
-            M.rhs(0.0, ys, p, M.Contact(CN.SLIDE, side, sig, np.zeros(3), math.cos(nu), math.sin(nu)), M.N_CORE,
+            M.rhs(ys, p, M.Contact(CN.SLIDE, side, sig, np.zeros(3), math.cos(nu), math.sin(nu)), M.N_CORE,
                   dy, aux)
             if aux[M.X_OK] != 1.0:
                 break
