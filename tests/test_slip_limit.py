@@ -554,3 +554,44 @@ def test_the_slaved_direction_converges_as_slave_tol_goes_to_zero():
     assert d[1e-4] < 1e-9, d
     # (down to the integration's own error at rtol 1e-10, ~1e-11 rad here)
     assert d[1e-3] < d[1e-2] / 10.0 and d[1e-4] < max(d[1e-3] / 10.0, 1e-11), d
+
+
+# A slaved slip at 5e-10 of a heavy thick disk at mu_d 1.1e-3 (mu_s 0.14) ending its slide: the slip
+# acceleration (1.2e-3) is a thousand times smaller than the terms it sums (gravity's, 1 in these units).
+LOW_FRICTION_SLAVED = {
+    "t": 403.03403978115,
+    "y": [-1.1736740655772926, 0.002143445251450493, 0.3466446478781076, -1.407303053158941, 4.754002992533849e-10,
+          9.35956868874382e-11, 0.10411685356637795, 0.038676035359407876, 0.020337240505694163, 0.004874361301609391,
+          -1355.0367952512702, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    "cs": [2.0, -1.0, 1.0, -1.0, -1.0, 0.0, 0.0, 0.0, 0.19439153010285587, 0.0, 0.0],
+    "p": [1.25, 0.24597319102745127, 0.2701676035680757, 0.5, 0.00046925389557301076, 3.3382988273572807e-05,
+          1.1966181984946656e-05, 0.1420494310886987, 0.001147009039429403, 9.826981148210212e-10, 1.2966443820220332e-08,
+          0.003],
+}
+
+
+def test_the_slaved_direction_converges_where_the_slip_acceleration_is_small():
+    """cross's round-off is that of the terms it sums, as large as gravity's (1 in these units), not
+    of the slip acceleration they leave: at mu_d ~ 1e-3 the secant's iterates jitter about the root
+    by eps/|d cross/d nu| ~ 1e-13 rad, and a floor relative to the slip acceleration alone (1e-3)
+    never declared them converged: the slaved right-hand side failed, and the scene this state is
+    from (a 27.7 kg disk sliding to rest) ended in step_size_underflow at every knob. The slaved
+    direction converges, at the root of cross that a bisection finds (to 1e-11 rad)."""
+    d = LOW_FRICTION_SLAVED
+    y, cs, p = np.array(d["y"]), np.array(d["cs"]), np.array(d["p"])
+    wk = np.zeros((L.N_WORK, L.N_WCOLS))
+    system = L.System(p, cs, M.N_CORE, wk, np.zeros(L.N_ISTATS, np.int64))
+    dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
+    nu, lag, dcross, ok, err = CR.slaved_slip(cs[L.CS_NU], d["t"], y, system, dy, aux)
+    assert ok == 1.0 and dcross < 0.0, (ok, dcross)
+    u = math.hypot(y[M.Y_U1], y[M.Y_U2])
+    lo, hi = 0.15, 0.25
+    c_lo = CR.slip_rates(lo, u, d["t"], y, system, dy, aux, ys)[0]
+    assert c_lo > 0.0 > CR.slip_rates(hi, u, d["t"], y, system, dy, aux, ys)[0]
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if CR.slip_rates(mid, u, d["t"], y, system, dy, aux, ys)[0] > 0.0:
+            lo = mid
+        else:
+            hi = mid
+    assert abs(nu - 0.5 * (lo + hi)) < 1e-11, (nu, lo, hi)
