@@ -582,15 +582,16 @@ def test_the_slaved_direction_converges_where_the_slip_acceleration_is_small():
     wk = np.zeros((L.N_WORK, L.N_WCOLS))
     system = L.System(p, cs, M.N_CORE, wk, np.zeros(L.N_ISTATS, np.int64))
     dy, aux, ys = np.zeros(M.N_FULL), np.zeros(M.N_AUX), np.zeros(M.N_FULL)
-    nu, lag, dcross, ok, err = CR.slaved_slip(cs[L.CS_NU], d["t"], y, system, dy, aux)
+    ev = L.Eval(d["t"], y, system, dy, aux)
+    nu, lag, dcross, ok, err = CR.slaved_slip(cs[L.CS_NU], ev)
     assert ok == 1.0 and dcross < 0.0, (ok, dcross)
     u = math.hypot(y[M.Y_U1], y[M.Y_U2])
     lo, hi = 0.15, 0.25
-    c_lo = CR.slip_rates(lo, u, d["t"], y, system, dy, aux, ys)[0]
-    assert c_lo > 0.0 > CR.slip_rates(hi, u, d["t"], y, system, dy, aux, ys)[0]
+    c_lo = CR.slip_rates(lo, u, ev, ys)[0]
+    assert c_lo > 0.0 > CR.slip_rates(hi, u, ev, ys)[0]
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        if CR.slip_rates(mid, u, d["t"], y, system, dy, aux, ys)[0] > 0.0:
+        if CR.slip_rates(mid, u, ev, ys)[0] > 0.0:
             lo = mid
         else:
             hi = mid

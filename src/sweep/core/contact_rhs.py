@@ -357,9 +357,21 @@ def slaved_slip(nu0, ev):
     lag, dcross, err = lag_and_error(nu, u, cross0, ev)
     if not ok > 0.0:
         lag = 0.0
-    elif ev.sys.p[P_SLAVE] > 0.0 and abs(lag) * err > EPS:
+    elif second_order_applies(lag, err, ev.sys.p):
         lag, err = second_order(nu, lag, dcross, err, ev)
     return nu, lag, dcross, ok, err
+
+
+@kernel
+def second_order_applies(lag, err, p):
+    """Whether the slow manifold is taken to second order (second_order) from the first-order lag
+    and error measure err: with slave_tol > 0, above the round-off of their product, and where the
+    first-order measure is within SLAVE_EXIT slave_tol, the series' region. Beyond it a slip is
+    slaved only at the floor's speed (SLAVE_FLOOR: near flat, where the motion's rate 1 + |theta'|
+    grows without bound), where the series' terms are not ordered and the second order's difference
+    of a difference carries round-off of ~1e-6 of the slip acceleration, which a 1e-13 error
+    control cannot step through."""
+    return p[P_SLAVE] > 0.0 and abs(lag) * err > EPS and err <= SLAVE_EXIT * p[P_SLAVE]
 
 
 @kernel

@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 
 from .. import outcomes as oc
-from .constants import AT_FLOOR, BELOW, EPS, HANDOVER_ARMED, HANDOVER_OFF, ROLL, SLAVED, SLIDE, SLOW_OFF
-from .contact_rhs import (SLAVE_FLOOR, eval_rhs, model_call, root_lag, second_order, slave_speed, slaved_direction,
-                          slip_floor, slip_rates, slip_roundoff)
+from .constants import AT_FLOOR, BELOW, HANDOVER_ARMED, HANDOVER_OFF, ROLL, SLAVED, SLIDE, SLOW_OFF
+from .contact_rhs import (SLAVE_FLOOR, eval_rhs, model_call, root_lag, second_order, second_order_applies, slave_speed,
+                          slaved_direction, slip_floor, slip_rates, slip_roundoff)
 from .impulse import project_velocity
 from .jit import kernel
 from .layout import (CS_FLOOR, CS_MODE, CS_NU, CS_SIDE, CS_SLAVE_OFF, Eval, W_AUXSLOPE, W_AUXTMP, W_DYSLOPE, W_DYTMP,
@@ -288,7 +288,7 @@ def settle_onto(root, t, y, sys, strict):
     u = math.hypot(y[Y_U1], y[Y_U2])
     ev = Eval(t, y, sys, wk[W_DYTMP], wk[W_AUXTMP])
     lag, dcross, err = root_lag(root, u, ev)
-    if p[P_SLAVE] > 0.0 and abs(lag) * err > EPS:
+    if second_order_applies(lag, err, p):
         lag, err = second_order(root, lag, dcross, err, ev)
     along = root + lag
     if strict and p[P_SLAVE] > 0.0 and u > SLAVE_FLOOR * p[P_MUD] * wk[W_AUXTMP, X_PHI]:
