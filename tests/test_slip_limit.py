@@ -596,3 +596,53 @@ def test_the_slaved_direction_converges_where_the_slip_acceleration_is_small():
         else:
             hi = mid
     assert abs(nu - 0.5 * (lo + hi)) < 1e-11, (nu, lo, hi)
+
+
+# A slip slaved at the floor's speed in a shell's last approach to flat (beta 1.9e-6 rad, theta'
+# 3e5, Phi 5e4): the first-order measure is 6.4e-2, twenty times slave_tol.
+NEAR_FLAT_FLOOR = {
+    "t": 758.4731847214267,
+    "y": [1.570794381409003, 0.6440225239412485, 0.03993938609664821, 0.5489905166770971, -0.0001158457353318668,
+          -0.002722823841199905, 0.011343633682873572, 0.009738038532354002, 0.8679204461310039, 0.010886524787798245,
+          -1885.9173298134026, 1907.011222961298, -0.8826340483272832, -3.336570137678942],
+    "p": [1.5, 0.02048668069245597, 0.5001399013619315, 1.0, 2.2632070651182783e-05, 0.0008939505850492159,
+          8.728714479686777e-05, 0.7444272152116016, 0.5314454962465481, 5.789843896298913e-09, 2.640920921451807e-09,
+          0.003],
+}
+
+
+def test_the_slaved_right_hand_side_is_smooth_where_the_series_does_not_hold():
+    """Beyond SLAVE_EXIT slave_tol of the first-order measure a slip is slaved only at the floor's
+    speed, and there its direction is the first-order manifold's: the second order's difference of
+    a difference carried round-off of 2e-6 of the slip acceleration from one state to the next along
+    the motion, which made a 1e-13 error control shrink the steps to the time's resolution
+    (step_size_underflow). Along 1.6e-14 tau of the motion the slip acceleration is now a straight
+    line to 1e-9 of itself (5e-11 here; 2e-7 before), and the lag is the first order's."""
+    d = NEAR_FLAT_FLOOR
+    y0 = np.zeros(M.N_FULL)
+    y0[:len(d["y"])] = d["y"]
+    p = np.array(d["p"])
+    cs = np.zeros(L.N_CS)
+    cs[L.CS_MODE], cs[L.CS_SIDE] = CN.SLAVED, 1.0
+    cs[L.CS_SIG:L.CS_SIG + 3] = np.where(np.array(M.moment_axes_rates(y0)) >= 0.0, 1.0, -1.0)
+    cs[L.CS_NU] = math.atan2(y0[M.Y_U2], y0[M.Y_U1])
+    system = L.System(p, cs, M.N_CORE, np.zeros((L.N_WORK, L.N_WCOLS)), np.zeros(L.N_ISTATS, np.int64))
+    dy0, aux0 = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
+    CR.eval_rhs(d["t"], y0, system, dy0, aux0)
+    assert aux0[M.X_OK] == 1.0 and aux0[M.X_SLAVE_ERR] > CR.SLAVE_EXIT * p[M.P_SLAVE], aux0[M.X_SLAVE_ERR]
+    first = p.copy()
+    first[M.P_SLAVE] = 0.0
+    aux1 = np.zeros(M.N_AUX)
+    CR.eval_rhs(d["t"], y0, L.System(first, cs, M.N_CORE, np.zeros((L.N_WORK, L.N_WCOLS)),
+                                     np.zeros(L.N_ISTATS, np.int64)), np.zeros(M.N_FULL), aux1)
+    assert aux0[M.X_LAG] == aux1[M.X_LAG]
+    s = np.arange(-4, 5) * 2e-15
+    du = []
+    for sk in s:
+        dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
+        CR.eval_rhs(d["t"] + sk, y0 + sk * dy0, system, dy, aux)
+        du.append(dy[M.Y_U1:M.Y_U2 + 1])
+    du = np.array(du)
+    for j in range(2):
+        line = np.polyval(np.polyfit(s, du[:, j], 1), s)
+        assert np.max(np.abs(du[:, j] - line)) < 1e-9 * np.max(np.abs(du)), (j, du[:, j] - line)
