@@ -122,6 +122,21 @@ def _flow_fate(y, p, cs, u):
     return "passes" if rad > 0.0 else "ends"
 
 
+def _random_disk_state(rng, k_log_max):
+    """A random disk (shell or solid, 3 mm to 0.3 m, thickness 0.01 to 2 R, mu_s 0.1 to 1.5, mu_d
+    0.05 to 1 mu_s, moments k_i/R 1e-6 to 10^k_log_max) and a state of it without slip (alpha either
+    side, 0.05 to 1.5 rad; random omega): (p, y)."""
+    shape = rng.choice([1.0, 2.0])
+    R = math.exp(rng.uniform(math.log(3e-3), math.log(0.3)))
+    mu_s = rng.uniform(0.1, 1.5)
+    p, _ = M.make_params(float(shape), R, R * math.exp(rng.uniform(math.log(0.01), math.log(2.0))), 9.81,
+                         mu_s, mu_s * rng.uniform(0.05, 1.0), tuple(R * 10.0 ** rng.uniform(-6, k_log_max, size=3)))
+    y = np.zeros(M.N_FULL)
+    y[M.Y_ALPHA] = rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 1.5)
+    y[M.Y_W1:M.Y_W3 + 1] = rng.normal(scale=[0.5, 0.5, 2.0])
+    return p, y
+
+
 def test_the_slip_fate_is_the_direction_flows():
     """slip.slip_fate (the first root of cross followed in the sense of the direction's motion, the
     sign of rad there) against the flow integrated by SciPy, at random slow slides of random disks:
@@ -133,14 +148,7 @@ def test_the_slip_fate_is_the_direction_flows():
     seen = {}
     tested = 0
     for _ in range(400):
-        shape = rng.choice([1.0, 2.0])
-        R = math.exp(rng.uniform(math.log(3e-3), math.log(0.3)))
-        mu_s = rng.uniform(0.1, 1.5)
-        p, _ = M.make_params(float(shape), R, R * math.exp(rng.uniform(math.log(0.01), math.log(2.0))), 9.81,
-                             mu_s, mu_s * rng.uniform(0.05, 1.0), tuple(R * 10.0 ** rng.uniform(-6, -1.5, size=3)))
-        y = np.zeros(M.N_FULL)
-        y[M.Y_ALPHA] = rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 1.5)
-        y[M.Y_W1:M.Y_W3 + 1] = rng.normal(scale=[0.5, 0.5, 2.0])
+        p, y = _random_disk_state(rng, -1.5)
         u = 1e-9
         nu = rng.uniform(-math.pi, math.pi)
         y[M.Y_U1], y[M.Y_U2] = u * math.cos(nu), u * math.sin(nu)
@@ -180,14 +188,7 @@ def test_cross_changes_sign_across_the_rim_tangent():
     rng = np.random.default_rng(41)
     worst, worst_radial, tested = 0.0, 0.0, 0
     for _ in range(300):
-        shape = rng.choice([1.0, 2.0])
-        R = math.exp(rng.uniform(math.log(3e-3), math.log(0.3)))
-        mu_s = rng.uniform(0.1, 1.5)
-        p, _ = M.make_params(float(shape), R, R * math.exp(rng.uniform(math.log(0.01), math.log(2.0))), 9.81,
-                             mu_s, mu_s * rng.uniform(0.05, 1.0), tuple(R * 10.0 ** rng.uniform(-6, -0.2, size=3)))
-        y = np.zeros(M.N_FULL)
-        y[M.Y_ALPHA] = rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 1.5)
-        y[M.Y_W1:M.Y_W3 + 1] = rng.normal(scale=[0.5, 0.5, 2.0])
+        p, y = _random_disk_state(rng, -0.2)
         sig = rng.choice([-1.0, 1.0], size=3)
         side = 1 if y[M.Y_ALPHA] > 0.0 else -1
         per_phi = []
