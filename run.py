@@ -163,7 +163,7 @@ def main(argv: list[str]) -> int:
         # kernels not compiled yet (a fresh clone, a change of src/sweep/core): compile them first,
         # with the notice and the ticking elapsed time, rather than silently inside the first test
         try:
-            subprocess.run([str(PY), "-c", "from sweep.frontdoor import compile_for_command; compile_for_command()"],
+            subprocess.run([str(PY), "-c", "from sweep.warmup import compile_for_command; compile_for_command()"],
                            env=env, check=False)
         except KeyboardInterrupt:
             return 130

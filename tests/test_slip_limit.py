@@ -431,9 +431,10 @@ def _slide_rows(cfg):
 
 def _manifold(tau, y, p, second):
     """(nu*, lag) of contact.slaved_slip at a sliding state of the paper's disk (no component
-    held): the first-order lag with slave_tol 0 in p, the second-order one with slave_tol > 0."""
+    held): the first-order lag with slave_tol 0 in p, the second-order one with slave_tol 1 (the
+    second order wherever the first-order measure is within 2, second_order_applies)."""
     p = p.copy()
-    p[M.P_SLAVE] = 1e-2 if second else 0.0
+    p[M.P_SLAVE] = 1.0 if second else 0.0
     cs = np.zeros(L.N_CS)
     cs[L.CS_MODE], cs[L.CS_SIDE] = CN.SLIDE, (1.0 if y[M.Y_ALPHA] >= 0.0 else -1.0)
     cs[L.CS_SIG:L.CS_SIG + 3] = np.where(np.array(M.moment_axes_rates(y)) >= 0.0, 1.0, -1.0)
