@@ -209,10 +209,20 @@ def eval_rhs(t, y, sys, dy, aux):
 
 
 @kernel
+def signed_speed(y, nu):
+    """The slaved slip's speed |u|, negative where u points against s(nu) (past the slip's end:
+    the slaved right-hand side continues analytically through u.s = 0, so a step can cross it
+    and the end is located on its dense output like any event)."""
+    un = math.hypot(y[Y_U1], y[Y_U2])
+    return -un if y[Y_U1] * math.cos(nu) + y[Y_U2] * math.sin(nu) < 0.0 else un
+
+
+@kernel
 def slip_rates(nu, u, ev, ys):
     """(cross, dot) of the slip acceleration with the slip direction s = (cos nu, sin nu), for the
-    slip vector u s at the state ev.y (ev: layout.Eval; the state with that slip in ys); the full
-    right-hand side is left in ev.dy, ev.aux."""
+    slip vector u s at the state ev.y (ev: layout.Eval; the state with that slip in ys), the
+    friction along s; u < 0 (a slaved slip past its end, signed_speed) is a slip against s. The
+    full right-hand side is left in ev.dy, ev.aux."""
     y, dy = ev.y, ev.dy
     c = math.cos(nu)
     s = math.sin(nu)
@@ -220,7 +230,10 @@ def slip_rates(nu, u, ev, ys):
         ys[i] = y[i]
     ys[Y_U1] = u * c
     ys[Y_U2] = u * s
-    slide_model(Eval(ev.t, ys, ev.sys, dy, ev.aux), c, s)
+    if u < 0.0:
+        friction_along(nu, Eval(ev.t, ys, ev.sys, dy, ev.aux))
+    else:
+        slide_model(Eval(ev.t, ys, ev.sys, dy, ev.aux), c, s)
     return dy[Y_U2] * c - dy[Y_U1] * s, dy[Y_U1] * c + dy[Y_U2] * s
 
 
@@ -295,13 +308,13 @@ def direction_lag(nu, u, rates, ev):
     t, y, sys, dy = ev.t, ev.y, ev.sys, ev.dy
     cross0, rad0, dcross = rates
     den = dcross * (dcross - rad0)
-    if not (dcross < 0.0 and dcross - rad0 < 0.0 and u > 0.0):
+    if not (dcross < 0.0 and dcross - rad0 < 0.0 and u != 0.0):
         return 0.0
-    # the step along the motion, short enough that the slip speed stays positive on it both ways
+    # the step along the motion, short enough that the slip speed keeps its sign on it both ways
     # (over FLOW_DTAU / (1 + |theta'|), the motion's rate: near flat theta' grows without bound)
     step = FLOW_DTAU / (1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA])))
     if rad0 != 0.0:
-        step = min(step, 0.5 * u / abs(rad0))
+        step = min(step, 0.5 * abs(u) / abs(rad0))
     wk = sys.wk
     yf = wk[W_YFLOW]
     for i in range(sys.n):
@@ -335,7 +348,7 @@ def lag_and_error(nu, u, cross0, ev):
     relax = rad0 - dcross
     err = math.inf
     if dcross < 0.0 and relax > 0.0:
-        err = u * (1.0 + abs(y[Y_W3] / aux[X_COSA])) / relax + abs(lag)
+        err = abs(u) * (1.0 + abs(y[Y_W3] / aux[X_COSA])) / relax + abs(lag)
     return lag, dcross, err
 
 
@@ -348,9 +361,11 @@ def slaved_slip(nu0, ev):
     relaxation time |u|/|c' - rad| times the motion's rate 1 + |theta'|, plus the lag itself
     (the neglected terms are of the order of their product and of the lag squared); inf where the
     direction does not relax onto nu* + lag (c' - rad >= 0). ev (layout.Eval): the state; its dy,
-    aux are left with the right-hand side at the slip vector |u| s(nu*)."""
+    aux are left with the right-hand side at the slip vector |u| s(nu*). The speed is signed
+    (signed_speed): past the slip's end, where u points against s, the same formulas continue
+    through u.s = 0 without a kink."""
     y, dy = ev.y, ev.dy
-    u = math.hypot(y[Y_U1], y[Y_U2])
+    u = signed_speed(y, nu0)
     nu = slaved_direction(nu0, u, ev, ev.sys.wk[W_YSLIP])
     ok = ev.aux[X_OK]
     cross0 = dy[Y_U2] * math.cos(nu) - dy[Y_U1] * math.sin(nu)
@@ -405,12 +420,12 @@ def second_order_lag(nu, lag, dcross, ev):
     t, y, sys, dy, aux = ev
     wk = sys.wk
     n = sys.n
-    u = math.hypot(y[Y_U1], y[Y_U2])
+    u = signed_speed(y, nu)
     yf, dyf, auxf = wk[W_YDRIFT], wk[W_DYDRIFT], wk[W_AUXDRIFT]
     rad = (y[Y_U1] * dy[Y_U1] + y[Y_U2] * dy[Y_U2]) / u
     step = DRIFT_DTAU / (1.0 + abs(y[Y_W3] / aux[X_COSA]))
-    if rad < 0.0:
-        step = min(step, 0.5 * u / -rad)
+    if rad * u < 0.0:
+        step = min(step, 0.5 * abs(u / rad))
     for i in range(n):
         yf[i] = y[i] + step * dy[i]
     uf = u + step * rad
