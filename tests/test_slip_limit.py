@@ -321,16 +321,19 @@ def test_cubic_rest_time_is_the_first_root():
     assert found > 100
 
 
-@pytest.mark.parametrize("seed, index", [(20261122, 0), (20261122, 67), (20261122, 29)])
-def test_micro_stick_counts_do_not_depend_on_spin_tol(seed, index):
+@pytest.mark.parametrize("seed, index, rtol", [(20261122, 0, 1e-10), (20261122, 67, 1e-10), (20261122, 29, 1e-11)])
+def test_micro_stick_counts_do_not_depend_on_spin_tol(seed, index, rtol):
     """Harness scenes where a free component's returns towards omega.a_i = 0 turn back between
     spin_tol 1e-9 and 1e-7 rad/s: sticking every return that slowed to spin_tol counted 8309 (scene
     0) and 8166 (scene 67) stick phases at the default against 3 and 1 at 1e-9, and 2426 against
     1853 (scene 29). A return sticks now only where its motion reaches rest (spin_rest_time):
-    the same counts at both."""
+    the same counts at both. Scene 29's count is compared where it has converged in rtol: at
+    1e-10 the integration error of the state decides one of its ~1850 returns (1852 or 1853
+    stick phases, by the step sequence), at 1e-11 to 1e-13 it is 1855 at both spin_tols
+    (docs/model.md, 'Sticking at spin_tol')."""
     cfg = harness.harness_scene(seed, index)
-    default = harness._one_run(cfg, 1e-10)
-    tight = harness._one_run(cfg, 1e-10, knobs={"spin_tol": 1e-9})
+    default = harness._one_run(cfg, rtol)
+    tight = harness._one_run(cfg, rtol, knobs={"spin_tol": 1e-9})
     assert default["events"] == tight["events"], (default["events"], tight["events"])
     for k, v in default["q"].items():
         if math.isfinite(v):
