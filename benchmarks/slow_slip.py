@@ -3,7 +3,7 @@
 against a base commit side by side (docs/model.md, 'Slow slip').
 
     .venv/bin/python benchmarks/slow_slip.py [--base 746a2c3] [--random 30] [--seed 20261150]
-        [--parts paper,accuracy,k3,random,mechanism]
+        [--parts paper,accuracy,k3,random,mechanism] [--scene SEED:INDEX]
 
 Parts (each prints one table; this tree and the base run in two worker processes, the base
 extracted with `git archive` into a temporary directory with its own numba cache):
@@ -20,7 +20,8 @@ extracted with `git archive` into a temporary directory with its own numba cache
 * random: random harness scenes (benchmarks/convergence.py's draw, levels 0.1 .. 0.001 rad,
   t_max 300 s) with mu_d / mu_s drawn in [0.97, 1], and the same scenes at mu_d = 0.9 mu_s:
   outcomes that are failures, and the total steps of the near-edge set over the 0.9 set.
-* mechanism: where the steps of the mu_d = mu_s scene go, by contact state (ROLL, SLIDE, SLAVED)
+* mechanism: where the steps of the mu_d = mu_s scene (or of the harness scene --scene SEED:INDEX)
+  go, by contact state (ROLL, SLIDE, SLAVED)
   and slip speed |u| (m/s): steps, simulated time, mean step, and for SLIDE the median of
   h mu_d Phi / |u| (dimensionless): a constant there means the step is held at the stability
   bound of the explicit method by the direction's relaxation rate ~ mu_d Phi / |u|.
@@ -328,13 +329,22 @@ def part_bands(sides: dict, n: int, seed: int) -> list[str]:
     return lines
 
 
-def part_mechanism(sides: dict) -> list[str]:
+def part_mechanism(sides: dict, scene: str | None = None) -> list[str]:
+    """Where the steps go: the paper's disk at mu_d = mu_s, or the harness scene `scene`
+    ("SEED:INDEX", benchmarks/convergence.py's draw, at rtol 1e-10)."""
     names = {0: "ROLL", 1: "SLIDE", 2: "SLAVED"}
-    lines = ["## Where the steps go at mu_d = mu_s (default settings)", "",
+    if scene:
+        seed, index = (int(x) for x in scene.split(":"))
+        cfg = cv.harness_scene(seed, index)
+        cfg.setdefault("solver", {})["rtol"] = 1e-10
+        title = f"harness scene {index} of seed {seed} (mu_d / mu_s {cfg['contact']['mu_d'] / cfg['contact']['mu_s']:.3f})"
+    else:
+        cfg, title = paper(0.5), "mu_d = mu_s"
+    lines = [f"## Where the steps go at {title} (default settings)", "",
              "| kernel | contact state | |u| (m/s) | steps | time (s) | mean step (s) | median h mu_d Phi / |u| |",
              "|---|---|---|---|---|---|---|"]
     for name, side in sides.items():
-        r = side.run(paper(0.5), mechanism=True)
+        r = side.run(cfg, mechanism=True)
         for m, lo, hi, k, tt, hm, stab in r["rows"]:
             hi_t = "inf" if hi is None else f"{hi:g}"
             st = f"{stab:.2g}" if m != 0 else "–"
@@ -347,6 +357,8 @@ def main(argv=None) -> int:
     ap.add_argument("--base", default="746a2c3", help="the commit to compare with (default: before slow slip)")
     ap.add_argument("--random", type=int, default=30, help="random scene pairs in part 'random'")
     ap.add_argument("--seed", type=int, default=20261150)
+    ap.add_argument("--scene", default=None, metavar="SEED:INDEX",
+                    help="part 'mechanism' on this harness scene instead of the paper's disk")
     ap.add_argument("--parts", default="paper,accuracy,k3,random,mechanism,sweep,bands")
     ap.add_argument("--bands", type=int, default=150, help="harness scenes of the main draw in part 'bands'")
     ap.add_argument("--slave-tols", type=float, nargs="*", default=[1e-4, 1e-3, 3e-3],
@@ -374,7 +386,7 @@ def main(argv=None) -> int:
             if "random" in parts:
                 out += part_random(sides, a.random, a.seed) + [""]
             if "mechanism" in parts:
-                out += part_mechanism(sides) + [""]
+                out += part_mechanism(sides, a.scene) + [""]
             if "sweep" in parts:
                 out += part_sweep(sides, a.base) + [""]
             if "bands" in parts:
