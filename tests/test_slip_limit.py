@@ -509,7 +509,12 @@ def test_the_second_order_lag_agrees_with_the_peers():
         if not math.isfinite(lag1):
             continue
         # (the slip along the first-order manifold, as in a slaved slip: the motion along which
-        # both difference it has the slip vector there)
+        # both difference it has the slip vector there; the kernel's root and lag read the slip
+        # along s, so they are taken again with the slip there)
+        y[M.Y_U1], y[M.Y_U2] = u * math.cos(nu + lag1), u * math.sin(nu + lag1)
+        nu, lag1 = _manifold(0.0, y, p, False)
+        if not math.isfinite(lag1):
+            continue
         y[M.Y_U1], y[M.Y_U2] = u * math.cos(nu + lag1), u * math.sin(nu + lag1)
         nu2, lag2 = _manifold(0.0, y, p, True)
         if not math.isfinite(lag2) or abs(nu2 - nu) > 1e-9:
@@ -665,11 +670,11 @@ PAPER_EDGE_SLAVED = {
 
 def test_the_slaved_right_hand_side_has_no_kink_where_the_slip_ends():
     """A slaved slip ends where u.s reaches 0, located on the dense output of the step that crosses
-    it. The slaved right-hand side takes the speed signed (contact_rhs.signed_speed), so it goes on
-    through u = 0 along s as one smooth function: its second difference over +-d is O(d^2), ~5e-5
-    of the first difference at d = 0.1 of the slip here. With |u| (the lag is proportional to the
-    speed) the right-hand side had a kink there, the second difference as large as the first
-    (0.94), and each slaved slip end cost a cascade of ~6 rejected tries."""
+    it. The slaved right-hand side takes the slip's speed along s (contact_rhs.speed_along), signed,
+    for its direction's root and lag, so it goes on through u = 0 along s as one smooth function:
+    its second difference over +-d is O(d^2), ~5e-5 of the first difference at d = 0.1 of the slip
+    here. With |u| the right-hand side had a kink there, the second difference as large as the
+    first (0.94), and each slaved slip end cost a cascade of ~6 rejected tries."""
     d = PAPER_EDGE_SLAVED
     y0 = np.zeros(M.N_FULL)
     y0[:len(d["y"])] = d["y"]

@@ -209,23 +209,26 @@ def eval_rhs(t, y, sys, dy, aux):
 
 
 @kernel
-def signed_speed(y, nu):
-    """The slaved slip's speed |u|, negative where u points against s(nu) (past the slip's end:
-    the slaved right-hand side continues analytically through u.s = 0, so a step can cross it
-    and the end is located on its dense output like any event)."""
-    un = math.hypot(y[Y_U1], y[Y_U2])
-    return -un if y[Y_U1] * math.cos(nu) + y[Y_U2] * math.sin(nu) < 0.0 else un
+def speed_along(y, nu):
+    """The slip's speed along s(nu), u.s: the speed of a slaved slip in its direction dynamics
+    (the lag is proportional to it). |u| where u lies along s; it passes through 0 where the slip
+    ends (u.s = 0) and goes negative past it, so the slaved right-hand side continues there
+    without a kink (with |u| it had one, and every step across a slip's end failed until the
+    steps had shrunk onto it), and it stays continuous where u turns across s."""
+    return y[Y_U1] * math.cos(nu) + y[Y_U2] * math.sin(nu)
 
 
 @kernel
 def slip_rates(nu, u, ev, ys):
     """(cross, dot) of the slip acceleration with the slip direction s = (cos nu, sin nu), for the
     slip vector u s at the state ev.y (ev: layout.Eval; the state with that slip in ys), the
-    friction along s; u < 0 (a slaved slip past its end, signed_speed) is a slip against s. The
-    full right-hand side is left in ev.dy, ev.aux."""
+    friction along s. u NaN: the state's own slip along s, u.s (speed_along); u < 0 (a slaved slip
+    past its end) is a slip against s. The full right-hand side is left in ev.dy, ev.aux."""
     y, dy = ev.y, ev.dy
     c = math.cos(nu)
     s = math.sin(nu)
+    if math.isnan(u):
+        u = y[Y_U1] * c + y[Y_U2] * s
     for i in range(ev.sys.n):
         ys[i] = y[i]
     ys[Y_U1] = u * c
@@ -240,7 +243,8 @@ def slip_rates(nu, u, ev, ys):
 @kernel
 def slaved_direction(nu0, u, ev, ys):
     """Slip direction near nu0 at which the slip acceleration is parallel to the slip (secant), at the
-    slip speed u and the state of ev (layout.Eval; ys: slip_rates' scratch).
+    slip speed u (NaN: the state's own slip along each iterate's direction, slip_rates) and the
+    state of ev (layout.Eval; ys: slip_rates' scratch).
 
     Returns nu; ev.dy, ev.aux hold the right-hand side there. ev.aux[X_OK] = 0 if it does not converge.
     """
@@ -362,11 +366,11 @@ def slaved_slip(nu0, ev):
     (the neglected terms are of the order of their product and of the lag squared); inf where the
     direction does not relax onto nu* + lag (c' - rad >= 0). ev (layout.Eval): the state; its dy,
     aux are left with the right-hand side at the slip vector |u| s(nu*). The speed is signed
-    (signed_speed): past the slip's end, where u points against s, the same formulas continue
-    through u.s = 0 without a kink."""
+    (speed_along): it goes through 0 where the slip ends, so the slaved right-hand side has no
+    kink there."""
     y, dy = ev.y, ev.dy
-    u = signed_speed(y, nu0)
-    nu = slaved_direction(nu0, u, ev, ev.sys.wk[W_YSLIP])
+    nu = slaved_direction(nu0, math.nan, ev, ev.sys.wk[W_YSLIP])
+    u = speed_along(y, nu)
     ok = ev.aux[X_OK]
     cross0 = dy[Y_U2] * math.cos(nu) - dy[Y_U1] * math.sin(nu)
     lag, dcross, err = lag_and_error(nu, u, cross0, ev)
@@ -420,23 +424,22 @@ def second_order_lag(nu, lag, dcross, ev):
     t, y, sys, dy, aux = ev
     wk = sys.wk
     n = sys.n
-    u = signed_speed(y, nu)
+    u = speed_along(y, nu)
     yf, dyf, auxf = wk[W_YDRIFT], wk[W_DYDRIFT], wk[W_AUXDRIFT]
-    rad = (y[Y_U1] * dy[Y_U1] + y[Y_U2] * dy[Y_U2]) / u
+    rad = speed_along(dy, nu)
     step = DRIFT_DTAU / (1.0 + abs(y[Y_W3] / aux[X_COSA]))
     if rad * u < 0.0:
         step = min(step, 0.5 * abs(u / rad))
     for i in range(n):
         yf[i] = y[i] + step * dy[i]
-    uf = u + step * rad
     # (started where nu* moves to at its first-order rate, lag (c' - rad)/u: the root is then a
     # Newton step away)
     evf = Eval(t + step, yf, sys, dyf, auxf)
-    nuf = direction_from(nu + step * lag * (dcross - rad) / u, dcross, uf, evf, wk[W_YSLIP])
+    nuf = direction_from(nu + step * lag * (dcross - rad) / u, dcross, math.nan, evf, wk[W_YSLIP])
     if not auxf[X_OK] > 0.0:
         return lag
     crossf = dyf[Y_U2] * math.cos(nuf) - dyf[Y_U1] * math.sin(nuf)
-    lagf, _, _ = lag_and_error(nuf, uf, crossf, evf)
+    lagf, _, _ = lag_and_error(nuf, speed_along(yf, nuf), crossf, evf)
     if lagf == 0.0:
         return lag
     drift = u * ((nuf + lagf) - (nu + lag)) / step
