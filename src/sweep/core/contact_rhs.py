@@ -365,9 +365,9 @@ def slaved_slip(nu0, ev):
     relaxation time |u|/|c' - rad| times the motion's rate 1 + |theta'|, plus the lag itself
     (the neglected terms are of the order of their product and of the lag squared); inf where the
     direction does not relax onto nu* + lag (c' - rad >= 0). ev (layout.Eval): the state; its dy,
-    aux are left with the right-hand side at the slip vector |u| s(nu*). The speed is signed
-    (speed_along): it goes through 0 where the slip ends, so the slaved right-hand side has no
-    kink there."""
+    aux are left with the right-hand side at the slip vector (u.s) s(nu*). The speed is the slip's
+    along s (speed_along), signed: it goes through 0 where the slip ends, so the slaved right-hand
+    side has no kink there."""
     y, dy = ev.y, ev.dy
     nu = slaved_direction(nu0, math.nan, ev, ev.sys.wk[W_YSLIP])
     u = speed_along(y, nu)
