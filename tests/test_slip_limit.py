@@ -340,6 +340,26 @@ def test_micro_stick_counts_do_not_depend_on_spin_tol(seed, index, rtol):
             assert abs(tight["q"][k] - v) <= 1e-6 * abs(v), k
 
 
+def test_a_slow_slide_below_atol_reaches_its_fate_at_every_slip_tol():
+    """Harness seed 20261211, near-edge scene 100002 (an 18.6 kg shell, k3 = 0, mu_d/mu_s 0.97):
+    at slip_tol 1e-13 m/s, below atol, a slide's direction chattered by ~12 degrees a step at
+    |u| ~ 2e-11 m/s, unresolved by an error of atol, and held the friction at its Filippov average
+    about u = 0 until step_limit (5e6 steps in 3.1e-4 s). With the slip held to rtol within
+    SLIP_NEAR max(slip_tol, atol) of 0 (accept.slip_atol) it reaches its fate: the same event counts
+    and level times as at the default slip_tol, in a like number of steps (docs/model.md, 'Where a
+    slip ends')."""
+    cfg = harness.harness_scene(20261211, 100002)
+    default = harness._one_run(cfg, 1e-10)
+    assert default["outcome"] == "halted"
+    for slip_tol in (1e-11, 1e-13):
+        run = harness._one_run(cfg, 1e-10, knobs={"slip_tol": slip_tol})
+        assert run["outcome"] == "halted" and run["events"] == default["events"], (slip_tol, run["outcome"], run["events"])
+        assert run["n_steps"] < 2 * default["n_steps"], (slip_tol, run["n_steps"], default["n_steps"])
+        for k, v in default["q"].items():
+            if math.isfinite(v):
+                assert abs(run["q"][k] - v) <= 1e-6 * abs(v), (slip_tol, k, run["q"][k], v)
+
+
 @pytest.mark.parametrize("index", [120, 652])
 def test_a_halted_scene_whose_levels_show_no_finite_approach_has_a_halt_time(index):
     """Harness seed 20261123: scenes 120 and 652 reach every level (0.1, 0.01, 0.001 rad), but the

@@ -57,7 +57,11 @@ DEFECT_FACTOR = 16.0
 # Within SLIP_NEAR x slip_tol of u = 0 the slip components are held to rtol SLIP_NEAR slip_tol rather
 # than atol: there the physics decides by |u| against slip_tol (a slip passing by 0 stops if it
 # comes within slip_tol, else reverses), and atol (1e-12 by default, ~1e-4 of slip_tol in u_hat)
-# left that decision to the error of the step: whether a near-reversal stuck moved with rtol.
+# left that decision to the error of the step: whether a near-reversal stuck moved with rtol. The
+# region is at least SLIP_NEAR x atol wide: a slide at |u| ~ 20 atol, its direction unresolved by an
+# error of atol, let the stepper at its stability bound flip the direction by ~12 degrees at every
+# step; that chatter held the friction at its Filippov average about u = 0 for millions of steps,
+# never reaching a slip_tol below atol (docs/model.md, 'Where a slip ends').
 SLIP_NEAR = 100.0
 
 
@@ -186,10 +190,11 @@ def error_scale(y, y_new, n, tol, sc):
 
 @kernel
 def slip_atol(y, y_new, p, rtol, atol):
-    """Absolute tolerance of the slip components on a step: atol, but rtol SLIP_NEAR slip_tol where
-    the slip is within SLIP_NEAR x slip_tol (p[P_UTOL]) of 0 at either end (see SLIP_NEAR), and not
-    below the round-off of the velocities the slip is the difference of (SLIP_ROUNDOFF |omega|)."""
-    near = SLIP_NEAR * p[P_UTOL]
+    """Absolute tolerance of the slip components on a step: atol, but rtol SLIP_NEAR max(slip_tol,
+    atol) where the slip is within SLIP_NEAR x max(slip_tol (p[P_UTOL]), atol) of 0 at either end
+    (see SLIP_NEAR), and not below the round-off of the velocities the slip is the difference of
+    (SLIP_ROUNDOFF |omega|)."""
+    near = SLIP_NEAR * max(p[P_UTOL], atol)
     if math.hypot(y[Y_U1], y[Y_U2]) < near or math.hypot(y_new[Y_U1], y_new[Y_U2]) < near:
         w = max(abs(y[Y_W1]), abs(y[Y_W2]), abs(y[Y_W3]), 1.0)
         return min(atol, max(rtol * near, SLIP_ROUNDOFF * w))
