@@ -11,7 +11,9 @@ rtol 1e-10 with each threshold knob tightened alone (slip_tol 1e-11 and 1e-13 m/
 rad/s), and reports:
 
 * outcomes, exceptions, NaNs, step_size_underflow, step_limit (allowed only past 100 s simulated),
-  the dissipation budget |E0 - E_end - sum(dissipated)| / E0 (target <= 1e-9);
+  the dissipation budget |E0 - E_end - sum(dissipated)| / E0 (target <= 1e-9), halted runs
+  without a finite t_halt (a scene's whose halt fit needs levels past t_max, shown by a run to
+  LONG_T_MAX, is listed apart: its NaN is the budget's, docs/model.md 'Halt time');
 * for every quantity (level times, t_halt, alpha at tau = 10, 30, 100, 300, and the scene's end:
   alpha at t_max = 300 s where the run gets there, the time of a located end (contact loss, line
   contact, Painleve)): its numerical error
@@ -46,6 +48,9 @@ REF_RTOL = 1e-13
 LEVELS = [0.1, 0.01, 0.001]
 SAMPLE_TAU = [10.0, 30.0, 100.0, 300.0]
 T_MAX = 300.0
+# a halted scene without a finite t_halt runs once more to this t_max (s): is its halt fit's last
+# level past T_MAX (docs/model.md, 'Halt time')?
+LONG_T_MAX = 3000.0
 PERTURB = 1e-10
 # atol = ATOL_RATIO * rtol: the product's default (solver rtol 1e-10, atol 1e-12) scaled with rtol
 ATOL_RATIO = 1e-2
@@ -205,7 +210,35 @@ def run_scene(args) -> dict:
     rec = {"index": idx, "scene": cfg, "runs": [_one_run(cfg, rt, 0.0, atol_ratio) for rt in RTOLS]}
     rec["perturbed"] = _one_run(cfg, REF_RTOL, PERTURB * math.copysign(1.0, cfg["initial"]["alpha"]), atol_ratio)
     rec["knobs"] = {name: _one_run(cfg, DEFAULT_RTOL, 0.0, atol_ratio, knobs) for name, knobs in KNOB_RUNS}
+    if any(_halt_unfitted(r) for r in _all_runs(rec)):
+        # the halt fit's levels below the last may lie past t_max, where no step goes: the same
+        # scene with LONG_T_MAX says whether they do (then t_halt is NaN by the scene's budget)
+        long = json.loads(json.dumps(cfg))
+        long["stop"]["t_max"] = LONG_T_MAX
+        rec["long"] = _one_run(long, DEFAULT_RTOL, 0.0, atol_ratio)
     return rec
+
+
+def _all_runs(rec: dict) -> list[dict]:
+    """A scene record's runs: every rtol, the perturbed one and every knob's."""
+    return rec["runs"] + [rec["perturbed"]] + list(rec.get("knobs", {}).values())
+
+
+def _halt_unfitted(r: dict) -> bool:
+    """A halted run without a finite t_halt and (unless it lay flat: a located halt) t_halt_error."""
+    return r.get("outcome") == "halted" and not (math.isfinite(r["q"].get("t_halt", math.nan))
+                                                 and (r.get("lay_flat")
+                                                      or math.isfinite(r.get("t_halt_error", math.nan))))
+
+
+def _halt_past_t_max(rec: dict) -> bool:
+    """Does the scene's run to LONG_T_MAX fit its halt on levels crossed after the scene's t_max
+    (t_halt - t_halt_error: the last level of the fit)? Then a NaN t_halt is the budget's."""
+    r = rec.get("long")
+    if r is None or r.get("outcome") != "halted":
+        return False
+    th, err = r["q"].get("t_halt", math.nan), r.get("t_halt_error", math.nan)
+    return math.isfinite(th) and math.isfinite(err) and th - err > rec["scene"]["stop"]["t_max"]
 
 
 def _rel(a, b) -> float:
@@ -234,15 +267,18 @@ def analyse(recs: list[dict]) -> str:
     bad_limit = [rec["index"] for rec in recs for r in rec["runs"]
                  if r.get("outcome") == "step_limit" and r["t_end"] <= 100.0]
     lines.append(f"step_limit before 100 s simulated (all rtols): {len(bad_limit)} runs, scenes {sorted(set(bad_limit))[:10]}")
-    no_halt = [rec["index"] for rec in recs for r in rec["runs"] + [rec["perturbed"]] + list(rec.get("knobs", {}).values())
-               if r.get("outcome") == "halted" and not (math.isfinite(r["q"].get("t_halt", math.nan))
-                                                       and (r.get("lay_flat")   # a located halt: no extrapolation error
-                                                            or math.isfinite(r.get("t_halt_error", math.nan))))]
-    n_halted = sum(1 for rec in recs for r in rec["runs"] + [rec["perturbed"]] + list(rec.get("knobs", {}).values())
-                   if r.get("outcome") == "halted")
+    past = [rec["index"] for rec in recs if _halt_past_t_max(rec)]
+    no_halt = [rec["index"] for rec in recs for r in _all_runs(rec) if _halt_unfitted(r) and rec["index"] not in past]
+    n_halted = sum(1 for rec in recs for r in _all_runs(rec) if r.get("outcome") == "halted")
     lines.append(f"halted runs without a finite t_halt and (unless lay flat) t_halt_error (all runs): "
                  f"{len(no_halt)} of {n_halted}"
                  + (f", scenes {sorted(set(no_halt))[:10]}" if no_halt else ""))
+    for rec in recs:
+        if rec["index"] in past:
+            r = rec["long"]
+            lines.append(f"  scene {rec['index']}: its halt fit's levels lie past t_max "
+                         f"{rec['scene']['stop']['t_max']:g} s (t_halt NaN, halt_finite false); to t_max "
+                         f"{LONG_T_MAX:g} s: t_halt {r['q']['t_halt']:.6g} +- {r['t_halt_error']:.3g} s")
     budgets = np.array([r["budget"] for r in default if "budget" in r])
     nb = int(np.sum(~(budgets <= 1e-9)))
     lines.append(f"dissipation budget at rtol 1e-10: max {np.nanmax(budgets):.2e} E0, scenes over 1e-9 E0: {nb}")
@@ -452,7 +488,7 @@ def analyse_knobs(recs: list[dict]) -> list[str]:
                     worst.append((d, rec["index"], k))
         worst.sort(key=lambda w: (-w[0] if math.isfinite(w[0]) else -math.inf))
         lines.append(f"  {name}: well-conditioned within {AGREE:g} of the default {n_ok}/{n_wc} = "
-                     f"{100.0 * n_ok / max(n_wc, 1):.2f} %, within {AGREE_ALL:g} {n_ok_all}/{n_wc}, largest "
+                     f"{100.0 * n_ok / max(n_wc, 1):.2f} %, within {AGREE_ALL:g} {n_ok_all}/{n_wc}, largest miss beyond {AGREE:g} "
                      f"{(worst[0][0] if worst else 0.0):.2e}; same event counts {same}/{len(recs)} scenes "
                      f"({100.0 * same / max(len(recs), 1):.1f} %), among scenes whose counts alpha0 + 1e-10 "
                      f"leaves alone {same_robust}/{robust}" + (f"; counts differ: scenes {diff[:10]}" if diff else ""))
