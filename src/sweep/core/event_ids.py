@@ -41,7 +41,7 @@ EVENTS = np.array([
     (0, 1, 0, 0, 2, 0),  # EV_UNSTICK3
     (1, 1, 0, 0, -1, 0),  # EV_CONE
     (1, 1, 3, 0, -1, 0),  # EV_SLIP_SLOW
-    (1, 1, 0, 0, -1, 0),  # EV_SLIP_STOP
+    (1, 1, 0, 1, -1, 0),  # EV_SLIP_STOP
     (1, 1, 0, 0, -1, 0),  # EV_SLIP_FAST
     (1, 1, 3, 0, -1, 0),  # EV_SLAVE
     (2, 1, 0, 0, -1, 0),  # EV_CONTACT

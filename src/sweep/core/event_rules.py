@@ -183,7 +183,9 @@ def slip_stop_update(t, y, sys):
     return -1
 
 
-RULES.append(Rule("SLIP_STOP", C_SLIP, 1, D_RATES, R_NONE, value=slip_stop_value, update=slip_stop_update))
+# (a slaved slip that leaves u = 0 starts on this surface, u.s = 0: it may rise and come back within
+# its first step, which a scan of sign changes from g > 0 alone missed; the slip then ran on against s)
+RULES.append(Rule("SLIP_STOP", C_SLIP, 1, D_RATES, R_SURFACE, value=slip_stop_value, update=slip_stop_update))
 
 
 # === SLAVED: |u| grows to SLAVE_EXIT x the slaving speed -> SLIDE; a SLIDE whose hand-over is off ======

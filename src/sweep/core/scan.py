@@ -129,8 +129,8 @@ def dense_built(have_dense, span, work):
 
 @kernel
 def surface_bracket(k, span, lev, work):
-    """Event k (the side, or a moment sign) on the step span (layout.Span: [t, t + h] from work.y)
-    that starts on its surface and ends on or past it (dense output built): a bracket (ta, ga, tb,
+    """Event k (the side, a moment sign, or a slaved slip's end) on the step span (layout.Span:
+    [t, t + h] from work.y) that starts on its surface and ends on or past it (dense output built): a bracket (ta, ga, tb,
     gb) of its return to the surface, and the event to apply there (k, or EV_AGAINST1 + i for a
     component moving against its sign)."""
     t, h = span.t0, span.h
@@ -143,6 +143,8 @@ def surface_bracket(k, span, lev, work):
         # g = side alpha, dg/dtau = side omega_1 (eq. 2.3)
         d0 = cs[CS_SIDE] * y[Y_W1] * h
         d1 = cs[CS_SIDE] * y_new[Y_W1] * h
+    elif EVENTS[k, E_DIP] == D_RATES:
+        d0, d1 = rate_slopes(k, span, lev, work)
     else:
         d0, d1 = sign_slopes(i, cs[CS_SIG + i], step_start(y, wk), step_end(wk), h)
     ta, ga = lift_off(k, span, Hermite(g0, d0, g1, d1), lev)
@@ -217,13 +219,8 @@ def dip_bracket(k, span, lev, work, have_dense):
         # components (a cubic in g, or its difference quotient, can step over it)
         dip = slip_closest_approach(y, f, y_new, f_new, h)
     elif how == D_RATES:
-        if not scan.rates[SC_RATES_OLD]:
-            event_rates(t, step_start(y, wk), wk[W_GOLD], wk[W_RATEOLD], lev, span.sys)
-            scan.rates[SC_RATES_OLD] = True
-        if not scan.rates[SC_RATES_NEW]:
-            event_rates(t + h, step_end(wk), wk[W_GNEW], wk[W_RATENEW], lev, span.sys)
-            scan.rates[SC_RATES_NEW] = True
-        dip = hermite_dip(g0, wk[W_RATEOLD, k] * h, g1, wk[W_RATENEW, k] * h)
+        d0, d1 = rate_slopes(k, span, lev, work)
+        dip = hermite_dip(g0, d0, g1, d1)
     else:
         raise ValueError("dip_bracket: an event of the dynamics with no way to bracket a dip (E_DIP)")
     if not dip > 0.0:
@@ -238,6 +235,22 @@ def dip_bracket(k, span, lev, work, have_dense):
     if gm <= 0.0:
         return tm, gm, have_dense
     return -1.0, 0.0, have_dense
+
+
+@kernel
+def rate_slopes(k, span, lev, work):
+    """d g_k per unit of the step span (layout.Span: [t, t + h] from work.y) at its two ends, from
+    the events' rates (roots.event_rates: one RHS evaluation for all events at each end, the end's
+    kept for the next step's start in work.trk.scan)."""
+    t, h = span.t0, span.h
+    y, wk, scan = work.y, span.sys.wk, work.trk.scan
+    if not scan.rates[SC_RATES_OLD]:
+        event_rates(t, step_start(y, wk), wk[W_GOLD], wk[W_RATEOLD], lev, span.sys)
+        scan.rates[SC_RATES_OLD] = True
+    if not scan.rates[SC_RATES_NEW]:
+        event_rates(t + h, step_end(wk), wk[W_GNEW], wk[W_RATENEW], lev, span.sys)
+        scan.rates[SC_RATES_NEW] = True
+    return wk[W_RATEOLD, k] * h, wk[W_RATENEW, k] * h
 
 
 @kernel
