@@ -323,8 +323,9 @@ class Disk:
         the motion), c' = d cross/d nu, u' = rad; central differences in nu and along the motion
         (docs/model.md, 'Slow slip'). 0 where c' - u' >= 0 or c' >= 0.
 
-        Returns (lag, err): err = |u| (1 + |theta'|) / (u' - c') + |lag|, how far this first order
-        is from exact (inf where the direction does not relax onto the root)."""
+        Returns (lag exp(-err^4), err): err = |u| (1 + |theta'|) / (u' - c') + |lag|, how far this
+        first order is from exact (inf where the direction does not relax onto the root); the
+        damping takes the lag to 0 where the series does not hold (err >> 1, c' - u' -> 0-)."""
         cross0, rad0 = self.cross_dot(nu, u, t, y, c)
         dc = self.dcross(nu, u, t, y, c)
         if not (dc < 0.0 and dc - rad0 < 0.0):
@@ -340,7 +341,8 @@ class Disk:
         um = self.cross_dot(nu, u - step * rad0, t - step, ys - step * dy, c)[0]
         root_rate = -((up - um) / (2.0 * step)) / dc
         lag = u * root_rate / (dc - rad0)
-        return lag, u * (1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA]))) / (rad0 - dc) + abs(lag)
+        err = u * (1.0 + abs(y[Y_W3] / math.cos(y[Y_ALPHA]))) / (rad0 - dc) + abs(lag)
+        return lag * math.exp(-err ** 4), err
 
     def manifold(self, nu, u, t, y, c):
         """(lag, err) of the slow manifold to second order in the relaxation time. The manifold

@@ -345,7 +345,8 @@ def root_lag(nu, u, ev):
 def lag_and_error(nu, u, cross0, ev):
     """(lag, c', err) at the quasi-static direction nu, ev.dy, ev.aux (layout.Eval) the right-hand
     side at the slip vector u s(nu) and cross0 its cross: c' = d cross/d nu by a forward difference,
-    the lag (direction_lag) and the slaved direction's error measure (slaved_slip)."""
+    the lag (direction_lag, damped by exp(-err^4)) and the slaved direction's error measure
+    (slaved_slip)."""
     y, sys, dy, aux = ev.y, ev.sys, ev.dy, ev.aux
     wk = sys.wk
     rad0 = dy[Y_U1] * math.cos(nu) + dy[Y_U2] * math.sin(nu)
@@ -356,6 +357,12 @@ def lag_and_error(nu, u, cross0, ev):
     err = math.inf
     if dcross < 0.0 and relax > 0.0:
         err = abs(u) * (1.0 + abs(y[Y_W3] / aux[X_COSA])) / relax + abs(lag)
+        # as the direction's relaxation falls to the slip's own decay (c' - rad -> 0-) the
+        # series' lag grows without bound, and the round-off of c' - rad with it, where the series
+        # no longer holds (err >> 1: the slip ends before its direction reaches that lag) and a
+        # slip is slaved only at the floor's speed; damped by exp(-err^4) it goes smoothly to 0,
+        # the lag where nu does not attract that way, and changes by err^4 where the series holds
+        lag *= math.exp(-(err * err) * (err * err))
     return lag, dcross, err
 
 

@@ -130,9 +130,9 @@ def dense_built(have_dense, span, work):
 @kernel
 def surface_bracket(k, span, lev, work):
     """Event k (the side, a moment sign, or a slaved slip's end) on the step span (layout.Span:
-    [t, t + h] from work.y) that starts on its surface and ends on or past it (dense output built): a bracket (ta, ga, tb,
-    gb) of its return to the surface, and the event to apply there (k, or EV_AGAINST1 + i for a
-    component moving against its sign)."""
+    [t, t + h] from work.y) that starts on its surface and ends on or past it (dense output built):
+    a bracket (ta, ga, tb, gb) of its return to the surface, and the event to apply there (k, or
+    EV_AGAINST1 + i for a component moving against its sign)."""
     t, h = span.t0, span.h
     y, cs, wk = work.y, span.sys.cs, span.sys.wk
     g0 = wk[W_GOLD, k]
@@ -199,7 +199,7 @@ def dip_bracket(k, span, lev, work, have_dense):
     flags the dip; the dense output confirms it. Returns (the time of the dip's minimum where g_k
     <= 0 there, g_k there, have_dense); the time is -1 where there is no such dip."""
     t, h = span.t0, span.h
-    y, cs, wk, scan = work.y, span.sys.cs, span.sys.wk, work.trk.scan
+    y, cs, wk = work.y, span.sys.cs, span.sys.wk
     g0 = wk[W_GOLD, k]
     g1 = wk[W_GNEW, k]
     f = wk[W_F]
