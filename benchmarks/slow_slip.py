@@ -24,7 +24,8 @@ extracted with `git archive` into a temporary directory with its own numba cache
   go, by contact state (ROLL, SLIDE, SLAVED)
   and slip speed |u| (m/s): steps, simulated time, mean step, and for SLIDE the median of
   h mu_d Phi / |u| (dimensionless): a constant there means the step is held at the stability
-  bound of the explicit method by the direction's relaxation rate ~ mu_d Phi / |u|.
+  bound of the explicit method by the direction's relaxation rate ~ mu_d Phi / |u|. Then the
+  sliding steps by why they are not slaved (the first hand-over condition their start state fails).
 * bands: tries per unit of content (precession cycles + transitions, stick phases, impacts) of the
   convergence harness's scenes (--bands of the main draw, a fifth as many near the edge) at rtol
   1e-10, by mu_d / mu_s band: median, p99, max and the median against that of mu_d / mu_s < 0.9.
@@ -72,6 +73,62 @@ from sweep.scene import load_scene
 from sweep.simulate import run_kernel, simulate
 from sweep.core import model
 BANDS = json.loads(sys.argv[1])
+
+
+def why_sliding(sc, tr):
+    # the sliding steps (SLIDE: the direction integrated) by the first of the hand-over's tests
+    # (slip.try_slave, settle_onto) that the step's start state fails, and where it passes them
+    # all, whether it is above the slaving speed (contact_rhs.slave_speed): {reason: [steps, time
+    # (s)]}, and the median over the steps with an attracting direction of its relaxation rate
+    # (rad - c') over the slaving speed's proxy for it, mu_d Phi; None for a kernel without the
+    # slaved slip's second order
+    try:
+        from sweep.core import constants as CN, contact_rhs as CR, layout as L, slip as SL
+        CR.second_order_applies
+    except (ImportError, AttributeError):
+        return None
+    p = np.array(sc.params)
+    stol = p[model.P_SLAVE]
+    tau = tr[:, 0]
+    out = {}
+    ratios = []
+    for k in np.nonzero(tr[1:, 2 + model.N_FULL] == CN.SLIDE)[0]:
+        y = tr[k, 1:1 + model.N_FULL].copy()
+        cs = np.zeros(L.N_CS)
+        cs[L.CS_MODE], cs[L.CS_SIDE] = CN.SLIDE, (1.0 if y[model.Y_ALPHA] >= 0.0 else -1.0)
+        cs[L.CS_SIG:L.CS_SIG + 3] = np.where(np.array(model.moment_axes_rates(y)) >= 0.0, 1.0, -1.0)
+        system = L.System(p, cs, model.N_CORE, np.zeros((L.N_WORK, L.N_WCOLS)), np.zeros(L.N_ISTATS, np.int64))
+        dy, aux = np.zeros(model.N_FULL), np.zeros(model.N_AUX)
+        CR.eval_rhs(tau[k], y, system, dy, aux)
+        u = math.hypot(y[model.Y_U1], y[model.Y_U2])
+        root = SL.attracting_direction(math.atan2(y[model.Y_U2], y[model.Y_U1]), u, tau[k], y, system)
+        if not math.isfinite(root):
+            why = "no attracting direction (a spiral or a jam)"
+        else:
+            ev = L.Eval(tau[k], y, system, np.zeros(model.N_FULL), np.zeros(model.N_AUX))
+            cross0, rad0 = CR.slip_rates(root, u, ev, np.zeros(model.N_FULL))
+            lag, dcross, err = CR.root_lag(root, u, ev)
+            ratios.append((rad0 - dcross) / (p[model.P_MUD] * aux[model.X_PHI]))
+            if not CR.second_order_applies(lag, err, p):
+                why = "first-order measure > 2 slave_tol (the series does not hold)"
+            else:
+                lag, err = CR.second_order(root, lag, dcross, err, ev)
+                turn = math.atan2(y[model.Y_U2], y[model.Y_U1]) - (root + lag)
+                turn = abs(math.atan2(math.sin(turn), math.cos(turn)))
+                if err > stol:
+                    why = "err in (slave_tol, 2 slave_tol]"
+                elif turn > stol * stol:
+                    why = "direction > slave_tol^2 rad from the manifold (not settled)"
+                elif u > CR.slave_speed(y, aux, p):
+                    why = "passes the tests, above the slaving speed"
+                else:
+                    why = "passes the tests, below the slaving speed (refused earlier in the slide)"
+        row = out.setdefault(why, [0, 0.0])
+        row[0] += 1
+        row[1] += float((tau[k + 1] - tau[k]) * sc.chi)
+    return {"reasons": out, "relax_over_proxy": float(np.median(ratios)) if ratios else math.nan}
+
+
 for line in sys.stdin:
     job = json.loads(line)
     cfg = job["cfg"]
@@ -97,7 +154,7 @@ for line in sys.stdin:
                 ok = sel & np.isfinite(phi)   # (a row at an event carries no normal force)
                 stab = float(np.median(h[ok] * sc.params[model.P_MUD] * phi[ok] / np.maximum(uhat[ok], 1e-300))) if ok.any() else math.nan
                 rows.append([m, lo, hi, int(sel.sum()), float(h[sel].sum() * chi), float(h[sel].mean() * chi), stab])
-        print(json.dumps({"rows": rows, "cpu": time.process_time() - t0}), flush=True)
+        print(json.dumps({"rows": rows, "why": why_sliding(sc, tr), "cpu": time.process_time() - t0}), flush=True)
         continue
     if job.get("anatomy"):
         from sweep.core import layout as L
@@ -340,6 +397,7 @@ def part_mechanism(sides: dict, scene: str | None = None) -> list[str]:
         title = f"harness scene {index} of seed {seed} (mu_d / mu_s {cfg['contact']['mu_d'] / cfg['contact']['mu_s']:.3f})"
     else:
         cfg, title = paper(0.5), "mu_d = mu_s"
+    whys = {}
     lines = [f"## Where the steps go at {title} (default settings)", "",
              "| kernel | contact state | |u| (m/s) | steps | time (s) | mean step (s) | median h mu_d Phi / |u| |",
              "|---|---|---|---|---|---|---|"]
@@ -349,6 +407,18 @@ def part_mechanism(sides: dict, scene: str | None = None) -> list[str]:
             hi_t = "inf" if hi is None else f"{hi:g}"
             st = f"{stab:.2g}" if m != 0 else "–"
             lines.append(f"| {name} | {names[int(m)]} | [{lo:g}, {hi_t}) | {k} | {tt:.3f} | {hm:.2g} | {st} |")
+        whys[name] = r.get("why")
+    lines += ["", "Why the sliding steps (SLIDE) are not slaved: the first test of the hand-over "
+              "(slip.try_slave) that the step's start state fails, and for those that pass them all, "
+              "their speed against the slaving speed (contact_rhs.slave_speed)", "",
+              "| kernel | reason | steps | time (s) |", "|---|---|---|---|"]
+    for name, why in whys.items():
+        if not why:
+            continue
+        for reason, (k, tt) in sorted(why["reasons"].items(), key=lambda kv: -kv[1][0]):
+            lines.append(f"| {name} | {reason} | {k} | {tt:.3f} |")
+        lines.append(f"| {name} | median relaxation rate (rad - c') / mu_d Phi (the slaving speed's proxy) "
+                     f"| {why['relax_over_proxy']:.2f} | |")
     return lines
 
 
