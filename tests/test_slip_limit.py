@@ -675,6 +675,22 @@ NEAR_FLAT_FLOOR = {
 }
 
 
+def _assert_slip_acceleration_straight(t, y0, dy0, system, spacing):
+    """The slip acceleration (eval_rhs in `system`) at 9 states along the motion from y0 (its rate
+    dy0), `spacing` tau apart, lies on a straight line to 1e-9 of itself: no round-off that an
+    error control would see from one stage to the next."""
+    s = np.arange(-4, 5) * spacing
+    du = []
+    for sk in s:
+        dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
+        CR.eval_rhs(t + sk, y0 + sk * dy0, system, dy, aux)
+        du.append(dy[M.Y_U1:M.Y_U2 + 1])
+    du = np.array(du)
+    for j in range(2):
+        line = np.polyval(np.polyfit(s, du[:, j], 1), s)
+        assert np.max(np.abs(du[:, j] - line)) < 1e-9 * np.max(np.abs(du)), (j, du[:, j] - line)
+
+
 def test_the_slaved_right_hand_side_is_smooth_where_the_series_does_not_hold():
     """Beyond SLAVE_EXIT slave_tol of the first-order measure a slip is slaved only at the floor's
     speed, and there its direction is the first-order manifold's: the second order's difference of
@@ -700,16 +716,7 @@ def test_the_slaved_right_hand_side_is_smooth_where_the_series_does_not_hold():
     CR.eval_rhs(d["t"], y0, L.System(first, cs, M.N_CORE, np.zeros((L.N_WORK, L.N_WCOLS)),
                                      np.zeros(L.N_ISTATS, np.int64)), np.zeros(M.N_FULL), aux1)
     assert aux0[M.X_LAG] == aux1[M.X_LAG]
-    s = np.arange(-4, 5) * 2e-15
-    du = []
-    for sk in s:
-        dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
-        CR.eval_rhs(d["t"] + sk, y0 + sk * dy0, system, dy, aux)
-        du.append(dy[M.Y_U1:M.Y_U2 + 1])
-    du = np.array(du)
-    for j in range(2):
-        line = np.polyval(np.polyfit(s, du[:, j], 1), s)
-        assert np.max(np.abs(du[:, j] - line)) < 1e-9 * np.max(np.abs(du)), (j, du[:, j] - line)
+    _assert_slip_acceleration_straight(d["t"], y0, dy0, system, 2e-15)
 
 
 
@@ -767,16 +774,7 @@ def test_a_slaved_slip_whose_relaxation_is_as_slow_as_its_decay_has_a_bounded_sm
     # (err agrees to ~3e-4; the damping turns that into 4 err^4 times as much of the lag)
     assert peer_err == pytest.approx(err, rel=1e-3), (peer_err, err)
     assert peer_lag == pytest.approx(lag, rel=0.05), (peer_lag, lag)
-    s = np.arange(-4, 5) * 4e-13
-    du = []
-    for sk in s:
-        dy, aux = np.zeros(M.N_FULL), np.zeros(M.N_AUX)
-        CR.eval_rhs(d["t"] + sk, y0 + sk * dy0, system, dy, aux)
-        du.append(dy[M.Y_U1:M.Y_U2 + 1])
-    du = np.array(du)
-    for j in range(2):
-        line = np.polyval(np.polyfit(s, du[:, j], 1), s)
-        assert np.max(np.abs(du[:, j] - line)) < 1e-9 * np.max(np.abs(du)), (j, du[:, j] - line)
+    _assert_slip_acceleration_straight(d["t"], y0, dy0, system, 4e-13)
 
 
 # A slaved slip of the paper's disk at mu_d = mu_s (0.9 mm/s along its direction, lag -8.6e-5 rad)
