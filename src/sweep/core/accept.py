@@ -1,5 +1,6 @@
-"""Step acceptance: one DOP853 step of the current contact state (try_step) with its error norm
-(error_scale: this state's per-component scales), the energy-balance checks of a step and of the
+"""Step acceptance: one step of the current contact state (try_step: DOP853, or in a stiff slide the
+linearly implicit extrapolation, stepper_for) with its error norm (error_scale: this state's
+per-component scales), the energy-balance checks of a step and of the
 kept part of a step cut at an event (balance_error, state_balance_error), and the step counters.
 """
 from __future__ import annotations
@@ -9,11 +10,12 @@ import math
 from .constants import EPS, ROLL, SLIDE
 from .contact_rhs import eval_rhs, mode_energy, mode_energy_at
 from .dop853 import dense_eval, error_norm, rk_step
+from .extrapolation import lie_error_norm, lie_step
 from .jit import kernel
-from .layout import (CS_MODE, CS_SIDE, I_REJECTED, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, Point, W_AUX, W_AUXNEW,
-                     W_DELTA, W_ESCALE, W_F, W_FNEW, W_YNEW, W_YSEG)
-from .model import (N_CORE, P_G, P_H, P_UTOL, X_COSA, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_U1, Y_U2, Y_W1,
-                    Y_W2, Y_W3, energy_increment_trig, energy_rate_trig)
+from .layout import (CS_MODE, CS_SIDE, CS_STEPPER, I_REJECTED, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, STEP_DOP853,
+                     STEP_LIE, Point, W_AUX, W_AUXNEW, W_DELTA, W_ESCALE, W_F, W_FNEW, W_YNEW, W_YSEG)
+from .model import (N_CORE, P_G, P_H, P_MUD, P_UTOL, X_COSA, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_U1,
+                    Y_U2, Y_W1, Y_W2, Y_W3, energy_increment_trig, energy_rate_trig)
 from .tableau import N_STAGES
 
 
@@ -74,9 +76,28 @@ SLIP_NEAR = 100.0
 SLIP_ROUNDOFF = 4.0 * EPS
 
 
+# A slide is stepped by the linearly implicit extrapolation (extrapolation.py) where the step asked
+# for is at least STIFF_RATIO relaxation times of its slip direction, |u| / (mu_d Phi): there DOP853
+# is held at its stability bound (h mu_d Phi / |u| ~ 1.5-2 on slow slides, docs/model.md 'Slow
+# slip'), the extrapolation steps at what accuracy needs. Which stepper takes a step is numerics:
+# both converge to the same motion, and no decision reads it.
+STIFF_RATIO = 1.0
+
+
+@kernel
+def stepper_for(h, y, aux, p, cs):
+    """The stepper of a step of size h from y (aux: the right-hand side's there) in the contact
+    state cs: STEP_LIE for a slide where h is at least STIFF_RATIO relaxation times of the slip
+    direction, else STEP_DOP853."""
+    if cs[CS_MODE] == SLIDE and h * p[P_MUD] * max(aux[X_PHI], 0.0) >= STIFF_RATIO * math.hypot(y[Y_U1], y[Y_U2]):
+        return STEP_LIE
+    return STEP_DOP853
+
+
 @kernel
 def try_step(t, h, consts, work, sys):
-    """One DOP853 step of size h from work.y, f = wk[W_F] (wk[W_AUX]: the right-hand side's aux
+    """One step of size h (DOP853, or the extrapolation where stepper_for says, the choice kept in
+    cs[CS_STEPPER] for its dense output) from work.y, f = wk[W_F] (wk[W_AUX]: the right-hand side's aux
     there) into wk[W_YNEW], wk[W_FNEW], wk[W_AUXNEW], in the system sys (layout.System); returns
     its error norm (inf for a step with a non-finite stage or end state, or one that raises the
     energy by more than ENERGY_GUARD rtol e0), at least its energy-balance error (balance_error;
@@ -94,7 +115,12 @@ def try_step(t, h, consts, work, sys):
     aux_new = wk[W_AUXNEW]
     e_cur = mode_energy_at(y, aux, p, cs)
     start = Point(y, f, aux)
-    rk_step(eval_rhs, t, h, (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K)
+    stepper = stepper_for(h, y, aux, p, cs)
+    cs[CS_STEPPER] = stepper
+    if stepper == STEP_LIE:
+        lie_step(eval_rhs, t, h, (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K, (Y_U1, Y_U2))
+    else:
+        rk_step(eval_rhs, t, h, (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K)
     err = 0.0
     for i in range(n):
         if not math.isfinite(y_new[i]):
@@ -109,7 +135,8 @@ def try_step(t, h, consts, work, sys):
         defect = max(power_defect(y, f, aux, p, cs), power_defect(y_new, wk[W_FNEW], aux_new, p, cs))
         nc = norm_size(n)
         error_scale(y, y_new, nc, (rtol, atol, slip_atol(y, y_new, p, cs[CS_MODE], rtol, atol)), wk[W_ESCALE])
-        err = max(error_norm(K, h, wk[W_ESCALE], nc), balance_error(start, wk[W_DELTA], h, defect, sys, consts))
+        step_err = lie_error_norm(K, wk[W_ESCALE], nc) if stepper == STEP_LIE else error_norm(K, h, wk[W_ESCALE], nc)
+        err = max(step_err, balance_error(start, wk[W_DELTA], h, defect, sys, consts))
     tally_step(cs, sys.istats, err <= 1.0, 1)
     return err
 

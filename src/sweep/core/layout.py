@@ -10,6 +10,9 @@ Contact state `cs` (float64, N_CS): the discrete state of the hybrid system.
     CS_SLAVE_OFF  a slide's hand-over to SLAVED: constants.HANDOVER_ARMED, HANDOVER_OFF, SLOW_OFF,
                   BELOW or AT_FLOOR (constants.py says what each means)
     CS_FLOOR   the slip speed (u_hat) at which a slide followed BELOW meets its fate again
+    CS_STEPPER the stepper of the contact state's current step (numerics, not physics: no event or
+               rule reads it): STEP_DOP853 or STEP_LIE (accept.stepper_for; its dense output is
+               that stepper's: tracking.step_dense)
 Work buffer `wk` (float64, N_WORK x N_FULL): rows used as vectors; `K` (N_KROWS x N_FULL) holds the
 RK stages of this step (rows 0..15) and of the previous step (rows K_PREV.., kept while its dense
 output was not built), `F` (14 x N_FULL) the dense-output coefficients of this step (rows 0..6) and
@@ -33,7 +36,9 @@ CS_STUCK = 5     # 5, 6, 7
 CS_NU = 8
 CS_SLAVE_OFF = 9  # 1 after a failed SLIDE -> SLAVED hand-over, until the slip is fast again
 CS_FLOOR = 10
-N_CS = 11
+CS_STEPPER = 11
+N_CS = 12
+STEP_DOP853, STEP_LIE = 0.0, 1.0
 
 # --- work-buffer rows ---------------------------------------------------------------------------
 W_Y = 0          # state at the step start

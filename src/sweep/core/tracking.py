@@ -13,16 +13,17 @@ import math
 from .contact_rhs import eval_rhs, mode_energy
 from .dop853 import N_DENSE, dense_coeffs, dense_eval
 from .event_ids import EV_LEVEL
+from .extrapolation import lie_dense
 from .fits import halt_from_three
 from .frequency import (Q_CAND_PHI, Q_CAND_T, Q_CAND_TH, lattice_due, lattice_step, open_level, peak_candidate,
                         peak_confirmed)
 from .jit import kernel
-from .layout import (Bracket, CS_MODE, FT_B, FT_DEEP_B, FT_DEEP_E, FT_T, F_APPROACH, F_NFMAX, F_TEND, F_THALT,
+from .layout import (Bracket, CS_MODE, CS_STEPPER, STEP_LIE, FT_B, FT_DEEP_B, FT_DEEP_E, FT_T, F_APPROACH, F_NFMAX, F_TEND, F_THALT,
                      F_THALT_ERR, I_LEVELS, I_OVERFLOW, I_PEAKS, I_TRAJ, K_PREV, L_ALPHA, L_FHAT, L_PENDING, L_TAU,
                      N_CS, PH_A, PH_B, PH_HPREV, PH_TA, PH_TB, PH_TPREV, PK_PHI, PK_TAU, PK_THETA, Peak, SA_ENERGY,
                      SA_MODE, SA_PHI, SA_Y, Span, System, TF_PREV_DENSE, TF_PREV_OK, TF_RING, TK_FHAT_PENDING, TK_LEVEL,
                      TK_NPK, TK_SAMPLE, TR_MODE, TR_PHI, TR_TAU, TR_Y, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV)
-from .model import X_PHI, Y_ALPHA, Y_THETA, steady_rolling_energy
+from .model import X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_U2, steady_rolling_energy
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
 
@@ -81,12 +82,16 @@ def peak_bracketed(phi_c, trk):
 
 @kernel
 def step_dense(span, y_new, K):
-    """dop853.dense_coeffs for the contact right-hand side (contact_rhs.eval_rhs): the dense output
+    """dop853.dense_coeffs for the contact right-hand side (contact_rhs.eval_rhs), or where the
+    step was the extrapolation's (span.sys.cs[CS_STEPPER]) extrapolation.lie_dense: the dense output
     (rows row0..row0 + 6 of span.F) of the step span (layout.Span: from y0 at t0 over h, in its
     system) to y_new, from its stages K.
     A kernel of its own: the stepper's kernels are inlined into their callers, and this one
     compiled copy serves every step's dense output (scan.dense_built, previous_dense)."""
-    dense_coeffs(eval_rhs, span, y_new, K)
+    if span.sys.cs[CS_STEPPER] == STEP_LIE:
+        lie_dense(eval_rhs, span, y_new, K, (Y_U1, Y_U2))
+    else:
+        dense_coeffs(eval_rhs, span, y_new, K)
 
 
 @kernel
