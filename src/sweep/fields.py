@@ -272,6 +272,12 @@ FIELDS: list[Field] = [
                                     "instead of integrated (0: only where the relaxation time alone is below 1e-7; "
                                     "results converge as it goes to 0: docs/model.md, 'Slow slip')"), 3.0e-3,
           sweep="solver.slave_tol", kernel=Param("P_SLAVE", "1")),
+    # which stepper takes a slide's step: both converge to the same motion (docs/model.md, 'Slow slip')
+    Field("solver.stiff_ratio", Range(0.0, 1e6, "step size, in relaxation times of a slide's slip direction "
+                                      "(|u| / (mu_d N / m)), from which a slide is stepped by the linearly implicit "
+                                      "extrapolation instead of DOP853 (0: DOP853 everywhere; a numerical choice: "
+                                      "docs/model.md, 'Slow slip')"), 1.0,
+          sweep="solver.stiff_ratio", kernel=Param("P_STIFF", "1")),
     Field("outputs.normal_force_frequency", default=True, kind="flag"),
     Field("outputs.kinematics", default=False, kind="flag"),
     # The disk's elastic material, used only by the sound synthesis (sweep.audio, sweep.plate), never by

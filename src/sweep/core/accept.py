@@ -14,7 +14,7 @@ from .extrapolation import lie_error_norm, lie_step
 from .jit import kernel
 from .layout import (CS_MODE, CS_SIDE, CS_STEPPER, I_REJECTED, I_SLIDE_REJECTED, I_SLIDE_STEPS, I_STEPS, STEP_DOP853,
                      STEP_LIE, Point, W_AUX, W_AUXNEW, W_DELTA, W_ESCALE, W_F, W_FNEW, W_YNEW, W_YSEG)
-from .model import (N_CORE, P_G, P_H, P_MUD, P_UTOL, X_COSA, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_U1,
+from .model import (N_CORE, P_G, P_H, P_MUD, P_STIFF, P_UTOL, X_COSA, X_PHI, X_SINA, Y_ALPHA, Y_DK1, Y_DK2, Y_DK3, Y_DSLIDE, Y_U1,
                     Y_U2, Y_W1, Y_W2, Y_W3, energy_increment_trig, energy_rate_trig)
 from .tableau import N_STAGES
 
@@ -76,20 +76,17 @@ SLIP_NEAR = 100.0
 SLIP_ROUNDOFF = 4.0 * EPS
 
 
-# A slide is stepped by the linearly implicit extrapolation (extrapolation.py) where the step asked
-# for is at least STIFF_RATIO relaxation times of its slip direction, |u| / (mu_d Phi): there DOP853
-# is held at its stability bound (h mu_d Phi / |u| ~ 1.5-2 on slow slides, docs/model.md 'Slow
-# slip'), the extrapolation steps at what accuracy needs. Which stepper takes a step is numerics:
-# both converge to the same motion, and no decision reads it.
-STIFF_RATIO = 1.0
-
 
 @kernel
 def stepper_for(h, y, aux, p, cs):
     """The stepper of a step of size h from y (aux: the right-hand side's there) in the contact
-    state cs: STEP_LIE for a slide where h is at least STIFF_RATIO relaxation times of the slip
-    direction, else STEP_DOP853."""
-    if cs[CS_MODE] == SLIDE and h * p[P_MUD] * max(aux[X_PHI], 0.0) >= STIFF_RATIO * math.hypot(y[Y_U1], y[Y_U2]):
+    state cs: STEP_LIE (the linearly implicit extrapolation, extrapolation.py) for a slide where h is
+    at least p[P_STIFF] > 0 relaxation times of the slip direction, |u| / (mu_d Phi): there DOP853 is
+    held at its stability bound (h mu_d Phi / |u| ~ 1.5-2 on slow slides, docs/model.md 'Slow
+    slip'), the extrapolation steps at what accuracy needs; else STEP_DOP853. Which stepper takes a
+    step is numerics: both converge to the same motion, and no decision reads it."""
+    r = p[P_STIFF]
+    if r > 0.0 and cs[CS_MODE] == SLIDE and h * p[P_MUD] * max(aux[X_PHI], 0.0) >= r * math.hypot(y[Y_U1], y[Y_U2]):
         return STEP_LIE
     return STEP_DOP853
 
@@ -118,7 +115,7 @@ def try_step(t, h, consts, work, sys):
     stepper = stepper_for(h, y, aux, p, cs)
     cs[CS_STEPPER] = stepper
     if stepper == STEP_LIE:
-        lie_step(eval_rhs, t, h, (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K, (Y_U1, Y_U2))
+        lie_step(eval_rhs, (t, h), (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K, (Y_U1, Y_U2))
     else:
         rk_step(eval_rhs, t, h, (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K)
     err = 0.0

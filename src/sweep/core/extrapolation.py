@@ -77,9 +77,10 @@ HERMITE5 = _hermite5()
 
 
 @kernel(inline="always")
-def jacobian_columns(rhs, t, y, f, sys, K, cols):
-    """The Jacobian's columns cols = (c1, c2) at (t, y), f = rhs(t, y), by forward differences of
-    JAC_STEP times |(y_c1, y_c2)|, into K[R_W1], K[R_W2]; K[R_F0] = f."""
+def jacobian_columns(rhs, t, start, sys, K, cols):
+    """The Jacobian's columns cols = (c1, c2) at (t, start.y) (start: layout.Point, f = rhs there),
+    by forward differences of JAC_STEP times |(y_c1, y_c2)|, into K[R_W1], K[R_W2]; K[R_F0] = f."""
+    y, f = start.y, start.f
     n, wk = sys.n, sys.wk
     c1, c2 = cols
     ytmp = wk[W_YTMP]
@@ -99,9 +100,11 @@ def jacobian_columns(rhs, t, y, f, sys, K, cols):
 
 
 @kernel(inline="always")
-def extrapolate(rhs, t, h, y, sys, K, cols):
-    """The extrapolation over h from y (K[R_F0] = f there, K[R_W1], K[R_W2] the Jacobian's columns
-    cols): T_{k,k} (the increment) in K[R_P + N_COLUMNS - 1], T_{k,k-1} in K[R_LOW]."""
+def extrapolate(rhs, at, y, sys, K, cols):
+    """The extrapolation over h from y at t (at = (t, h); K[R_F0] = f there, K[R_W1], K[R_W2] the
+    Jacobian's columns cols): T_{k,k} (the increment) in K[R_P + N_COLUMNS - 1], T_{k,k-1} in
+    K[R_LOW]."""
+    t, h = at
     n, wk = sys.n, sys.wk
     c1, c2 = cols
     ytmp = wk[W_YTMP]
@@ -143,16 +146,17 @@ def extrapolate(rhs, t, h, y, sys, K, cols):
 
 
 @kernel(inline="always")
-def lie_step(rhs, t, h, ends, sys, K, cols):
-    """One extrapolation step of size h from start (ends = (start, end), each a layout.Point; start:
-    y, f at t): end.y, and end.f = K[R_FNEW] = f(t + h, end.y) with its aux end.aux; the increment
+def lie_step(rhs, at, ends, sys, K, cols):
+    """One extrapolation step of size h from start at t (at = (t, h); ends = (start, end), each a
+    layout.Point; start: y, f at t): end.y, and end.f = K[R_FNEW] = f(t + h, end.y) with its aux end.aux; the increment
     before rounding in sys.wk[W_DELTA]; the error estimate's rows for lie_error_norm. cols: the
     components whose Jacobian columns are taken."""
+    t, h = at
     start, end = ends
     n = sys.n
-    y, f, y_new, f_new = start.y, start.f, end.y, end.f
-    jacobian_columns(rhs, t, y, f, sys, K, cols)
-    extrapolate(rhs, t, h, y, sys, K, cols)
+    y, y_new, f_new = start.y, end.y, end.f
+    jacobian_columns(rhs, t, start, sys, K, cols)
+    extrapolate(rhs, at, y, sys, K, cols)
     delta = sys.wk[W_DELTA]
     top = K[R_P + N_COLUMNS - 1]
     for i in range(n):
@@ -182,7 +186,7 @@ def lie_dense(rhs, span, y_new, K, cols):
     its f, y_new and f_new = K[R_FNEW]; 36 right-hand sides."""
     t, y, h, sys, F = span.t0, span.y0, span.h, span.sys, span.F[span.row0:]
     n, wk = sys.n, sys.wk
-    extrapolate(rhs, t, 0.5 * h, y, sys, K, cols)
+    extrapolate(rhs, (t, 0.5 * h), y, sys, K, cols)
     mid = K[R_MID]
     top = K[R_P + N_COLUMNS - 1]
     ytmp = wk[W_YTMP]

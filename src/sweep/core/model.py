@@ -46,7 +46,12 @@ P_WTOL = 10
 # time instead of integrated (core.contact, docs/model.md 'Slow slip'). A numerical knob: the
 # results converge to those of the integrated direction as it goes to 0.
 P_SLAVE = 11
-N_PARAMS = 12
+# A slide's step is taken by the linearly implicit extrapolation (core.extrapolation) where it spans
+# at least this many relaxation times of the slip direction, |u| / (mu_d Phi) (solver.stiff_ratio);
+# 0: by DOP853 everywhere, as in the pure model. A numerical choice: both steppers converge to the
+# same motion (core.accept.stepper_for).
+P_STIFF = 12
+N_PARAMS = 13
 
 # --- auxiliary outputs of the right-hand side ----------------------------------------------
 X_PHI, X_F1, X_F2, X_SIG1, X_SIG2, X_SIG3, X_G1, X_G2, X_G3, X_OK = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
@@ -90,6 +95,7 @@ def make_params(k2_shape: float, radius: float, thickness: float, gravity: float
     p[P_UTOL] = 0.0
     p[P_WTOL] = 0.0
     p[P_SLAVE] = 0.0
+    p[P_STIFF] = 0.0
     return p, chi
 
 
