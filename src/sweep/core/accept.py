@@ -77,6 +77,11 @@ SLIP_ROUNDOFF = 4.0 * EPS
 
 
 
+# The extrapolation's Jacobian: the components the right-hand side reads (alpha, omega, the slip: the
+# dissipation books and the kinematics are quadratures), the slip's pair among them
+LIE_COMPONENTS = (Y_U2 + 1, Y_U1, Y_U2)
+
+
 @kernel
 def stepper_for(h, y, aux, p, cs):
     """The stepper of a step of size h from y (aux: the right-hand side's there) in the contact
@@ -115,7 +120,7 @@ def try_step(t, h, consts, work, sys):
     stepper = stepper_for(h, y, aux, p, cs)
     cs[CS_STEPPER] = stepper
     if stepper == STEP_LIE:
-        lie_step(eval_rhs, (t, h), (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K, (Y_U1, Y_U2))
+        lie_step(eval_rhs, (t, h), (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K, LIE_COMPONENTS)
     else:
         rk_step(eval_rhs, t, h, (start, Point(y_new, wk[W_FNEW], aux_new)), sys, K)
     err = 0.0

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+from .accept import LIE_COMPONENTS
 from .contact_rhs import eval_rhs, mode_energy
 from .dop853 import N_DENSE, dense_coeffs, dense_eval
 from .event_ids import EV_LEVEL
@@ -23,7 +24,7 @@ from .layout import (Bracket, CS_MODE, CS_STEPPER, STEP_LIE, FT_B, FT_DEEP_B, FT
                      N_CS, PH_A, PH_B, PH_HPREV, PH_TA, PH_TB, PH_TPREV, PK_PHI, PK_TAU, PK_THETA, Peak, SA_ENERGY,
                      SA_MODE, SA_PHI, SA_Y, Span, System, TF_PREV_DENSE, TF_PREV_OK, TF_RING, TK_FHAT_PENDING, TK_LEVEL,
                      TK_NPK, TK_SAMPLE, TR_MODE, TR_PHI, TR_TAU, TR_Y, W_AUXBUF, W_CSPREV, W_DYBUF, W_YBUF, W_YPREV)
-from .model import X_PHI, Y_ALPHA, Y_THETA, Y_U1, Y_U2, steady_rolling_energy
+from .model import X_PHI, Y_ALPHA, Y_THETA, steady_rolling_energy
 from .roots import brent_max_phi, locate, phi_on_dense
 from .tableau import N_STAGES
 
@@ -89,7 +90,7 @@ def step_dense(span, y_new, K):
     A kernel of its own: the stepper's kernels are inlined into their callers, and this one
     compiled copy serves every step's dense output (scan.dense_built, previous_dense)."""
     if span.sys.cs[CS_STEPPER] == STEP_LIE:
-        lie_dense(eval_rhs, span, y_new, K, (Y_U1, Y_U2))
+        lie_dense(eval_rhs, span, y_new, K, LIE_COMPONENTS)
     else:
         dense_coeffs(eval_rhs, span, y_new, K)
 
