@@ -44,7 +44,7 @@ import math
 import numpy as np
 
 from .jit import kernel
-from .layout import W_AUXTMP, W_DELTA, W_JAC, W_LU, W_YTMP, Point
+from .layout import W_AUXTMP, W_DELTA, W_JAC, W_LU, W_YTMP
 
 SEQUENCE = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0])
 N_COLUMNS = 8
@@ -239,11 +239,13 @@ def lie_error_norm(K, sc, n):
 def lie_dense(rhs, span, y_new, K, comps):
     """Coefficients F[row0:row0+7] of the step span (layout.Span: from y0 at t0 over h) to y_new
     in dop853's nested form: the quintic Hermite interpolant of y0, f0 = K[R_F0], the midpoint
-    (the extrapolation over h / 2 from y0 with the step's Jacobian, recomputed) and its f, y_new
-    and f_new = K[R_FNEW]; m + 36 right-hand sides (comps = (m, c1, c2), as lie_step's)."""
+    (the extrapolation over h / 2 from y0) and its f, y_new and f_new = K[R_FNEW]; 29 right-hand
+    sides (comps = (m, c1, c2), as lie_step's). The midpoint's extrapolation takes the Jacobian last
+    computed (wk[W_JAC]: this step's, or for a previous step's dense output the step after it): the
+    method has its order whatever the matrix, which need only carry the stiff direction, and
+    that of two consecutive steps of a slide does."""
     t, y, h, sys, F = span.t0, span.y0, span.h, span.sys, span.F[span.row0:]
     n, wk = sys.n, sys.wk
-    jacobian(rhs, t, Point(y, K[R_F0], wk[W_AUXTMP]), sys, comps)
     extrapolate(rhs, (t, 0.5 * h), y, sys, K, comps[0])
     mid = K[R_MID]
     top = K[R_P + N_COLUMNS - 1]
