@@ -61,7 +61,8 @@ def _linear_step(lam, h):
     y[:2] = 1.0, 0.5
     _linear(0.0, y, system, f, aux)
     end = L.Point(np.zeros(M.N_FULL), np.zeros(M.N_FULL), np.zeros(M.N_AUX))
-    X.lie_step(_linear, (0.0, h), (L.Point(y, f, aux), end), system, np.zeros((L.N_KROWS, M.N_FULL)), (2, 0, 1))
+    at = (0.0, h, np.ones(M.N_FULL), X.N_COLUMNS, 3)    # (all eight columns: no early stop)
+    X.lie_step(_linear, at, (L.Point(y, f, aux), end), system, np.zeros((L.N_KROWS, M.N_FULL)), (2, 0, 1))
     return end.y[:3]
 
 

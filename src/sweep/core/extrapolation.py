@@ -162,10 +162,12 @@ def solve_into(b, hs, m, n, wk, x):
 
 @kernel(inline="always")
 def extrapolate(rhs, at, y, sys, K, m):
-    """The extrapolation over h from y at t (at = (t, h); K[R_F0] = f there, wk[W_JAC..] the
-    Jacobian's columns of the m leading components): T_{k,k} (the increment) in
-    K[R_P + N_COLUMNS - 1], T_{k-1,k-1} in K[R_LOW]."""
-    t, h = at
+    """The extrapolation over h from y at t (K[R_F0] = f there, wk[W_JAC..] the Jacobian's columns
+    of the m leading components), at = (t, h, sc, first, nc): from `first` columns on it stops at
+    the first column j whose estimate, the RMS of (T_jj - T_{j-1,j-1}) / sc over the nc leading
+    components, is within 1 (the step's error is then that column's, of order j). T_{j,j} (the
+    increment) in K[R_P + N_COLUMNS - 1], T_{j-1,j-1} in K[R_LOW]; returns j."""
+    t, h, sc, first, nc = at
     n, wk = sys.n, sys.wk
     ytmp = wk[W_YTMP]
     aux = wk[W_AUXTMP]
@@ -197,23 +199,34 @@ def extrapolate(rhs, at, y, sys, K, m):
                 K[R_P + q - 1, i] = cur
                 cur = cur + (cur - prev) / (r - 1.0)
             K[R_P + j, i] = cur
+        if j + 1 >= first and j + 1 < N_COLUMNS:
+            e = 0.0
+            for i in range(nc):
+                e += ((K[R_P + j, i] - K[R_LOW, i]) / sc[i]) ** 2
+            if e <= nc:
+                for i in range(n):
+                    K[R_P + N_COLUMNS - 1, i] = K[R_P + j, i]
+                return j + 1
+    return N_COLUMNS
 
 
 @kernel(inline="always")
 def lie_step(rhs, at, ends, sys, K, comps):
-    """One extrapolation step of size h from start at t (at = (t, h); ends = (start, end), each a
-    layout.Point; start: y, f at t): end.y, and end.f = K[R_FNEW] = f(t + h, end.y) with its aux
-    end.aux; the increment before rounding in sys.wk[W_DELTA]; the error estimate's rows for
-    lie_error_norm. comps = (m, c1, c2): the leading components the Jacobian takes, and the pair
-    whose difference steps scale together (jacobian)."""
-    t, h = at
+    """One extrapolation step of size h from start at t (at = (t, h, sc, first, nc), as
+    extrapolate's: the tolerances sc of the nc leading components, from `first` columns on the
+    first converged column ends it; ends = (start, end), each a layout.Point; start: y, f at t):
+    end.y, and end.f = K[R_FNEW] = f(t + h, end.y) with its aux end.aux; the increment before
+    rounding in sys.wk[W_DELTA]; the error estimate's rows for lie_error_norm. comps = (m, c1, c2):
+    the leading components the Jacobian takes, and the pair whose difference steps scale together
+    (jacobian). Returns the columns used (the step's order)."""
+    t, h = at[0], at[1]
     start, end = ends
     n = sys.n
     y, y_new, f_new = start.y, end.y, end.f
     for i in range(n):
         K[R_F0, i] = start.f[i]
     jacobian(rhs, t, start, sys, comps)
-    extrapolate(rhs, at, y, sys, K, comps[0])
+    columns = extrapolate(rhs, at, y, sys, K, comps[0])
     delta = sys.wk[W_DELTA]
     top = K[R_P + N_COLUMNS - 1]
     for i in range(n):
@@ -222,6 +235,7 @@ def lie_step(rhs, at, ends, sys, K, comps):
     rhs(t + h, y_new, sys, f_new, end.aux)
     for i in range(n):
         K[R_FNEW, i] = f_new[i]
+    return columns
 
 
 @kernel
@@ -246,7 +260,7 @@ def lie_dense(rhs, span, y_new, K, comps):
     that of two consecutive steps of a slide does."""
     t, y, h, sys, F = span.t0, span.y0, span.h, span.sys, span.F[span.row0:]
     n, wk = sys.n, sys.wk
-    extrapolate(rhs, (t, 0.5 * h), y, sys, K, comps[0])
+    extrapolate(rhs, (t, 0.5 * h, K[R_F0], N_COLUMNS, 1), y, sys, K, comps[0])
     mid = K[R_MID]
     top = K[R_P + N_COLUMNS - 1]
     ytmp = wk[W_YTMP]
