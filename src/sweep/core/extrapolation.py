@@ -19,8 +19,10 @@ asymptotic expansion in powers of h_j, Hairer & Wanner (1996), IV.9):
 
     T_{j,q+1} = T_{j,q} + (T_{j,q} - T_{j-1,q}) / (n_j / n_{j-q} - 1).
 
-y_new = y + T_{k,k} (k = N_COLUMNS = 8). The error estimate is T_{k,k} - T_{k-1,k-1}, the error of
-the order-7 diagonal entry (as dop853's estimator: the same step-size exponent): on the slow slides
+y_new = y + T_{k,k} (k = N_COLUMNS = 8), or T_{j,j} of the first column j >= the caller's `first`
+whose estimate has converged (its error then of order j: fewer right-hand sides where the step is
+short for order 8). The error estimate is T_{k,k} - T_{k-1,k-1}, the error of the order-7 diagonal
+entry (as dop853's estimator: the same step-size exponent): on the slow slides
 of the paper's disk at mu_d = mu_s the true local error of the steps so controlled is 0.32 / 3.2 /
 7.1 times the tolerance (median, p99, max; dop853 0.09 / 2.3 / 4.9), where T_{k,k} - T_{k,k-1}
 let it reach 2.5 / 25 / 77 (docs/model.md, 'Slow slip').
