@@ -76,7 +76,6 @@ SLIP_NEAR = 100.0
 SLIP_ROUNDOFF = 4.0 * EPS
 
 
-
 # The extrapolation's Jacobian: the components the right-hand side reads (alpha, omega, the slip: the
 # dissipation books and the kinematics are quadratures), the slip's pair among them
 LIE_COMPONENTS = (Y_U2 + 1, Y_U1, Y_U2)

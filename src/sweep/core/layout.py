@@ -75,7 +75,7 @@ W_YDRIFT = 36     # SLAVED: the state a short way along the slaved motion (the s
 W_DYDRIFT = 37
 W_AUXDRIFT = 38
 W_JAC = 39       # 6 rows: the extrapolation's Jacobian columns (core.extrapolation; row c: d f/d y_c)
-W_LU = 45        # 6 rows: its linear system I - h_j W, LU-factored (row r: the matrix's row r, its pivot after)
+W_LU = 45        # 6 rows: its linear system I - h_j J, LU-factored (row r: the matrix's row r, its pivot after)
 N_WORK = 51
 N_WCOLS = max(N_FULL, N_AUX, N_EVENTS)   # columns of the work buffer: a state, an aux or every event's value
 
