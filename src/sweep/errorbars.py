@@ -104,11 +104,21 @@ class Calibration:
         return out
 
 
-def conformal_quantile(sample: np.ndarray) -> float:
-    """The COVERAGE quantile of a sample with the split-conformal finite-sample correction
-    (the ceil((n + 1) COVERAGE)-th smallest)."""
-    sample = np.sort(sample)
-    return float(sample[min(len(sample) - 1, math.ceil((len(sample) + 1) * COVERAGE) - 1)])
+def conformal_quantile(sample: np.ndarray, weights: np.ndarray | None = None) -> float:
+    """The COVERAGE quantile of a sample with the split-conformal finite-sample correction: the
+    ceil((n + 1) COVERAGE)-th smallest. With `weights` (tests sampled at unequal rates, each
+    standing for `weight` nodes), the smallest value at which the weights of the values up to it
+    reach COVERAGE of the total plus the largest weight (the node the bar is for, counted at the
+    most any test stands for: weighted split-conformal, Tibshirani et al. 2019); equal weights give
+    the unweighted rank. The largest value where that is never reached."""
+    order = np.argsort(sample, kind="stable")
+    sample = np.asarray(sample, float)[order]
+    n = len(sample)
+    if weights is None or np.all(weights == weights[0]):
+        return float(sample[min(n - 1, math.ceil((n + 1) * COVERAGE) - 1)])
+    w = np.asarray(weights, float)[order]
+    reach = np.cumsum(w) / (w.sum() + w.max())
+    return float(sample[min(n - 1, int(np.searchsorted(reach, COVERAGE * (1 - 1e-12))))])
 
 
 def _binned(ind: np.ndarray, ratio: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -12,15 +12,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errorbars import MIN_CALIBRATION, bar_factors, bar_indicator, cell_class, conformal_quantile
-from .lattice import Fields, Lattice, Settings, flat_index, leaf_of, multilinear
-from .refine import holdout_mask
+from .errorbars import MIN_CALIBRATION, bar_factors, cell_class, conformal_quantile
+from .interpolation import estimate
+from .lattice import Fields, Lattice, Settings
+from .refine import QUIET_SHARE, STRATUM_LOUD, STRATUM_QUIET, holdout_design, inclusion_weights
 from .surplus import cell_states, surpluses
-
-
-# The bars calibrated on the hold-out: the reconstructed nodes split at this quantile of their
-# error scale (`Map.scale`) into quiet and loud, each bin's bar its tests' conformal quantile.
-QUIET_SHARE = 0.6
 
 
 @dataclass
@@ -45,12 +41,12 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
     """The full map from the computed nodes (see the module's docstring for the bars): the map's
     cells are interpolated without the hold-out nodes, whose errors then calibrate the bars
     (holdout_bars); in the map they are computed nodes like the others."""
-    hold = holdout_mask(lat, f, st)
+    hold, strata = holdout_design(lat, f, st)
     if not hold.any():
         return _interpolate(lat, f, st)
     known = f.subset(~hold)
     m = _interpolate(lat, known, st)
-    holdout_bars(f, known, m, hold)
+    holdout_bars(f, known, m, hold, strata, st.outputs[0])
     idx = np.nonzero(hold)[0]
     m.outcome[idx] = f.outcome[idx]
     m.source[idx] = idx
@@ -64,16 +60,20 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
     return m
 
 
-def holdout_bars(f: Fields, known: Fields, m: Map, hold: np.ndarray) -> None:
-    """Replace the bars of `m` (reconstructed from `known`: `f` without the hold-out nodes `hold`) by bars calibrated on the hold-out (split-conformal on a uniform sample of the nodes
-    reconstructed, so its COVERAGE holds for them): per output and component, the reconstructed
-    nodes with a value split at the QUIET_SHARE quantile of their error scale (`m.scale`) into
-    quiet and loud; each bin's bar (in the interpolation space) is the conformal quantile
-    (conformal_quantile) of its hold-out tests' |error|, in the loud bin at least the bar calibrated on the
-    surpluses (the loud bin mixes rough cells with merely steep ones: its constant bar is not
-    allowed to undercut the per-class one). A bin with fewer than MIN_CALIBRATION tests keeps the
-    bars calibrated on the surpluses."""
+def holdout_bars(f: Fields, known: Fields, m: Map, hold: np.ndarray, strata: np.ndarray, headline: str) -> None:
+    """Replace the bars of `m` (reconstructed from `known`: `f` without the hold-out nodes `hold`)
+    by bars calibrated on the hold-out (split-conformal on a sample of the nodes reconstructed, so
+    its COVERAGE holds for them). Per output and component the reconstructed nodes with a value
+    are split into quiet and loud: for the first driving output (`headline`) by the hold-out's
+    strata (sweep.refine.holdout_strata), each stratum's tests a uniform sample of it; for the
+    others at the QUIET_SHARE quantile of their own error scale (`m.scale`), each test weighted by
+    its stratum's inclusion weight (sweep.refine.inclusion_weights). Each bin's bar (in the
+    interpolation space) is the conformal quantile (conformal_quantile) of its tests' |error|, in
+    the loud bin at least the bar calibrated on the surpluses (the loud bin mixes rough cells with
+    merely steep ones: its constant bar is not allowed to undercut the per-class one). A bin with
+    fewer than MIN_CALIBRATION tests keeps the bars calibrated on the surpluses."""
     idx = np.nonzero(hold)[0]
+    weight = inclusion_weights(strata, hold)[idx]
     for name, v in f.values.items():
         log = known.is_log(name)
         est, scale = m.values[name], m.scale[name]
@@ -85,25 +85,27 @@ def holdout_bars(f: Fields, known: Fields, m: Map, hold: np.ndarray) -> None:
             pop = rec[:, c]
             if not pop.any():
                 continue
-            sc = np.where(np.isfinite(scale[:, c]), scale[:, c], np.inf)
-            cut = np.quantile(sc[pop], QUIET_SHARE, method="inverted_cdf")
+            if name == headline and c == 0:
+                quiet, loud, w = strata == STRATUM_QUIET, strata == STRATUM_LOUD, None
+            else:
+                sc = np.where(np.isfinite(scale[:, c]), scale[:, c], np.inf)
+                cut = np.quantile(sc[pop], QUIET_SHARE, method="inverted_cdf")
+                quiet, loud, w = sc <= cut, sc > cut, weight
             err = np.abs(g_true[:, c] - g_est[idx, c])
             ok = np.isfinite(err)
-            for loud in (False, True):
-                in_bin = (sc > cut) if loud else (sc <= cut)
-                tests = err[ok & in_bin[idx]]
-                if len(tests) < MIN_CALIBRATION:
+            for is_loud, in_bin in ((False, quiet), (True, loud)):
+                sel_t = ok & in_bin[idx]
+                if sel_t.sum() < MIN_CALIBRATION:
                     continue
-                q = conformal_quantile(tests)
+                q = conformal_quantile(err[sel_t], None if w is None else w[sel_t])
                 sel = pop & in_bin & ~hold
                 bar = est[sel, c] * np.expm1(q) if log else np.full(int(sel.sum()), q)
-                m.bars[name][sel, c] = np.fmax(bar, m.bars[name][sel, c]) if loud else bar
+                m.bars[name][sel, c] = np.fmax(bar, m.bars[name][sel, c]) if is_loud else bar
 
 
 def _interpolate(lat: Lattice, f: Fields, st: Settings) -> Map:
     """The full map from the computed nodes of `f`, bars calibrated on its surpluses."""
     n = lat.size
-    all_nodes = np.array(np.unravel_index(np.arange(n), lat.shape)).T.astype(np.int64)
     outcome = f.outcome.copy()
     source = np.arange(n)
     values = {k: v.copy() for k, v in f.values.items()}
@@ -114,55 +116,33 @@ def _interpolate(lat: Lattice, f: Fields, st: Settings) -> Map:
     scales = {k: np.full(v.shape, np.nan) for k, v in f.values.items()}
     if not miss.size:
         return Map(outcome, source, values, bars, rough_node, cell_level, scales)
-    nodes = all_nodes[miss]
-    level, lower = leaf_of(lat, f.computed, nodes)
-    cell_level[miss] = level
+    nodes = np.array(np.unravel_index(miss, lat.shape)).T.astype(np.int64)
     surs = {k: surpluses(lat, f, k) for k in f.values}
     driving = {o: surs[o] for o in st.outputs}
     factors = {k: bar_factors(lat, f, st, k, surs[k], driving) for k in f.values}
-    for k in np.unique(level):
-        sel = np.nonzero(level == k)[0]
-        s = lat.stride(int(k))
-        corners, w = multilinear(lat, nodes[sel], lower[sel], s)
-        cidx = flat_index(lat, corners.reshape(-1, lat.ndim)).reshape(corners.shape[:2])
-        # nearest corner (largest weight; ties: the first in lexicographic order) gives the outcome
-        # where the corners disagree, and every categorical value
-        near = cidx[np.arange(len(sel)), np.argmax(w, axis=1)]
-        oc = f.outcome[cidx]
-        used = w > 0
-        out = f.outcome[near]
+    e = estimate(lat, f, nodes, surs)
+    cell_level[miss] = e.level
+    outcome[miss] = e.outcome
+    source[miss] = e.near
+    for k in np.unique(e.level):
+        sel = np.nonzero(e.level == k)[0]
         tgt = miss[sel]
-        outcome[tgt] = out
-        source[tgt] = near
         # the cells' rough flags (by the driving outputs): reported, and a calibration class
-        ucells, inv = np.unique(lower[sel], axis=0, return_inverse=True)
+        ucells, inv = np.unique(e.lower[sel], axis=0, return_inverse=True)
         inv = inv.ravel()
         cell_rough = cell_states(lat, f, st, int(k), ucells, driving)["rough"]
         rough_node[tgt] = cell_rough[inv]
-        same = used & (oc == out[:, None])
-        for name, g_all in ((nm, f.transformed(nm)) for nm in f.values):
-            gv = g_all[cidx]                                            # (n, 2^d, m)
-            ok = same[:, :, None] & np.isfinite(gv)
-            wv = np.where(ok, w[:, :, None], 0.0)
-            wsum = wv.sum(axis=1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                est = np.einsum("ncm,ncm->nm", wv, np.where(ok, gv, 0.0)) / wsum
-            est[(wsum <= 0) | ~np.isfinite(g_all[near])] = np.nan
-            lo = np.where(ok, gv, np.inf).min(axis=1)
-            hi = np.where(ok, gv, -np.inf).max(axis=1)
-            spread = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, np.nan)
-            ind = bar_indicator(lat, int(k), ucells, surs[name])[inv]            # (n, m)
-            cls = cell_class(lat, f, st, int(k), ucells, g_all, driving, cell_rough)[inv]    # (n, m)
+        for name in f.values:
+            est, ind = e.values[name][sel], e.indicator[name][sel]
+            cls = cell_class(lat, f, st, int(k), ucells, f.transformed(name), driving, cell_rough)[inv]    # (n, m)
             # no indicator (no surplus at this level around): the corners' spread
-            bar = np.where(np.isfinite(ind), factors[name].bar(cls, ind), spread)
-            scales[name][tgt] = np.where(np.isfinite(spread) | np.isfinite(ind),
-                                         np.nan_to_num(spread) + np.nan_to_num(ind), np.nan)
+            bar = np.where(np.isfinite(ind), factors[name].bar(cls, ind), e.spread[name][sel])
+            scales[name][tgt] = e.scale(name)[sel]
             if f.is_log(name):
                 x = np.exp(est)
                 absbar = x * np.expm1(bar)
             else:
                 x, absbar = est, bar
-            absbar = np.where(np.isfinite(x), absbar, np.nan)
             values[name][tgt] = x
-            bars[name][tgt] = absbar
+            bars[name][tgt] = np.where(np.isfinite(x), absbar, np.nan)
     return Map(outcome, source, values, bars, rough_node, cell_level, scales)
