@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sweep import axes, errorbars, grid, outcomes, reconstruct, refine, surplus, validation
+from sweep import axes, errorbars, grid, interpolation, outcomes, reconstruct, refine, surplus, validation
 from sweep import lattice as sweep_lattice
 
 
@@ -366,3 +366,140 @@ def test_holdout_bars_hold_over_draws(monkeypatch):
     assert np.mean(cover) >= 0.9 and min(cover) >= 0.85
     assert np.mean(cover_rough) >= 0.9
     assert max(med) < 0.02          # the smooth majority's bars: ~0.4 %, not the noise patch's
+
+
+def two_output_rounds(lat, seed=52, monkeypatch=None):
+    """The synthetic map with a second, linear output `u` (not log) that has its own noise patch
+    (x < 0.4, y > 0.2) and exists only where x > 0.1: rounds driven by `t` alone, so `t` is the
+    headline whose scale stratifies the hold-out and `u` is calibrated with weights."""
+    oc, val, rough = synthetic(lat)
+    x, y = xy(lat)
+    u_patch = (x < 0.4) & (y > 0.2)
+    u = 3.0 * x - 2.0 * y ** 2 + np.where(u_patch, 0.2 * np.random.default_rng(7).standard_normal(lat.size), 0.0)
+    u = np.where((oc == outcomes.HALTED) & (x > 0.1), u, np.nan)
+    f = sweep_lattice.Fields.empty(lat, {"t": 1, "u": 1}, {"t": True, "u": False})
+    st = sweep_lattice.Settings(("t",), 0.01, int(0.25 * lat.size))
+    plans = []
+    for k in range(lat.rounds + 1):
+        p = refine.plan_round(lat, f, st, k)
+        idx = sweep_lattice.flat_index(lat, p.nodes)
+        f.set(lat, p.nodes, k, oc[idx], {"t": val[idx], "u": u[idx]})
+        plans.append(p)
+    return f, st, plans, oc, val, u, rough, u_patch
+
+
+def test_the_holdout_strata_are_the_finished_maps_quiet_and_loud_nodes():
+    # the strata drawn from before the last round's values exist are the split the finished map
+    # makes of its reconstructed nodes by the headline's error scale
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    f, st, plans, *_ = two_output_rounds(lat)
+    strata = plans[-1].strata
+    hold, again = refine.holdout_design(lat, f, st)
+    np.testing.assert_array_equal(again, strata)
+    m0 = reconstruct._interpolate(lat, f.subset(~hold), st)
+    cand = m0.cell_level >= 0                                     # reconstructed, the hold-out included
+    np.testing.assert_array_equal(np.nonzero(strata >= 0)[0], np.nonzero(cand)[0])
+    has = cand & np.isfinite(m0.values["t"][:, 0])
+    sc = m0.scale["t"][:, 0]
+    cut = np.quantile(sc[has], refine.QUIET_SHARE, method="inverted_cdf")
+    np.testing.assert_array_equal(strata[has], np.where(sc[has] <= cut, refine.STRATUM_QUIET, refine.STRATUM_LOUD))
+    assert (strata[cand & ~has] == refine.STRATUM_NONE).all()
+    # the scale is the indicator plus a quarter of the corners' spread
+    np.testing.assert_allclose(interpolation.error_scale(np.array([0.4, np.nan, 1.0]), np.array([0.1, 0.2, np.nan])),
+                               [0.1 + 0.25 * 0.4, 0.2, 0.25])
+    assert np.isnan(interpolation.error_scale(np.array([np.nan]), np.array([np.nan]))[0])
+
+
+def test_the_holdout_is_a_stratified_sample_and_its_weights_undo_it():
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    f, st, plans, *_ = two_output_rounds(lat)
+    strata, hold = plans[-1].strata, np.zeros(lat.size, bool)
+    hold[sweep_lattice.flat_index(lat, plans[-1].holdout)] = True
+    n = refine.holdout_size(lat, st)
+    assert hold.sum() == n and (strata[hold] >= 0).all()
+    size = {s: (strata == s).sum() for s in (refine.STRATUM_NONE, refine.STRATUM_QUIET, refine.STRATUM_LOUD)}
+    got = {s: (hold & (strata == s)).sum() for s in size}
+    assert min(size.values()) > 0
+    # the stratum without a value in proportion to its size, 3/4 of the rest quiet
+    assert got[refine.STRATUM_NONE] == round(n * size[refine.STRATUM_NONE] / sum(size.values()))
+    rest = n - got[refine.STRATUM_NONE]
+    assert got[refine.STRATUM_QUIET] == round(refine.QUIET_TESTS * rest)
+    assert got[refine.STRATUM_LOUD] == rest - got[refine.STRATUM_QUIET]
+    # far from the strata's own shares: quiet is 55 % of the nodes with a value
+    assert size[refine.STRATUM_QUIET] / (size[refine.STRATUM_QUIET] + size[refine.STRATUM_LOUD]) == pytest.approx(
+        refine.QUIET_SHARE, abs=0.01)
+    w = refine.inclusion_weights(strata, hold)
+    for s in size:
+        np.testing.assert_allclose(w[hold & (strata == s)], size[s] / got[s])
+    assert np.isnan(w[~hold]).all()
+    # the weights undo the sampling: the weighted share of quiet tests is the stratum's share
+    assert w[hold & (strata == refine.STRATUM_QUIET)].sum() == pytest.approx(size[refine.STRATUM_QUIET])
+
+
+def test_the_weighted_conformal_quantile():
+    # equal weights: the split-conformal rank ceil(0.9 (n + 1))
+    for n in (9, 10, 19, 20, 57, 100):
+        x = np.random.default_rng(n).permutation(np.arange(1.0, n + 1))
+        k = int(np.ceil(0.9 * (n + 1)))
+        assert errorbars.conformal_quantile(x) == errorbars.conformal_quantile(x, np.full(n, 2.5)) == k
+    # 30 values 1..30, the last 10 standing for 2 nodes each: total 40, plus the largest weight 2;
+    # 0.9 x 42 = 37.8 is first reached after 20 + 2 x 9 = 38, at 29 (the unweighted rank: 28)
+    x = np.arange(1.0, 31.0)
+    w = np.where(x > 20, 2.0, 1.0)
+    assert errorbars.conformal_quantile(x[::-1], w[::-1]) == 29.0 and errorbars.conformal_quantile(x) == 28.0
+    # never reached: the largest
+    assert errorbars.conformal_quantile(np.array([1.0, 2.0, 3.0, 4.0]), np.array([1.0, 1.0, 1.0, 7.0])) == 4.0
+    assert errorbars.MIN_CONFORMAL == 9 and errorbars.conformal_quantile(np.arange(1.0, 10.0)) == 9.0
+
+
+def test_every_outputs_bars_hold_over_draws(monkeypatch):
+    # the headline `t` is calibrated per stratum, `u` (linear, its own noise patch, a value on
+    # part of the map) per bin of its own scale with the strata's weights: over draws each holds
+    # at >= 90 % on average in each of its bins (what split-conformal promises: coverage over the
+    # nodes of a bin, not over any region one picks afterwards)
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    cover = {}
+    for seed in range(32):
+        monkeypatch.setattr(refine, "HOLDOUT_SEED", seed)
+        f, st, plans, oc, val, u, rough, u_patch = two_output_rounds(lat)
+        m = reconstruct.reconstruct(lat, f, st)
+        m0 = reconstruct._interpolate(lat, f.subset(~m.holdout), st)
+        for name, truth in (("t", val), ("u", u)):
+            ok = ~f.computed & np.isfinite(truth) & np.isfinite(m.values[name][:, 0])
+            holds = np.abs(m.values[name][:, 0] - truth) <= m.bars[name][:, 0]
+            if name == "t":
+                quiet = plans[-1].strata == refine.STRATUM_QUIET
+            else:
+                pop = (m0.cell_level >= 0) & np.isfinite(m0.values["u"][:, 0])
+                sc = m0.scale["u"][:, 0]
+                quiet = pop & (sc <= np.quantile(sc[pop], refine.QUIET_SHARE, method="inverted_cdf"))
+            for label, sel in (("all", ok), ("quiet", ok & quiet), ("loud", ok & ~quiet)):
+                cover.setdefault(f"{name} {label}", []).append(holds[sel].mean())
+    for key, c in cover.items():
+        assert np.mean(c) >= 0.9, (key, np.mean(c))
+        assert min(c) >= 0.75, (key, min(c))
+
+
+def test_an_output_with_few_tests_gets_one_bin():
+    # an output with a value on a small part of the map has too few hold-out tests to split into
+    # quiet and loud: one bin, its bar the conformal quantile of all its tests (at least the
+    # surpluses' bar), if it has MIN_CONFORMAL of them
+    lat = sweep_lattice.make_lattice({"x": {"from": 0.0, "to": 1.0, "points": 65},
+                                      "y": {"from": 0.0, "to": 1.0, "points": 65}}, 9)
+    f, st, _, oc, val, u, *_ = two_output_rounds(lat)
+    x, _ = xy(lat)
+    f.values["u"] = np.where((x > 0.8)[:, None], f.values["u"], np.nan)
+    hold, _ = refine.holdout_design(lat, f, st)
+    known = f.subset(~hold)
+    m0 = reconstruct._interpolate(lat, known, st)
+    m = reconstruct.reconstruct(lat, f, st)
+    err = np.abs(f.values["u"][hold, 0] - m0.values["u"][hold, 0])
+    tests = err[np.isfinite(err)]
+    assert errorbars.MIN_CONFORMAL <= len(tests) < 2 * errorbars.MIN_CALIBRATION
+    sel = (m.cell_level >= 0) & np.isfinite(m.values["u"][:, 0])
+    assert sel.sum() > 50
+    q = errorbars.conformal_quantile(tests, refine.inclusion_weights(refine.holdout_design(lat, f, st)[1], hold)[hold][np.isfinite(err)])
+    np.testing.assert_allclose(m.bars["u"][sel, 0], np.fmax(q, m0.bars["u"][sel, 0]))

@@ -23,6 +23,9 @@ from .surplus import cell_states
 # fewest tests (computed nodes with a surplus) a calibration class needs (bar_factors).
 COVERAGE = 0.9
 MIN_CALIBRATION = 20
+# The fewest tests whose conformal quantile (conformal_quantile) lies within them: the
+# ceil((n + 1) COVERAGE)-th smallest of n exists from n = COVERAGE / (1 - COVERAGE) on.
+MIN_CONFORMAL = math.ceil(COVERAGE / (1.0 - COVERAGE) - 1e-9)
 BIN_TESTS = 200
 
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errorbars import MIN_CALIBRATION, bar_factors, cell_class, conformal_quantile
+from .errorbars import MIN_CALIBRATION, MIN_CONFORMAL, bar_factors, cell_class, conformal_quantile
 from .interpolation import estimate
 from .lattice import Fields, Lattice, Settings
 from .refine import QUIET_SHARE, STRATUM_LOUD, STRATUM_QUIET, holdout_design, inclusion_weights
@@ -35,6 +35,14 @@ class Map:
     cell_level: np.ndarray
     scale: dict[str, np.ndarray] = field(default_factory=dict)
     holdout: np.ndarray | None = None
+
+
+def relative_to_absolute(x: np.ndarray, bar: np.ndarray | float) -> np.ndarray:
+    """The absolute bar (x's units) of a value x whose bar in log space is `bar`: a true value
+    within `bar` of log x lies within x expm1(bar) of x, plus a few ulp of x, the rounding of
+    |value - x| (a node whose log error equals the bar, as a conformal quantile's own test and
+    the nodes tied with it do, stays within it)."""
+    return x * np.expm1(bar) + 8.0 * np.finfo(float).eps * np.abs(x)
 
 
 def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
@@ -93,13 +101,17 @@ def holdout_bars(f: Fields, known: Fields, m: Map, hold: np.ndarray, strata: np.
                 quiet, loud, w = sc <= cut, sc > cut, weight
             err = np.abs(g_true[:, c] - g_est[idx, c])
             ok = np.isfinite(err)
-            for is_loud, in_bin in ((False, quiet), (True, loud)):
-                sel_t = ok & in_bin[idx]
-                if sel_t.sum() < MIN_CALIBRATION:
+            bins = ((False, quiet), (True, loud))
+            if min((ok & b[idx]).sum() for _, b in bins) < MIN_CALIBRATION:
+                # too few tests to split: one bin, if it has enough for a conformal quantile
+                bins = ((True, quiet | loud),)
+                if (ok & bins[0][1][idx]).sum() < MIN_CONFORMAL:
                     continue
+            for is_loud, in_bin in bins:
+                sel_t = ok & in_bin[idx]
                 q = conformal_quantile(err[sel_t], None if w is None else w[sel_t])
                 sel = pop & in_bin & ~hold
-                bar = est[sel, c] * np.expm1(q) if log else np.full(int(sel.sum()), q)
+                bar = relative_to_absolute(est[sel, c], q) if log else np.full(int(sel.sum()), q)
                 m.bars[name][sel, c] = np.fmax(bar, m.bars[name][sel, c]) if is_loud else bar
 
 
@@ -140,7 +152,7 @@ def _interpolate(lat: Lattice, f: Fields, st: Settings) -> Map:
             scales[name][tgt] = e.scale(name)[sel]
             if f.is_log(name):
                 x = np.exp(est)
-                absbar = x * np.expm1(bar)
+                absbar = relative_to_absolute(x, bar)
             else:
                 x, absbar = est, bar
             values[name][tgt] = x
