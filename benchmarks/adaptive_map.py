@@ -247,13 +247,21 @@ def draws(lat, st, truth: adaptive.MapState, smooth: np.ndarray, seeds: int) -> 
     finally:
         refine.HOLDOUT_SEED = keep
     for key, label, fmt in (("holds", "error bar holds", "{:.1%}"), ("bar_med", "median bar / value", "{:.2%}"),
-                            ("outcome_wrong", "outcome wrong", "{:.2%}"),
-                            ("cover_min", "bars hold, the worst other output", "{:.1%}")):
+                            ("outcome_wrong", "outcome wrong", "{:.2%}")):
         v = np.array([r[key] for r in rows])
         print(f"  over {seeds} draws of the hold-out: {label} min {fmt.format(v.min())}, median "
               f"{fmt.format(float(np.median(v)))}, mean {fmt.format(float(np.mean(v)))}, max {fmt.format(v.max())}"
-              + (f"; >= 90 % in {int((v >= 0.9).sum())}" if key in ("holds", "cover_min") else "")
+              + (f"; >= 90 % in {int((v >= 0.9).sum())}" if key == "holds" else "")
               + (f"; <= 5 % in {int((v <= 0.05).sum())}" if key == "bar_med" else ""), flush=True)
+    # every output's coverage averaged over the draws (what split-conformal promises), the lowest;
+    # and the worst of them within one draw (the minimum of ~47 noisy shares)
+    mean_cover = {k: float(np.mean([r["cover"][k] for r in rows if k in r["cover"]])) for k in rows[0]["cover"]}
+    if mean_cover:
+        low = min(mean_cover, key=mean_cover.get)
+        worst = np.array([r["cover_min"] for r in rows])
+        print(f"  over {seeds} draws of the hold-out: every output's bars hold on average at >= {mean_cover[low]:.1%} "
+              f"({low}; >= 90 % for {sum(v >= 0.9 for v in mean_cover.values())} of {len(mean_cover)}); the worst "
+              f"output of one draw holds at {worst.min():.1%}-{worst.max():.1%}", flush=True)
 
 
 def leave_one_out(lat, truth: adaptive.MapState, smooth: np.ndarray) -> dict[str, float]:
@@ -330,7 +338,7 @@ def metrics(lat, st, truth: adaptive.MapState, f: lattice.Fields, smooth: np.nda
         "bar_med": q((bar / t_got)[halted], 50),
         "n_smooth": int(sm.sum()), "err_med_smooth": q(rel[sm], 50), "err_p95_smooth": q(rel[sm], 95),
         "rough_nodes": int(m.rough.sum()),
-        "cover_min": cover.get(worst, math.nan), "cover_worst": worst,
+        "cover_min": cover.get(worst, math.nan), "cover_worst": worst, "cover": cover,
         "cover_outputs": sum(c >= 0.9 for c in cover.values()), "n_outputs": len(cover),
     }
 
