@@ -5,9 +5,10 @@ A config with a `refine:` section is a set of *maps*: every combination of the `
 the other axes (the map's *outer point*) gets the lattice of `refine.axes`. Each map runs rounds
 0..R (R: sweep.lattice.Lattice.rounds), one Snakemake job per (map, round), chained by their round
 files `results/<name>/rounds/<map>/round<k>.json`. A round job plans its nodes from the chunk files
-of the earlier rounds (sweep.refine.plan_round, deterministic), cuts them into chunks as the tensor
-sweep does (content-addressed ids, sweep.chunking.chunk_id_of), runs the chunks that are not on disk
-yet with the tensor sweep's runner (sweep.batch.run_chunk, one process per thread) and writes its
+of the earlier rounds (sweep.refine.plan_round, deterministic), cuts them into chunks of equal size
+(round_blocks) named by their content as the tensor sweep's (sweep.chunking.chunk_id_of), runs the
+chunks that are not on disk yet with the tensor sweep's runner (sweep.batch.run_chunk, one process
+per thread, the largest chunks first) and writes its
 round file last, atomically. So a killed round resumes from its finished chunks, and a rerun of a
 finished map finds every round file and does nothing.
 
@@ -166,22 +167,46 @@ class MapState:
                             {k: vals[k] for k in self.fields.values})
 
 
-def chunks_of_round(settings: Mapping, outer: Mapping[str, float], lat: _lattice.Lattice,
-                    nodes: np.ndarray) -> list[_chunking.Chunk]:
-    """The chunks of a round's nodes: the points (AXES order) in lexicographic node order, cut by
-    the tensor sweep's content-defined rule (sweep.chunking.split_inner) and named by their content."""
+# A round's nodes are cut into at least ROUND_CHUNKS chunks of equal size (where that leaves
+# ROUND_CHUNK_MIN scenes a chunk), so that its processes share it evenly: a round has one plan, so
+# the tensor sweep's content-defined cut (stable under inserted points) buys nothing here, and on
+# issue #52's plane it cut round 0's 81 scenes into chunks of 80 and 1, one process doing all.
+ROUND_CHUNKS = 8
+ROUND_CHUNK_MIN = 8
+
+
+def round_blocks(nodes: np.ndarray, chunk_size: int) -> list[np.ndarray]:
+    """A round's nodes (lexicographic) cut into consecutive blocks of equal size (+-1): as many as
+    chunk_size asks, at least ROUND_CHUNKS where each keeps ROUND_CHUNK_MIN nodes."""
+    n = len(nodes)
+    if not n:
+        return []
+    k = max(math.ceil(n / chunk_size), min(ROUND_CHUNKS, n // ROUND_CHUNK_MIN), 1)
+    cuts = np.round(np.linspace(0, n, k + 1)).astype(int)
+    return [nodes[a:b] for a, b in zip(cuts[:-1], cuts[1:])]
+
+
+def chunks_of(settings: Mapping, outer: Mapping[str, float], lat: _lattice.Lattice,
+              blocks: Sequence[np.ndarray]) -> list[_chunking.Chunk]:
+    """One chunk per block of nodes: the points in AXES order, named by their content
+    (sweep.chunking.chunk_id_of), as the tensor sweep's."""
     part = _chunking.scene_settings(settings)
     core = _chunking.core_fingerprint()
-    inner = [lat.point(n) for n in nodes]
     chunks = []
-    for block in _chunking.split_inner(inner, settings["chunk_size"]):
+    for block in blocks:
         points = []
-        for p in block:
-            full = dict(outer, **dict(zip(lat.axes, p)))
+        for node in block:
+            full = dict(outer, **dict(zip(lat.axes, lat.point(node))))
             points.append(tuple(float(full[a]) for a in _axes.AXES))
         cid, text = _chunking.chunk_id_of(part, points, core)
         chunks.append(_chunking.Chunk(cid, tuple(points), text))
     return chunks
+
+
+def chunks_of_round(settings: Mapping, outer: Mapping[str, float], lat: _lattice.Lattice,
+                    nodes: np.ndarray) -> list[_chunking.Chunk]:
+    """The chunks of a round's nodes (round_blocks, chunks_of)."""
+    return chunks_of(settings, outer, lat, round_blocks(np.asarray(nodes), settings["chunk_size"]))
 
 
 def _run_one(spec_json: str, out_path: str) -> dict:
@@ -208,6 +233,8 @@ def run_chunks(chunks: Sequence[_chunking.Chunk], chunk_dir: Path, threads: int)
         for c in todo:
             _run_one(c.spec_json, str(chunk_dir / f"{c.id}.nc"))
         return len(todo)
+    # the largest chunks first, so the last to finish is a small one
+    todo.sort(key=lambda c: -len(c.points))
     ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
     with concurrent.futures.ProcessPoolExecutor(max_workers=min(threads, len(todo)), mp_context=ctx) as pool:
         futures = [pool.submit(_run_one, c.spec_json, str(chunk_dir / f"{c.id}.nc")) for c in todo]
