@@ -2,7 +2,7 @@
 
 Every node not computed is interpolated multilinearly in the finest cell holding it (log values
 for positive times and frequencies; the outcome and the categorical values from the nearest
-corner), with an error bar (absolute, the output's units) calibrated on the map's surpluses
+corner; sweep.interpolation), with an error bar (absolute, the output's units) calibrated on the map's surpluses
 (sweep.errorbars) or, where the map has a hold-out (sweep.refine.holdout_size), on the hold-out's
 errors (`holdout_bars`).
 """
@@ -25,8 +25,8 @@ class Map:
     its categorical values (itself where computed), each continuous output with its
     interpolation error bar (absolute, the output's units; 0 where computed), and whether its
     cell is rough; `scale`: per continuous output, each reconstructed node's error scale (in its
-    interpolation space: the spread of the corners it is interpolated from plus its cell's
-    bar_indicator; NaN where computed); `holdout`: the hold-out nodes (holdout_mask), or None."""
+    interpolation space, sweep.interpolation.error_scale; NaN where computed); `holdout`: the
+    hold-out nodes (holdout_mask), or None."""
     outcome: np.ndarray
     source: np.ndarray
     values: dict[str, np.ndarray]
