@@ -40,14 +40,11 @@ def error_scale(spread: np.ndarray, indicator: np.ndarray) -> np.ndarray:
 
 @dataclass
 class Estimate:
-    """Per node asked for (n of them): the level and lower corner of its cell, the corners (n, 2^d;
-    flat indices) with their weights, the nearest corner (flat index) and its outcome; per
-    continuous output (n, m) the estimate, the spread of the corner values used and the cell's
-    bar_indicator, all in the output's interpolation space."""
+    """Per node asked for (n of them): the level and lower corner of its cell, the nearest corner
+    (flat index) and its outcome; per continuous output (n, m) the estimate, the spread of the
+    corner values used and the cell's bar_indicator, all in the output's interpolation space."""
     level: np.ndarray
     lower: np.ndarray
-    corners: np.ndarray
-    weights: np.ndarray
     near: np.ndarray
     outcome: np.ndarray
     values: dict[str, np.ndarray]
@@ -94,4 +91,4 @@ def estimate(lat: Lattice, f: Fields, nodes: np.ndarray, surs: Mapping[str, np.n
         hi = np.where(ok, gv, -np.inf).max(axis=1)
         values[name] = est
         spread[name] = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, np.nan)
-    return Estimate(level, lower, corners, weights, near, outcome, values, spread, ind)
+    return Estimate(level, lower, near, outcome, values, spread, ind)

@@ -2,9 +2,9 @@
 
 Every node not computed is interpolated multilinearly in the finest cell holding it (log values
 for positive times and frequencies; the outcome and the categorical values from the nearest
-corner; sweep.interpolation), with an error bar (absolute, the output's units) calibrated on the map's surpluses
-(sweep.errorbars) or, where the map has a hold-out (sweep.refine.holdout_size), on the hold-out's
-errors (`holdout_bars`).
+corner; sweep.interpolation), with an error bar (absolute, the output's units) calibrated on the
+map's surpluses (sweep.errorbars) or, where the map has a hold-out (sweep.refine.holdout_size), on
+the hold-out's errors (`holdout_bars`).
 """
 from __future__ import annotations
 
@@ -68,7 +68,8 @@ def reconstruct(lat: Lattice, f: Fields, st: Settings) -> Map:
     return m
 
 
-def holdout_bars(f: Fields, known: Fields, m: Map, hold: np.ndarray, strata: np.ndarray, headline: str) -> None:
+def holdout_bars(f: Fields, known: Fields, m: Map, hold: np.ndarray, strata: np.ndarray,
+                 headline: str) -> None:
     """Replace the bars of `m` (reconstructed from `known`: `f` without the hold-out nodes `hold`)
     by bars calibrated on the hold-out (split-conformal on a sample of the nodes reconstructed, so
     its COVERAGE holds for them). Per output and component the reconstructed nodes with a value
@@ -78,8 +79,9 @@ def holdout_bars(f: Fields, known: Fields, m: Map, hold: np.ndarray, strata: np.
     its stratum's inclusion weight (sweep.refine.inclusion_weights). Each bin's bar (in the
     interpolation space) is the conformal quantile (conformal_quantile) of its tests' |error|, in
     the loud bin at least the bar calibrated on the surpluses (the loud bin mixes rough cells with
-    merely steep ones: its constant bar is not allowed to undercut the per-class one). A bin with
-    fewer than MIN_CALIBRATION tests keeps the bars calibrated on the surpluses."""
+    merely steep ones: its constant bar is not allowed to undercut the per-class one). Where a bin
+    has fewer than MIN_CALIBRATION tests the two are one bin, calibrated as a loud one, if it has
+    MIN_CONFORMAL tests; with fewer the bars calibrated on the surpluses stay."""
     idx = np.nonzero(hold)[0]
     weight = inclusion_weights(strata, hold)[idx]
     for name, v in f.values.items():
@@ -146,7 +148,8 @@ def _interpolate(lat: Lattice, f: Fields, st: Settings) -> Map:
         rough_node[tgt] = cell_rough[inv]
         for name in f.values:
             est, ind = e.values[name][sel], e.indicator[name][sel]
-            cls = cell_class(lat, f, st, int(k), ucells, f.transformed(name), driving, cell_rough)[inv]    # (n, m)
+            g_all = f.transformed(name)
+            cls = cell_class(lat, f, st, int(k), ucells, g_all, driving, cell_rough)[inv]    # (n, m)
             # no indicator (no surplus at this level around): the corners' spread
             bar = np.where(np.isfinite(ind), factors[name].bar(cls, ind), e.spread[name][sel])
             scales[name][tgt] = e.scale(name)[sel]
