@@ -120,7 +120,7 @@ def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
     strata = None
     if n_hold and k == lat.rounds:
         # a stratified sample of the nodes the map will reconstruct (fixed seed)
-        strata = holdout_strata(lat, f, st, taken)
+        strata = holdout_strata(lat, f, st, taken, surs[st.outputs[0]])
         hold = _draw(strata, n_hold)
         taken[hold] = True
     as_nodes = (lambda idx: np.array(np.unravel_index(idx, lat.shape)).T.astype(np.int64).reshape(-1, lat.ndim))
@@ -130,13 +130,15 @@ def plan_round(lat: Lattice, f: Fields, st: Settings, k: int) -> Plan:
                 as_nodes(hold), strata)
 
 
-def holdout_strata(lat: Lattice, f: Fields, st: Settings, taken: np.ndarray) -> np.ndarray:
+def holdout_strata(lat: Lattice, f: Fields, st: Settings, taken: np.ndarray,
+                   sur: np.ndarray) -> np.ndarray:
     """Per lattice node (flat, int8) the hold-out stratum of each node the finished map will
     reconstruct (neither computed in `f`, the rounds before the last, nor `taken` by the last
     round's refinement), -1 elsewhere: STRATUM_NONE where the first driving output gets no value,
     else STRATUM_QUIET or STRATUM_LOUD by its error scale against its QUIET_SHARE quantile over
     them. Those nodes lie in cells of level < R, whose corners and surpluses are all computed
-    before the last round, so this is the error scale they have in the finished map."""
+    before the last round, so this is the error scale they have in the finished map. `sur`: the
+    first driving output's surpluses in `f` (sweep.surplus.surpluses; the taken nodes have none)."""
     out = np.full(lat.size, -1, np.int8)
     cand = np.nonzero(~f.computed & ~taken)[0]
     if not cand.size:
@@ -145,7 +147,7 @@ def holdout_strata(lat: Lattice, f: Fields, st: Settings, taken: np.ndarray) -> 
                    {k: np.where(taken[:, None], np.nan, v) for k, v in f.values.items()}, dict(f.log))
     name = st.outputs[0]
     nodes = np.array(np.unravel_index(cand, lat.shape)).T.astype(np.int64)
-    e = estimate(lat, after, nodes, {name: surpluses(lat, after, name)}, (name,))
+    e = estimate(lat, after, nodes, {name: sur}, (name,))
     has = np.isfinite(e.values[name][:, 0])
     sc = np.where(np.isfinite(e.scale(name)[:, 0]), e.scale(name)[:, 0], np.inf)
     out[cand] = STRATUM_NONE
